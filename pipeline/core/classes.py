@@ -1,0 +1,85 @@
+"""Object classes, their COCO category ids, and the semantic classes of the rendered world.
+
+Category ids follow COCO's 80-class ids where the class exists there (person 1, bicycle 2, car 3,
+motorcycle 4, bus 6, truck 8), so that a COCO-trained detector is scored without remapping. The finer
+class (e.g. van) stays as an attribute (``subclass``). Ids are never 0.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class ObjectClass(str, enum.Enum):
+    """Classes of simulated actors (the ``cls`` column of trajectories and labels)."""
+
+    CAR = "car"
+    VAN = "van"
+    TRUCK = "truck"
+    BUS = "bus"
+    MOTORCYCLE = "motorcycle"
+    BICYCLE = "bicycle"
+    PEDESTRIAN = "pedestrian"
+
+    @property
+    def coco_id(self) -> int:
+        """COCO category id (van counts as car)."""
+        return _COCO_ID[self]
+
+    @property
+    def coco_name(self) -> str:
+        return COCO_CATEGORIES[self.coco_id][0]
+
+    @property
+    def semantic(self) -> SemanticClass:
+        return SemanticClass[self.name]
+
+
+# id -> (name, supercategory), COCO 2017 instances.
+COCO_CATEGORIES: dict[int, tuple[str, str]] = {
+    1: ("person", "person"),
+    2: ("bicycle", "vehicle"),
+    3: ("car", "vehicle"),
+    4: ("motorcycle", "vehicle"),
+    6: ("bus", "vehicle"),
+    8: ("truck", "vehicle"),
+}
+
+_COCO_ID = {
+    ObjectClass.CAR: 3,
+    ObjectClass.VAN: 3,
+    ObjectClass.TRUCK: 8,
+    ObjectClass.BUS: 6,
+    ObjectClass.MOTORCYCLE: 4,
+    ObjectClass.BICYCLE: 2,
+    ObjectClass.PEDESTRIAN: 1,
+}
+
+
+class SemanticClass(enum.IntEnum):
+    """Per-pixel / per-point semantic labels (uint8 in images and point clouds). 0 is 'nothing hit'."""
+
+    NONE = 0  # sky or out of range
+    ROAD = 1
+    LANE_MARKING = 2
+    SIDEWALK = 3
+    CROSSING = 4
+    TERRAIN = 5
+    BUILDING = 6
+    VEGETATION = 7
+    POLE = 8
+    TRAFFIC_LIGHT = 9
+    BARRIER = 10
+    KERB = 11
+    CAR = 20
+    VAN = 21
+    TRUCK = 22
+    BUS = 23
+    MOTORCYCLE = 24
+    BICYCLE = 25
+    PEDESTRIAN = 26
+    EGO = 30
+
+    @property
+    def is_actor(self) -> bool:
+        return 20 <= self.value < 30

@@ -1,0 +1,41 @@
+"""Validated configuration models. YAML under ``configs/`` only deserialises into these."""
+
+from pipeline.core.config.distributions import Constant, Distribution, LogNormal, TruncNormal, Uniform
+from pipeline.core.config.loading import ConfigError, config_dir, load_config, resolve_config_path
+from pipeline.core.config.scenario import (
+    ClassSpec,
+    DemandConfig,
+    DriverModel,
+    EgoConfig,
+    NetworkConfig,
+    NetworkKind,
+    ScenarioConfig,
+    SimulationConfig,
+)
+from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
+from pipeline.core.config.experiment import ExperimentConfig
+
+__all__ = [
+    "CameraConfig",
+    "ClassSpec",
+    "ConditionConfig",
+    "ConfigError",
+    "Constant",
+    "DemandConfig",
+    "Distribution",
+    "DriverModel",
+    "EgoConfig",
+    "ExperimentConfig",
+    "LidarConfig",
+    "LogNormal",
+    "NetworkConfig",
+    "NetworkKind",
+    "RigConfig",
+    "ScenarioConfig",
+    "SimulationConfig",
+    "TruncNormal",
+    "Uniform",
+    "config_dir",
+    "load_config",
+    "resolve_config_path",
+]

@@ -1,0 +1,37 @@
+"""An experiment: which scenarios, seeds and conditions to run, and at what size."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+
+class ExperimentConfig(BaseModel):
+    """The cross product scenarios x seeds is simulated; each run is rendered under every condition."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str
+    description: str = ""
+    scenarios: list[str] = Field(min_length=1)
+    seeds: list[int] = Field(min_length=1)
+    conditions: list[str] = Field(min_length=1)
+    rig: str = "default"
+    vehicles: int = Field(200, ge=1)
+    warmup_s: float = Field(60.0, ge=0.0)
+    duration_s: float = Field(20.0, gt=0.0)
+    frames: int | None = Field(None, ge=1, description="frames rendered per run (None: all recorded)")
+    iou_thresholds: list[float] = Field([0.5, 0.6, 0.7, 0.8], min_length=1)
+
+    @field_validator("seeds")
+    @classmethod
+    def _unique_seeds(cls, seeds: list[int]) -> list[int]:
+        if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
+            raise ValueError("seeds must be unique non-negative integers")
+        return seeds
+
+    @field_validator("iou_thresholds")
+    @classmethod
+    def _check_iou(cls, values: list[float]) -> list[float]:
+        if any(not 0.0 < v <= 1.0 for v in values):
+            raise ValueError("IoU thresholds must lie in (0, 1]")
+        return values

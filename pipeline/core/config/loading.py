@@ -1,0 +1,85 @@
+"""Loading YAML configs into validated models, with errors that name the file, key and allowed values.
+
+A config argument is either a NAME (resolved to ``configs/<kind>/NAME.yaml``) or a PATH to any YAML
+file. The configs folder is the repository's ``configs/`` unless ``ROADSYNTH_CONFIGS`` points elsewhere.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+M = TypeVar("M", bound=BaseModel)
+
+
+class ConfigError(ValueError):
+    """A config file is missing, unreadable or invalid. The message names the file and the key path."""
+
+
+def config_dir() -> Path:
+    """The folder holding ``scenarios/``, ``rigs/``, ``conditions/``, ``experiments/``."""
+    env = os.environ.get("ROADSYNTH_CONFIGS")
+    return Path(env) if env else Path(__file__).resolve().parents[3] / "configs"
+
+
+def available_names(kind: str) -> list[str]:
+    folder = config_dir() / kind
+    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+
+
+def resolve_config_path(name_or_path: str | Path, kind: str) -> Path:
+    """Resolve a NAME under ``configs/<kind>/`` or return an existing PATH; fail listing the names."""
+    candidate = Path(name_or_path)
+    if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
+        if not candidate.is_file():
+            raise ConfigError(f"{candidate}: config file not found")
+        return candidate
+    path = config_dir() / kind / f"{name_or_path}.yaml"
+    if not path.is_file():
+        names = ", ".join(available_names(kind)) or "(none)"
+        raise ConfigError(f"unknown {kind[:-1] if kind.endswith('s') else kind} {name_or_path!r}; available: {names}")
+    return path
+
+
+def _format_loc(loc: tuple[Any, ...]) -> str:
+    parts: list[str] = []
+    for item in loc:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+        else:
+            parts.append(("." if parts else "") + str(item))
+    return "".join(parts) or "(top level)"
+
+
+def format_validation_error(source: str, exc: ValidationError) -> str:
+    lines = [f"{source}: invalid config ({exc.error_count()} error{'s' if exc.error_count() > 1 else ''})"]
+    for err in exc.errors(include_url=False):
+        # Tagged unions add the tag name to the location; it is not a key the user wrote.
+        loc = tuple(p for p in err["loc"] if p not in ("constant", "uniform", "truncnormal", "lognormal"))
+        shown = "" if err["type"] == "missing" else f" got {err.get('input')!r}:"
+        lines.append(f"  {_format_loc(loc)}:{shown} {err['msg']}")
+    return "\n".join(lines)
+
+
+def parse_config(model: type[M], data: Any, source: str) -> M:
+    """Validate already-parsed data into ``model``; errors name ``source`` and the key path."""
+    try:
+        return model.model_validate(data if data is not None else {})
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(source, exc)) from None
+
+
+def load_config(model: type[M], name_or_path: str | Path, kind: str) -> tuple[M, Path]:
+    """Load ``configs/<kind>/NAME.yaml`` or PATH into ``model``. Returns the model and the file used."""
+    path = resolve_config_path(name_or_path, kind)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+    if data is not None and not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
+    return parse_config(model, data, str(path)), path

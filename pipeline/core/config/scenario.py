@@ -1,0 +1,177 @@
+"""Scenario configuration: network, demand (naturalistic background vehicles), simulation and ego.
+
+Units are in the field names (``_m``, ``_s``, ``_hz``, ``_mps``). Distributions are tagged mappings
+(see :mod:`pipeline.core.config.distributions`).
+"""
+
+from __future__ import annotations
+
+import enum
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from pipeline.core.classes import ObjectClass
+from pipeline.core.config.distributions import Constant, Distribution, TruncNormal
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, use_enum_values=False)
+
+
+class NetworkKind(str, enum.Enum):
+    HIGHWAY = "highway"
+    URBAN = "urban"
+    OSM = "osm"
+
+
+class HighwayNetwork(_Model):
+    lanes_per_direction: int = Field(3, ge=3, le=6)
+    lane_width_m: float = Field(3.5, gt=2.5, le=5.0)
+    straight_length_m: float = Field(1500.0, ge=300.0, description="each straight before/after the curve")
+    curve_radius_m: float = Field(800.0, ge=150.0)
+    curve_angle_deg: float = Field(40.0, gt=0.0, le=120.0)
+    median_width_m: float = Field(4.0, ge=1.0)
+    speed_limit_mps: float = Field(33.33, gt=5.0, le=70.0)
+    ramp_speed_mps: float = Field(22.22, gt=5.0, le=40.0)
+
+
+class UrbanNetwork(_Model):
+    blocks_x: int = Field(4, ge=4, le=20)
+    blocks_y: int = Field(4, ge=4, le=20)
+    block_length_m: float = Field(120.0, ge=50.0, le=500.0)
+    lanes_per_direction: int = Field(2, ge=1, le=4)
+    lane_width_m: float = Field(3.2, gt=2.5, le=5.0)
+    sidewalk_width_m: float = Field(2.5, ge=1.0, le=6.0)
+    speed_limit_mps: float = Field(13.89, gt=3.0, le=30.0)
+
+
+class NetworkConfig(_Model):
+    """Which road network to build. ``osm_file`` is required (and only allowed) for ``kind: osm``."""
+
+    kind: NetworkKind
+    highway: HighwayNetwork = HighwayNetwork()
+    urban: UrbanNetwork = UrbanNetwork()
+    osm_file: Path | None = None
+
+    @model_validator(mode="after")
+    def _check_osm(self) -> NetworkConfig:
+        if self.kind is NetworkKind.OSM and self.osm_file is None:
+            raise ValueError("kind 'osm' needs osm_file: the path of an OpenStreetMap .osm extract")
+        if self.kind is not NetworkKind.OSM and self.osm_file is not None:
+            raise ValueError(f"osm_file is only used with kind 'osm', not {self.kind.value!r}")
+        return self
+
+
+class DriverModel(_Model):
+    """Per-vehicle car-following (SUMO IDM) and lane-change parameters, each sampled per vehicle.
+
+    speed_factor: desired speed / lane speed limit (SUMO speedFactor).
+    tau_s: desired time headway T. min_gap_m: standstill gap s0. accel_mps2: maximum acceleration a.
+    decel_mps2: comfortable deceleration b. delta: IDM acceleration exponent.
+    imperfection: driver imperfection in [0, 1): SUMO's driver-state device with
+        initialAwareness = 1 - imperfection (perception errors on gap and speed difference; SUMO's IDM
+        ignores Krauss' ``sigma``). 0 disables the device.
+    lc_cooperative: willingness to make room for others, [0, 1]. lc_assertive: acceptance of small
+        gaps when changing lanes (>= 1 means accepting smaller gaps).
+    """
+
+    speed_factor: Distribution
+    tau_s: Distribution
+    min_gap_m: Distribution
+    accel_mps2: Distribution
+    decel_mps2: Distribution
+    delta: Distribution = Constant(value=4.0)
+    imperfection: Distribution = Constant(value=0.0)
+    lc_cooperative: Distribution = Constant(value=1.0)
+    lc_assertive: Distribution = Constant(value=1.0)
+
+
+class ClassSpec(_Model):
+    """One actor class in the mix: its share and its size and colour distributions."""
+
+    share: float = Field(ge=0.0)
+    length_m: Distribution
+    width_m: Distribution
+    height_m: Distribution
+    colors: list[tuple[int, int, int]] = Field(min_length=1, description="RGB 0-255, drawn uniformly")
+    max_speed_mps: float = Field(gt=0.0)
+    driver: DriverModel | None = Field(None, description="overrides the demand's driver model")
+
+    @field_validator("colors")
+    @classmethod
+    def _check_colors(cls, colors: list[tuple[int, int, int]]) -> list[tuple[int, int, int]]:
+        for rgb in colors:
+            if not all(0 <= c <= 255 for c in rgb):
+                raise ValueError(f"colour components must be in 0..255, got {rgb}")
+        return colors
+
+
+class DeparturePattern(str, enum.Enum):
+    UNIFORM = "uniform"  # evenly spaced departures over the window
+    RANDOM = "random"  # independent uniform departure times over the window
+
+
+class DemandConfig(_Model):
+    """Background traffic. ``vehicles`` vehicles depart in ``[0, depart_window_s]`` on random routes."""
+
+    vehicles: int = Field(200, ge=1, le=20000)
+    depart_window_s: float = Field(60.0, gt=0.0)
+    departure: DeparturePattern = DeparturePattern.RANDOM
+    min_route_length_m: float = Field(300.0, ge=0.0)
+    classes: dict[ObjectClass, ClassSpec]
+    driver: DriverModel
+    pedestrians: int = Field(0, ge=0, description="pedestrians walking sidewalks and crossings (urban/osm)")
+    pedestrian_speed_mps: Distribution = TruncNormal(mean=1.34, std=0.26, low=0.6, high=2.2)
+
+    @model_validator(mode="after")
+    def _check_classes(self) -> DemandConfig:
+        if ObjectClass.PEDESTRIAN in self.classes:
+            raise ValueError("pedestrians are not a vehicle class: set 'pedestrians' (a count) instead")
+        if sum(spec.share for spec in self.classes.values()) <= 0:
+            raise ValueError("class shares must not all be zero")
+        return self
+
+
+class SimulationConfig(_Model):
+    step_length_s: float = Field(0.1, gt=0.0, le=1.0)
+    record_hz: float = Field(10.0, gt=0.0)
+    warmup_s: float = Field(60.0, ge=0.0)
+    duration_s: float = Field(20.0, gt=0.0, description="recorded time after the warm-up")
+    time_to_teleport_s: float = Field(120.0, description="SUMO --time-to-teleport; <= 0 disables teleports")
+    collision_action: str = Field("warn", pattern="^(none|warn|teleport|remove)$")
+
+    @model_validator(mode="after")
+    def _check_rates(self) -> SimulationConfig:
+        steps = 1.0 / (self.record_hz * self.step_length_s)
+        if steps < 1 - 1e-9 or abs(steps - round(steps)) > 1e-6:
+            raise ValueError(
+                f"record_hz ({self.record_hz}) must divide the step rate 1/step_length_s "
+                f"({1.0 / self.step_length_s:g} Hz) into a whole number of steps"
+            )
+        return self
+
+    @property
+    def record_every_steps(self) -> int:
+        return round(1.0 / (self.record_hz * self.step_length_s))
+
+    @property
+    def num_frames(self) -> int:
+        return int(round(self.duration_s * self.record_hz))
+
+
+class EgoConfig(_Model):
+    """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``."""
+
+    vehicle_id: str | None = None
+    route_margin: float = Field(1.2, ge=1.0, description="remaining route >= margin x duration x max speed")
+    cls: ObjectClass = ObjectClass.CAR
+
+
+class ScenarioConfig(_Model):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
+    description: str = ""
+    network: NetworkConfig
+    demand: DemandConfig
+    simulation: SimulationConfig = SimulationConfig()
+    ego: EgoConfig = EgoConfig()

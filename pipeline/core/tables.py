@@ -1,0 +1,27 @@
+"""Deterministic Parquet I/O for the pipeline's tidy tables.
+
+Fixed writer settings (zstd, no pandas index metadata, one row group per 1M rows) so that the same
+table gives the same bytes on any machine with the same pyarrow version.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+
+def write_parquet(frame: pd.DataFrame, path: Path) -> None:
+    table = pa.Table.from_pandas(frame, preserve_index=False)
+    # pandas metadata embeds library versions and index details; the schema itself is what readers need.
+    table = table.replace_schema_metadata(None)
+    pq.write_table(table, path, compression="zstd", compression_level=3, row_group_size=1 << 20,
+                   use_dictionary=False, write_statistics=True, version="2.6")
+
+
+def read_parquet(path: Path, columns: list[str] | None = None) -> pd.DataFrame:
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: table not found")
+    return pq.read_table(path, columns=columns).to_pandas()

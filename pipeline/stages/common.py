@@ -1,0 +1,103 @@
+"""What every stage shares: atomic output folders, ``meta.json``, and config hashing.
+
+A stage writes into a temporary sibling of its output and renames it into place only when it has
+finished, so a crash never leaves a half-written folder that DVC would hash.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import os
+import shutil
+import sys
+from collections.abc import Iterator
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+
+def canonical_json(data: Any) -> str:
+    """JSON with sorted keys and no insignificant whitespace: the input of :func:`config_hash`."""
+    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+
+
+def config_hash(data: Any) -> str:
+    """sha256 hex digest of the canonical JSON of ``data``."""
+    return hashlib.sha256(canonical_json(data).encode()).hexdigest()
+
+
+def _version(dist: str) -> str | None:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def software_versions() -> dict[str, str | None]:
+    """Versions of roadsynth and the engines that shape its outputs."""
+    return {
+        "roadsynth": _version("roadsynth"),
+        "sumo": _version("eclipse-sumo"),
+        "libsumo": _version("libsumo"),
+        "open3d": _version("open3d-cpu") or _version("open3d"),
+        "numpy": _version("numpy"),
+        "pyarrow": _version("pyarrow"),
+    }
+
+
+def write_json(path: Path, data: Any) -> None:
+    """Write JSON deterministically (sorted keys, two-space indent, trailing newline)."""
+    path.write_text(json.dumps(data, sort_keys=True, indent=2) + "\n")
+
+
+def write_meta(
+    out_dir: Path, *, stage: str, config: dict[str, Any], seed: int | None, argv: list[str] | None = None
+) -> dict[str, Any]:
+    """Write ``meta.json``: versions, the resolved config, its hash, the seed and the command line.
+
+    The command line is recorded relative to nothing machine-specific; it is informational and
+    excluded from the config hash so that the same config and seed give the same hash anywhere.
+    """
+    meta = {
+        "stage": stage,
+        "versions": software_versions(),
+        "config": config,
+        "config_hash": config_hash(config),
+        "seed": seed,
+        "command": list(sys.argv if argv is None else argv),
+    }
+    write_json(out_dir / "meta.json", meta)
+    return meta
+
+
+@contextlib.contextmanager
+def atomic_output_dir(out_dir: Path, *, overwrite: bool = True) -> Iterator[Path]:
+    """Yield a temporary sibling of ``out_dir``; rename it into place when the block succeeds.
+
+    On an exception the temporary folder is removed and ``out_dir`` is left as it was.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise FileExistsError(f"{out_dir}: output exists (pass overwrite to replace it)")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_dir.with_name(f".{out_dir.name}.tmp-{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
+    if out_dir.exists():
+        out_dir.rename(old)
+    tmp.rename(out_dir)
+    if old.exists():
+        shutil.rmtree(old)
+    log.info("wrote %s", out_dir)

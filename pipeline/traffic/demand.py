@@ -1,0 +1,222 @@
+"""Demand: naturalistic background vehicles with per-vehicle parameters, and pedestrians.
+
+Routes come from SUMO's randomTrips (which validates them with duarouter). Each vehicle then gets
+its own vType whose car-following (IDM) and lane-change parameters, size and colour are drawn from the
+configured distributions with a numpy Generator derived from the run's seed. We draw per vehicle
+ourselves rather than through createVehTypeDistribution because SUMO would then pick a type per
+vehicle with its own random draw at insertion; drawing here lets the exact parameters of every vehicle
+be recorded (``vehicles.parquet``) and tested against their distributions.
+"""
+
+from __future__ import annotations
+
+import logging
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.core.classes import ObjectClass
+from pipeline.core.config import DemandConfig, DriverModel
+from pipeline.core.config.scenario import DeparturePattern
+from pipeline.traffic.sumo_tools import run_python_tool
+
+log = logging.getLogger(__name__)
+
+ROUTES_FILE = "demand.rou.xml"
+
+SUMO_VCLASS = {
+    ObjectClass.CAR: "passenger",
+    ObjectClass.VAN: "delivery",
+    ObjectClass.TRUCK: "truck",
+    ObjectClass.BUS: "bus",
+    ObjectClass.MOTORCYCLE: "motorcycle",
+    ObjectClass.BICYCLE: "bicycle",
+}
+_GUI_SHAPE = {
+    ObjectClass.CAR: "passenger",
+    ObjectClass.VAN: "delivery",
+    ObjectClass.TRUCK: "truck",
+    ObjectClass.BUS: "bus",
+    ObjectClass.MOTORCYCLE: "motorcycle",
+    ObjectClass.BICYCLE: "bicycle",
+}
+DRIVER_FIELDS = tuple(DriverModel.model_fields)
+# SUMO's default pedestrian type (DEFAULT_PEDTYPE): its length is the body depth.
+PEDESTRIAN_SIZE_M = {"length_m": 0.215, "width_m": 0.478, "height_m": 1.719}
+_CLOTHES = np.array([[40, 40, 60], [120, 30, 30], [30, 80, 140], [200, 180, 150], [60, 90, 50], [20, 20, 20],
+                     [180, 120, 40], [150, 150, 160]], dtype=np.uint8)
+
+
+class DemandError(ValueError):
+    """Demand could not be generated (e.g. the network has too few valid routes)."""
+
+
+@dataclass(frozen=True)
+class Demand:
+    """Generated demand.
+
+    Attributes:
+        vehicles: one row per vehicle: vehicle_id, cls, depart_s, route (space-separated edges),
+            route_length_m, length_m, width_m, height_m, color_r/g/b, max_speed_mps and one column per
+            DriverModel field.
+        routes_file: the written SUMO route file.
+    """
+
+    vehicles: pd.DataFrame
+    persons: pd.DataFrame
+    routes_file: Path
+
+    def actor_table(self) -> pd.DataFrame:
+        """Static attributes of every actor, indexed by SUMO id: track_id (1.., stable), cls, size, colour."""
+        cols = ["cls", "length_m", "width_m", "height_m", "color_r", "color_g", "color_b"]
+        vehicles = self.vehicles.set_index("vehicle_id")[cols]
+        persons = self.persons.set_index("person_id")
+        persons = persons.assign(cls=ObjectClass.PEDESTRIAN.value, **PEDESTRIAN_SIZE_M)[cols]
+        table = pd.concat([vehicles, persons]).astype({c: np.uint8 for c in cols if c.startswith("color_")})
+        table.insert(0, "track_id", np.arange(1, len(table) + 1, dtype=np.int32))
+        return table
+
+
+def _random_routes(net_file: Path, count: int, seed: int, min_distance_m: float, work: Path, *, prefix: str,
+                   extra: list[str]) -> list[tuple[str, list[str]]]:
+    """``count`` or more validated routes from randomTrips, as (trip id, edge list)."""
+    trips, routes = work / f"{prefix}.trips.xml", work / f"{prefix}.rou.xml"
+    # Ask for twice as many as needed: validation drops trips without a route.
+    period = 1.0 / (2 * count)
+    run_python_tool("randomTrips.py", ["-n", str(net_file), "-o", trips.name, "-r", routes.name, "--seed", str(seed),
+                                       "-b", "0", "-e", "1", "-p", f"{period:.9f}", "--prefix", prefix,
+                                       "--min-distance", f"{min_distance_m:.1f}", "--fringe-factor", "max",
+                                       "--validate", *extra], cwd=work)
+    root = ET.parse(routes).getroot()
+    out = []
+    for veh in root.iter("vehicle"):
+        route = veh.find("route")
+        if route is not None:
+            out.append((veh.get("id"), route.get("edges").split()))
+    return out
+
+
+def sample_driver(model: DriverModel, rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+    """Draw every DriverModel parameter for ``n`` vehicles (one independent stream per field)."""
+    return {name: getattr(model, name).sample(rng, n) for name in DRIVER_FIELDS}
+
+
+def sample_vehicles(config: DemandConfig, rng: np.random.Generator) -> pd.DataFrame:
+    """Class, size, colour and driver parameters for every vehicle (routes and departures excluded)."""
+    n = config.vehicles
+    classes = sorted(config.classes, key=lambda c: c.value)
+    shares = np.array([config.classes[c].share for c in classes])
+    cls_index = rng.choice(len(classes), size=n, p=shares / shares.sum())
+    frame = pd.DataFrame({"cls": [classes[i].value for i in cls_index]})
+    columns: dict[str, np.ndarray] = {}
+    for name in ("length_m", "width_m", "height_m", "max_speed_mps", "color_r", "color_g", "color_b",
+                 *DRIVER_FIELDS):
+        columns[name] = np.zeros(n)
+    for k, cls in enumerate(classes):
+        mask = cls_index == k
+        count = int(mask.sum())
+        spec = config.classes[cls]
+        for name in ("length_m", "width_m", "height_m"):
+            columns[name][mask] = getattr(spec, name).sample(rng, count)
+        colors = np.asarray(spec.colors)[rng.integers(0, len(spec.colors), size=count)]
+        columns["color_r"][mask], columns["color_g"][mask], columns["color_b"][mask] = colors.T
+        columns["max_speed_mps"][mask] = spec.max_speed_mps
+        for name, values in sample_driver(spec.driver or config.driver, rng, count).items():
+            columns[name][mask] = values
+    for name, values in columns.items():
+        frame[name] = values.astype(np.uint8) if name.startswith("color_") else values
+    return frame
+
+
+def _depart_times(config: DemandConfig, rng: np.random.Generator) -> np.ndarray:
+    n, window = config.vehicles, config.depart_window_s
+    if config.departure is DeparturePattern.UNIFORM:
+        return np.arange(n) * (window / n)
+    return np.sort(rng.uniform(0.0, window, size=n))
+
+
+def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: Path, seed: int) -> Demand:
+    """Sample the vehicles, route them, and write ``out_dir/demand.rou.xml``."""
+    rng = np.random.default_rng([seed, 0xDE3A4D])
+    work_dir.mkdir(parents=True, exist_ok=True)
+    vclasses = {SUMO_VCLASS[c] for c in config.classes}
+    vclass = "passenger" if "passenger" in vclasses else sorted(vclasses)[0]
+    routes = _random_routes(net_file, config.vehicles, seed, config.min_route_length_m, work_dir, prefix="veh",
+                            extra=["--vehicle-class", vclass])
+    if len(routes) < config.vehicles:
+        raise DemandError(f"{net_file}: only {len(routes)} valid routes of at least {config.min_route_length_m} m "
+                          f"for {config.vehicles} vehicles; lower demand.vehicles or min_route_length_m")
+    vehicles = sample_vehicles(config, rng)
+    vehicles.insert(0, "vehicle_id", [f"veh{i:04d}" for i in range(config.vehicles)])
+    vehicles.insert(2, "depart_s", np.round(_depart_times(config, rng), 2))
+    vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])
+    persons = _pedestrians(config, net_file, work_dir, seed, rng)
+    path = out_dir / ROUTES_FILE
+    _write_routes(vehicles, persons, path)
+    return Demand(vehicles, persons, path)
+
+
+def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
+                 rng: np.random.Generator) -> pd.DataFrame:
+    if config.pedestrians == 0:
+        return pd.DataFrame({"person_id": pd.Series(dtype=str), "depart_s": pd.Series(dtype=float),
+                             "route": pd.Series(dtype=str), "speed_mps": pd.Series(dtype=float),
+                             **{f"color_{c}": pd.Series(dtype=np.uint8) for c in "rgb"}})
+    walks = _random_routes(net_file, config.pedestrians, seed + 1, 50.0, work, prefix="ped",
+                           extra=["--pedestrians", "--max-distance", "1500"])
+    if len(walks) < config.pedestrians:
+        raise DemandError(f"{net_file}: only {len(walks)} valid walks for {config.pedestrians} pedestrians "
+                          "(does the network have sidewalks?)")
+    n = config.pedestrians
+    clothes = _CLOTHES[rng.integers(0, len(_CLOTHES), size=n)]
+    return pd.DataFrame({
+        "person_id": [f"ped{i:04d}" for i in range(n)],
+        "depart_s": np.round(np.sort(rng.uniform(0.0, config.depart_window_s, size=n)), 2),
+        "route": [" ".join(edges) for _, edges in walks[:n]],
+        "speed_mps": config.pedestrian_speed_mps.sample(rng, n),
+        "color_r": clothes[:, 0], "color_g": clothes[:, 1], "color_b": clothes[:, 2],
+    })
+
+
+def _g(x: float) -> str:
+    return f"{x:.4f}".rstrip("0").rstrip(".")
+
+
+def _vtype(row) -> dict[str, str]:
+    cls = ObjectClass(row.cls)
+    attrs = {
+        "id": f"t_{row.vehicle_id}", "vClass": SUMO_VCLASS[cls], "guiShape": _GUI_SHAPE[cls],
+        "length": _g(row.length_m), "width": _g(row.width_m), "height": _g(row.height_m),
+        "color": f"{row.color_r},{row.color_g},{row.color_b}", "maxSpeed": _g(row.max_speed_mps),
+        "carFollowModel": "IDM", "accel": _g(row.accel_mps2), "decel": _g(row.decel_mps2),
+        "emergencyDecel": _g(max(9.0, row.decel_mps2)), "tau": _g(row.tau_s), "minGap": _g(row.min_gap_m),
+        "delta": _g(row.delta), "speedFactor": _g(row.speed_factor), "speedDev": "0",
+        "laneChangeModel": "LC2013", "lcCooperative": _g(row.lc_cooperative), "lcAssertive": _g(row.lc_assertive),
+    }
+    return attrs
+
+
+def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path) -> None:
+    root = ET.Element("routes")
+    root.append(ET.Comment(" roadsynth: one vType per background vehicle, parameters sampled per vehicle "))
+    for row in vehicles.itertuples(index=False):
+        vtype = ET.SubElement(root, "vType", _vtype(row))
+        if row.imperfection > 0:
+            # SUMO's driver-state device adds perception errors; awareness 1 is a perfect driver.
+            ET.SubElement(vtype, "param", key="has.driverstate.device", value="true")
+            ET.SubElement(vtype, "param", key="device.driverstate.initialAwareness", value=_g(1.0 - row.imperfection))
+    entries = [(row.depart_s, 0, row.vehicle_id, row) for row in vehicles.itertuples(index=False)]
+    entries += [(row.depart_s, 1, row.person_id, row) for row in persons.itertuples(index=False)]
+    for depart, kind, ident, row in sorted(entries, key=lambda e: (e[0], e[1], e[2])):
+        if kind == 0:
+            veh = ET.SubElement(root, "vehicle", id=ident, type=f"t_{ident}", depart=f"{depart:.2f}",
+                                departLane="best", departSpeed="max", departPos="base")
+            ET.SubElement(veh, "route", edges=row.route)
+        else:
+            person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}")
+            ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))
+    ET.indent(root)
+    path.write_text('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n")

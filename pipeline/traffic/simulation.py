@@ -1,0 +1,222 @@
+"""Running a scenario in libsumo and recording every actor at a fixed rate.
+
+libsumo runs one simulation per process (start/close in sequence is fine; parallel runs need
+processes). Actors are read through subscriptions, not per-vehicle getters: after the warm-up every
+running vehicle and person is subscribed once, and each newly departed one when it appears.
+
+Recorded positions follow DESIGN.md: SUMO's front-bumper position and clockwise-from-north angle are
+converted to box centre and yaw (CCW from east); centre z = road z + height / 2.
+"""
+
+from __future__ import annotations
+
+import logging
+import xml.etree.ElementTree as ET
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from pipeline.core.config import EgoConfig, SimulationConfig
+from pipeline.core.geometry import sumo_front_to_center
+from pipeline.traffic.sumo_tools import binary
+
+log = logging.getLogger(__name__)
+
+SUMOCFG_FILE = "run.sumocfg"
+# traci.constants, spelled out so this module needs only libsumo at run time.
+VAR_POSITION3D, VAR_ANGLE, VAR_SPEED, VAR_ACCELERATION, VAR_LANE_ID, VAR_SIGNALS = 0x39, 0x43, 0x40, 0x72, 0x51, 0x5B
+VAR_ROAD_ID, TL_STATE = 0x50, 0x20
+VEHICLE_VARS = (VAR_POSITION3D, VAR_ANGLE, VAR_SPEED, VAR_ACCELERATION, VAR_LANE_ID, VAR_SIGNALS)
+PERSON_VARS = (VAR_POSITION3D, VAR_ANGLE, VAR_SPEED, VAR_ROAD_ID)
+SIGNAL_BRAKELIGHT = 8
+
+
+class SimulationError(RuntimeError):
+    """The simulation could not produce a valid recording (e.g. no vehicle can serve as ego)."""
+
+
+def write_sumocfg(out_dir: Path, net_file: str, routes_file: str, sim: SimulationConfig, seed: int) -> Path:
+    """Write the .sumocfg that replays the run in plain ``sumo`` / ``sumo-gui``."""
+    root = ET.Element("configuration")
+    inp = ET.SubElement(root, "input")
+    ET.SubElement(inp, "net-file", value=net_file)
+    ET.SubElement(inp, "route-files", value=routes_file)
+    time = ET.SubElement(root, "time")
+    ET.SubElement(time, "begin", value="0")
+    ET.SubElement(time, "end", value=f"{sim.warmup_s + sim.duration_s:g}")
+    ET.SubElement(time, "step-length", value=f"{sim.step_length_s:g}")
+    proc = ET.SubElement(root, "processing")
+    ET.SubElement(proc, "time-to-teleport", value=f"{sim.time_to_teleport_s:g}")
+    ET.SubElement(proc, "collision.action", value=sim.collision_action)
+    ET.SubElement(proc, "collision.check-junctions", value="true")
+    ET.SubElement(root, "random_number").append(ET.Element("seed", value=str(seed)))
+    report = ET.SubElement(root, "report")
+    ET.SubElement(report, "no-step-log", value="true")
+    ET.SubElement(report, "duration-log.disable", value="true")
+    ET.indent(root)
+    path = out_dir / SUMOCFG_FILE
+    path.write_text(ET.tostring(root, encoding="unicode") + "\n")
+    return path
+
+
+@dataclass
+class _Columns:
+    """Growing per-record columns (one entry per actor per recorded frame)."""
+
+    frame: list[np.ndarray] = field(default_factory=list)
+    time_s: list[np.ndarray] = field(default_factory=list)
+    actor_id: list[str] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)  # (n, 7): x, y, z, angle, speed, accel, signals
+    lane_id: list[str] = field(default_factory=list)
+
+    def add(self, frame: int, time_s: float, results: dict[str, dict[int, object]], person: bool) -> None:
+        if not results:
+            return
+        ids = sorted(results)
+        rows = np.empty((len(ids), 7))
+        for i, ident in enumerate(ids):
+            res = results[ident]
+            x, y, z = res[VAR_POSITION3D]
+            rows[i] = (x, y, z, res[VAR_ANGLE], res[VAR_SPEED],
+                       0.0 if person else res[VAR_ACCELERATION], 0 if person else res[VAR_SIGNALS])
+            self.lane_id.append(res[VAR_ROAD_ID] if person else res[VAR_LANE_ID])
+        self.actor_id.extend(ids)
+        self.values.append(rows)
+        self.frame.append(np.full(len(ids), frame, dtype=np.int32))
+        self.time_s.append(np.full(len(ids), time_s))
+
+
+@dataclass(frozen=True)
+class Recording:
+    """What a run produced: trajectories (one row per actor per frame), traffic-light states and stats."""
+
+    trajectories: pd.DataFrame
+    tls_states: pd.DataFrame
+    stats: dict[str, object]
+    ego_id: str
+
+
+def choose_ego(sumo, candidates: list[str], ego: EgoConfig, sim: SimulationConfig, rng: np.random.Generator) -> str:
+    """The named vehicle, or a random running vehicle whose remaining route covers the recording."""
+    running = sorted(sumo.vehicle.getIDList())
+    if ego.vehicle_id is not None:
+        if ego.vehicle_id not in running:
+            raise SimulationError(f"ego.vehicle_id {ego.vehicle_id!r} is not driving at the end of the warm-up "
+                                  f"({len(running)} vehicles are, e.g. {', '.join(running[:5])})")
+        return ego.vehicle_id
+    eligible = []
+    for vid in sorted(set(running) & set(candidates)):
+        route = sumo.vehicle.getRoute(vid)
+        last = route[-1]
+        remaining = sumo.vehicle.getDrivingDistance(vid, last, sumo.lane.getLength(f"{last}_0"))
+        speed = max(sumo.vehicle.getSpeed(vid), sumo.vehicle.getAllowedSpeed(vid))
+        if remaining >= ego.route_margin * sim.duration_s * speed:
+            eligible.append(vid)
+    if not eligible:
+        raise SimulationError(f"no {ego.cls.value} driving at the end of the warm-up ({sim.warmup_s} s) has a route "
+                              f"long enough for {sim.duration_s} s of recording; shorten simulation.duration_s, "
+                              "lengthen the warm-up, or name ego.vehicle_id")
+    return eligible[int(rng.integers(len(eligible)))]
+
+
+def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: list[str], seed: int, *,
+        progress: bool = True) -> tuple[_Columns, _Columns, list[tuple], dict[str, object], str]:
+    """Step the simulation; return vehicle and person columns, TLS rows, counters and the ego id."""
+    import libsumo as sumo
+
+    sumo.start([binary("sumo"), "-c", str(sumocfg), "--no-warnings", "true"])
+    try:
+        return _loop(sumo, sim, ego, ego_candidates, np.random.default_rng([seed, 0xE90]), progress)
+    finally:
+        sumo.close()
+
+
+def _loop(sumo, sim, ego, ego_candidates, rng, progress):
+    warm_steps = round(sim.warmup_s / sim.step_length_s)
+    total_steps = warm_steps + round(sim.duration_s / sim.step_length_s)
+    vehicles, persons, tls_rows = _Columns(), _Columns(), []
+    counters: dict[str, int] = defaultdict(int)
+    collisions: list[dict[str, object]] = []
+    ego_id, recording = "", False
+    bar = tqdm(total=round(sim.warmup_s + sim.duration_s, 3), unit="s", desc="simulate", disable=not progress,
+               bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim-s [{elapsed}<{remaining}]")
+    for step in range(1, total_steps + 1):
+        sumo.simulationStep()
+        counters["departed"] += sumo.simulation.getDepartedNumber()
+        counters["arrived"] += sumo.simulation.getArrivedNumber()
+        counters["teleports"] += sumo.simulation.getStartingTeleportNumber()
+        counters["persons_departed"] += sumo.simulation.getDepartedPersonNumber()
+        for col in sumo.simulation.getCollisions():
+            collisions.append({"time_s": round(step * sim.step_length_s, 3), "collider": col.collider,
+                               "victim": col.victim, "type": col.type, "lane": col.lane})
+        if step == warm_steps or (warm_steps == 0 and step == 1):
+            ego_id = choose_ego(sumo, ego_candidates, ego, sim, rng)
+            for vid in sumo.vehicle.getIDList():
+                sumo.vehicle.subscribe(vid, VEHICLE_VARS)
+            for pid in sumo.person.getIDList():
+                sumo.person.subscribe(pid, PERSON_VARS)
+            for tls in sumo.trafficlight.getIDList():
+                sumo.trafficlight.subscribe(tls, (TL_STATE,))
+            recording = True
+        elif recording:
+            for vid in sumo.simulation.getDepartedIDList():
+                sumo.vehicle.subscribe(vid, VEHICLE_VARS)
+            for pid in sumo.simulation.getDepartedPersonIDList():
+                sumo.person.subscribe(pid, PERSON_VARS)
+        since = step - max(warm_steps, 1)
+        if recording and since % sim.record_every_steps == 0 and since // sim.record_every_steps < sim.num_frames:
+            frame = since // sim.record_every_steps
+            time_s = round(step * sim.step_length_s, 6)
+            veh_results = sumo.vehicle.getAllSubscriptionResults()
+            if ego_id not in veh_results:
+                log.warning("ego %s left the network at %.1f s; recording stops", ego_id, time_s)
+                counters["ego_left_early"] = 1
+                break
+            vehicles.add(frame, time_s, veh_results, person=False)
+            persons.add(frame, time_s, sumo.person.getAllSubscriptionResults(), person=True)
+            for tls, res in sorted(sumo.trafficlight.getAllSubscriptionResults().items()):
+                tls_rows.append((frame, time_s, tls, res[TL_STATE]))
+        if step % round(1.0 / sim.step_length_s) == 0:
+            bar.update(1.0)
+    bar.close()
+    counters["collisions"] = len(collisions)
+    stats = {**counters, "collision_events": collisions}
+    return vehicles, persons, tls_rows, stats, ego_id
+
+
+def to_trajectories(vehicles: _Columns, persons: _Columns, actors: pd.DataFrame, ego_id: str) -> pd.DataFrame:
+    """Assemble the trajectories table from recorded columns and the static actor table.
+
+    ``actors`` has one row per actor id: track_id, cls, length_m, width_m, height_m, color_r/g/b.
+    """
+    parts = []
+    for cols in (vehicles, persons):
+        if not cols.actor_id:
+            continue
+        values = np.concatenate(cols.values)
+        part = pd.DataFrame({"frame": np.concatenate(cols.frame), "time_s": np.concatenate(cols.time_s),
+                             "actor_id": cols.actor_id, "lane_id": cols.lane_id})
+        static = actors.loc[part["actor_id"]].reset_index(drop=True)
+        centre, yaw = sumo_front_to_center(values[:, :2], values[:, 3], static["length_m"].to_numpy())
+        part["x_m"], part["y_m"] = centre[:, 0], centre[:, 1]
+        part["z_m"] = values[:, 2] + 0.5 * static["height_m"].to_numpy()
+        part["yaw_rad"] = yaw
+        part["speed_mps"], part["accel_mps2"] = values[:, 4], values[:, 5]
+        part["signals"] = values[:, 6].astype(np.int32)
+        for name in ("track_id", "cls", "length_m", "width_m", "height_m", "color_r", "color_g", "color_b"):
+            part[name] = static[name].to_numpy()
+        parts.append(part)
+    if not parts:
+        raise SimulationError("nothing was recorded: no actor was in the network during the recording")
+    table = pd.concat(parts, ignore_index=True)
+    table["is_ego"] = table["actor_id"] == ego_id
+    table["braking"] = (table["signals"] & SIGNAL_BRAKELIGHT) != 0
+    order = ["frame", "time_s", "track_id", "actor_id", "is_ego", "cls", "x_m", "y_m", "z_m", "yaw_rad",
+             "length_m", "width_m", "height_m", "speed_mps", "accel_mps2", "lane_id", "signals", "braking",
+             "color_r", "color_g", "color_b"]
+    table = table[order].sort_values(["frame", "track_id"], kind="stable").reset_index(drop=True)
+    return table.astype({"frame": np.int32, "track_id": np.int32, "signals": np.int32})

@@ -1,0 +1,78 @@
+"""Surface materials: colour for the camera, reflectivity for the LiDAR.
+
+Meshes carry a material index per triangle (:func:`material_index`); the renderer turns the table
+into arrays (:func:`material_arrays`) and gathers by index for all hits at once.
+Actor body paint is the material ``paint``; its colour comes from the actor, not from this table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Material:
+    """Attributes:
+    albedo_rgb: diffuse colour, linear RGB in [0, 1].
+    specular: strength of the specular highlight in [0, 1] (wet road, glass, paint).
+    shininess: Phong exponent of the highlight.
+    reflectivity: LiDAR reflectivity I0 at normal incidence in [0, 1] (905 nm).
+    emissive_rgb: light emitted (lamps, lit tail lights), linear RGB, may exceed 1.
+    """
+
+    albedo_rgb: tuple[float, float, float]
+    specular: float = 0.0
+    shininess: float = 16.0
+    reflectivity: float = 0.2
+    emissive_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+MATERIALS: dict[str, Material] = {
+    "asphalt": Material((0.09, 0.09, 0.10), specular=0.05, reflectivity=0.12),
+    "lane_paint": Material((0.85, 0.85, 0.82), specular=0.05, reflectivity=0.75),
+    "concrete": Material((0.45, 0.44, 0.42), reflectivity=0.35),
+    "kerb": Material((0.55, 0.55, 0.53), reflectivity=0.40),
+    "grass": Material((0.10, 0.22, 0.06), reflectivity=0.45),
+    "building": Material((0.50, 0.42, 0.36), reflectivity=0.30),
+    "building_glass": Material((0.08, 0.10, 0.12), specular=0.6, shininess=64.0, reflectivity=0.08),
+    "foliage": Material((0.07, 0.18, 0.05), reflectivity=0.40),
+    "bark": Material((0.20, 0.13, 0.08), reflectivity=0.30),
+    "metal": Material((0.40, 0.41, 0.43), specular=0.4, shininess=32.0, reflectivity=0.50),
+    "barrier": Material((0.60, 0.60, 0.58), specular=0.2, reflectivity=0.60),
+    "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=48.0, reflectivity=0.45),
+    "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05),
+    "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
+    "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
+    "headlight": Material((0.9, 0.9, 0.85), specular=0.8, reflectivity=0.80),
+    "taillight": Material((0.45, 0.02, 0.02), specular=0.5, reflectivity=0.70),
+    "lamp": Material((0.9, 0.85, 0.7), reflectivity=0.5),
+    "skin": Material((0.60, 0.45, 0.35), reflectivity=0.30),
+    "cloth": Material((0.20, 0.22, 0.30), reflectivity=0.25),
+    # Appended by the actor meshes (pipeline/world/actor_shapes.py).
+    "cargo": Material((0.70, 0.70, 0.68), specular=0.2, reflectivity=0.55),
+}
+
+MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
+
+
+def material_index(name: str) -> int:
+    """Index of a material by name; unknown names fail listing the known ones."""
+    try:
+        return MATERIAL_NAMES.index(name)
+    except ValueError:
+        raise KeyError(f"unknown material {name!r}; known: {', '.join(MATERIAL_NAMES)}") from None
+
+
+def material_arrays() -> dict[str, np.ndarray]:
+    """The table as arrays indexed by material index: albedo (M, 3), specular (M,), shininess (M,),
+    reflectivity (M,), emissive (M, 3), all float32."""
+    mats = [MATERIALS[n] for n in MATERIAL_NAMES]
+    return {
+        "albedo": np.array([m.albedo_rgb for m in mats], dtype=np.float32),
+        "specular": np.array([m.specular for m in mats], dtype=np.float32),
+        "shininess": np.array([m.shininess for m in mats], dtype=np.float32),
+        "reflectivity": np.array([m.reflectivity for m in mats], dtype=np.float32),
+        "emissive": np.array([m.emissive_rgb for m in mats], dtype=np.float32),
+    }
