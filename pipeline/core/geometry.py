@@ -205,7 +205,8 @@ class Boxes3D:
         local_x = c * rel[..., 0] + s * rel[..., 1]
         local_y = -s * rel[..., 0] + c * rel[..., 1]
         half = 0.5 * self.size[:, None, :] + margin_m
-        return (np.abs(local_x) <= half[..., 0]) & (np.abs(local_y) <= half[..., 1]) & (np.abs(rel[..., 2]) <= half[..., 2])
+        inside_xy = (np.abs(local_x) <= half[..., 0]) & (np.abs(local_y) <= half[..., 1])
+        return inside_xy & (np.abs(rel[..., 2]) <= half[..., 2])
 
     def transformed(self, transform: Transform) -> Boxes3D:
         """Boxes expressed in another z-up frame (the transform must keep z up: yaw-only rotation)."""

@@ -43,9 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         return int(args._module.main(args) or 0)
-    except (ValueError, FileNotFoundError, FileExistsError) as exc:
-        # Input errors: the message names the file, the field and what was expected.
-        logging.getLogger("roadsynth").debug("failure", exc_info=True)
+    except (ValueError, OSError, RuntimeError) as exc:
+        # Input and run errors: the message names the file, the field and what was expected;
+        # -v shows the traceback.
+        logging.getLogger("roadsynth").debug("traceback", exc_info=True)
         print(f"roadsynth {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vehicles", type=int, help="override demand.vehicles")
     parser.add_argument("--duration", type=float, help="override simulation.duration_s (recorded seconds)")
     parser.add_argument("--warmup", type=float, help="override simulation.warmup_s")
+    parser.add_argument("--metrics-out", type=Path, help="also write the run's summary stats here (for dvc metrics)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -108,6 +109,10 @@ def main(args: argparse.Namespace) -> int:
                                     warmup_s=args.warmup)
     log.info("scenario %s from %s, seed %d", config.name, path, args.seed)
     stats = simulate(config, args.seed, args.out, progress=not args.no_progress)
+    if args.metrics_out is not None:
+        args.metrics_out.parent.mkdir(parents=True, exist_ok=True)
+        summary = {k: v for k, v in stats.items() if k not in ("collision_events", "ego_id")}
+        write_json(args.metrics_out, summary)
     log.info("recorded %d frames, %d actor states; %d collisions, %d teleports -> %s", stats["frames"],
              stats["recorded_actor_states"], stats["collisions"], stats["teleports"], args.out)
     return 0

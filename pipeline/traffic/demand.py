@@ -144,12 +144,16 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
     work_dir.mkdir(parents=True, exist_ok=True)
     vclasses = {SUMO_VCLASS[c] for c in config.classes}
     vclass = "passenger" if "passenger" in vclasses else sorted(vclasses)[0]
+    net_file = net_file.resolve()
     routes = _random_routes(net_file, config.vehicles, seed, config.min_route_length_m, work_dir, prefix="veh",
                             extra=["--vehicle-class", vclass])
     if len(routes) < config.vehicles:
         raise DemandError(f"{net_file}: only {len(routes)} valid routes of at least {config.min_route_length_m} m "
                           f"for {config.vehicles} vehicles; lower demand.vehicles or min_route_length_m")
     vehicles = sample_vehicles(config, rng)
+    # SUMO reads the parameters at the precision written to the route file; record exactly those.
+    rounded = ["length_m", "width_m", "height_m", *DRIVER_FIELDS]
+    vehicles[rounded] = vehicles[rounded].round(4)
     vehicles.insert(0, "vehicle_id", [f"veh{i:04d}" for i in range(config.vehicles)])
     vehicles.insert(2, "depart_s", np.round(_depart_times(config, rng), 2))
     vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])

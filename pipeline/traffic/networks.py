@@ -111,8 +111,11 @@ def _highway_xml(cfg: HighwayNetwork) -> tuple[ET.Element, ET.Element, ET.Elemen
             ET.SubElement(edges, "edge", id=f"{direction}_{i}", **{"from": ids[i], "to": ids[i + 1]}, type=_MOTORWAY,
                           numLanes=str(lane_counts[i]), shape=_fmt(np.vstack([node_xy[i], inner, node_xy[i + 1]])))
         ramp_offset = n * w + 35.0
-        on_xy = np.vstack([place(np.array([merge - 320.0]), ramp_offset), place(np.array([merge - 160.0]), n * w + 8.0)])
-        off_xy = np.vstack([place(np.array([diverge + 160.0]), n * w + 8.0), place(np.array([diverge + 320.0]), ramp_offset)])
+        # Ramps curve in from (out to) well beside the carriageway.
+        on_xy = np.vstack([place(np.array([merge - 320.0]), ramp_offset),
+                           place(np.array([merge - 160.0]), n * w + 8.0)])
+        off_xy = np.vstack([place(np.array([diverge + 160.0]), n * w + 8.0),
+                            place(np.array([diverge + 320.0]), ramp_offset)])
         ET.SubElement(nodes, "node", id=f"{direction}_ramp_in", x=f"{on_xy[0, 0]:.2f}", y=f"{on_xy[0, 1]:.2f}")
         ET.SubElement(nodes, "node", id=f"{direction}_ramp_out", x=f"{off_xy[1, 0]:.2f}", y=f"{off_xy[1, 1]:.2f}")
         ET.SubElement(edges, "edge", id=f"{direction}_on", **{"from": f"{direction}_ramp_in", "to": ids[1]},

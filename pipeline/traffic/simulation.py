@@ -136,24 +136,28 @@ def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: li
 
 
 def _loop(sumo, sim, ego, ego_candidates, rng, progress):
+    # Times follow SUMO's outputs (FCD, sumo-gui): the state after the step that starts at time t is
+    # labelled t, while libsumo's clock already reads t + step_length. Frame 0 is the state at warmup_s.
     warm_steps = round(sim.warmup_s / sim.step_length_s)
-    total_steps = warm_steps + round(sim.duration_s / sim.step_length_s)
+    last_step = warm_steps + (sim.num_frames - 1) * sim.record_every_steps
     vehicles, persons, tls_rows = _Columns(), _Columns(), []
     counters: dict[str, int] = defaultdict(int)
     collisions: list[dict[str, object]] = []
-    ego_id, recording = "", False
+    ego_id = ""
     bar = tqdm(total=round(sim.warmup_s + sim.duration_s, 3), unit="s", desc="simulate", disable=not progress,
                bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim-s [{elapsed}<{remaining}]")
-    for step in range(1, total_steps + 1):
+    for step in range(last_step + 1):
         sumo.simulationStep()
+        time_s = round(step * sim.step_length_s, 6)
         counters["departed"] += sumo.simulation.getDepartedNumber()
         counters["arrived"] += sumo.simulation.getArrivedNumber()
         counters["teleports"] += sumo.simulation.getStartingTeleportNumber()
         counters["persons_departed"] += sumo.simulation.getDepartedPersonNumber()
         for col in sumo.simulation.getCollisions():
-            collisions.append({"time_s": round(step * sim.step_length_s, 3), "collider": col.collider,
-                               "victim": col.victim, "type": col.type, "lane": col.lane})
-        if step == warm_steps or (warm_steps == 0 and step == 1):
+            collisions.append({"time_s": time_s, "collider": col.collider, "victim": col.victim, "type": col.type,
+                               "lane": col.lane})
+        since = step - warm_steps
+        if since == 0:
             ego_id = choose_ego(sumo, ego_candidates, ego, sim, rng)
             for vid in sumo.vehicle.getIDList():
                 sumo.vehicle.subscribe(vid, VEHICLE_VARS)
@@ -161,16 +165,13 @@ def _loop(sumo, sim, ego, ego_candidates, rng, progress):
                 sumo.person.subscribe(pid, PERSON_VARS)
             for tls in sumo.trafficlight.getIDList():
                 sumo.trafficlight.subscribe(tls, (TL_STATE,))
-            recording = True
-        elif recording:
+        elif since > 0:
             for vid in sumo.simulation.getDepartedIDList():
                 sumo.vehicle.subscribe(vid, VEHICLE_VARS)
             for pid in sumo.simulation.getDepartedPersonIDList():
                 sumo.person.subscribe(pid, PERSON_VARS)
-        since = step - max(warm_steps, 1)
-        if recording and since % sim.record_every_steps == 0 and since // sim.record_every_steps < sim.num_frames:
+        if since >= 0 and since % sim.record_every_steps == 0:
             frame = since // sim.record_every_steps
-            time_s = round(step * sim.step_length_s, 6)
             veh_results = sumo.vehicle.getAllSubscriptionResults()
             if ego_id not in veh_results:
                 log.warning("ego %s left the network at %.1f s; recording stops", ego_id, time_s)
@@ -180,7 +181,7 @@ def _loop(sumo, sim, ego, ego_candidates, rng, progress):
             persons.add(frame, time_s, sumo.person.getAllSubscriptionResults(), person=True)
             for tls, res in sorted(sumo.trafficlight.getAllSubscriptionResults().items()):
                 tls_rows.append((frame, time_s, tls, res[TL_STATE]))
-        if step % round(1.0 / sim.step_length_s) == 0:
+        if (step + 1) % round(1.0 / sim.step_length_s) == 0:
             bar.update(1.0)
     bar.close()
     counters["collisions"] = len(collisions)

@@ -1,6 +1,7 @@
 """Validated configuration models. YAML under ``configs/`` only deserialises into these."""
 
 from pipeline.core.config.distributions import Constant, Distribution, LogNormal, TruncNormal, Uniform
+from pipeline.core.config.experiment import ExperimentConfig
 from pipeline.core.config.loading import ConfigError, config_dir, load_config, resolve_config_path
 from pipeline.core.config.scenario import (
     ClassSpec,
@@ -13,7 +14,6 @@ from pipeline.core.config.scenario import (
     SimulationConfig,
 )
 from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
-from pipeline.core.config.experiment import ExperimentConfig
 
 __all__ = [
     "CameraConfig",

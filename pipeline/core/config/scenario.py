@@ -157,7 +157,7 @@ class SimulationConfig(_Model):
 
     @property
     def num_frames(self) -> int:
-        return int(round(self.duration_s * self.record_hz))
+        return round(self.duration_s * self.record_hz)
 
 
 class EgoConfig(_Model):

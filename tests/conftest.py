@@ -1,0 +1,31 @@
+"""Shared fixtures: small real SUMO runs (no mocks), built once per test session."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def tree_hashes(root: Path, *, skip: tuple[str, ...] = ()) -> dict[str, str]:
+    """sha256 of every file under ``root`` by relative path."""
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name not in skip
+    }
+
+
+@pytest.fixture(scope="session")
+def small_highway_run(tmp_path_factory) -> Path:
+    """A small highway simulation: 40 vehicles, 20 s warm-up, 3 s recorded at 10 Hz."""
+    from pipeline.stages.simulate import resolve_scenario, simulate
+
+    config, _ = resolve_scenario("highway", vehicles=40, duration_s=3.0, warmup_s=20.0)
+    out = tmp_path_factory.mktemp("sim") / "highway-7"
+    simulate(config, 7, out, progress=False)
+    return out

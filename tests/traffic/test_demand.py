@@ -1,0 +1,84 @@
+"""Per-vehicle parameters follow their configured distributions (statistical tests, fixed seed)."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from pipeline.core.config import ScenarioConfig, load_config
+from pipeline.core.config.distributions import LogNormal, TruncNormal, Uniform
+from pipeline.traffic.demand import DRIVER_FIELDS, sample_vehicles
+
+N = 4000
+
+
+@pytest.fixture(scope="module")
+def highway() -> ScenarioConfig:
+    return load_config(ScenarioConfig, "highway", "scenarios")[0]
+
+
+@pytest.fixture(scope="module")
+def sampled(highway):
+    demand = highway.demand.model_copy(update={"vehicles": N})
+    return demand, sample_vehicles(demand, np.random.default_rng(12345))
+
+
+def test_class_shares_match_configuration(sampled):
+    demand, table = sampled
+    counts = table["cls"].value_counts()
+    classes = sorted(demand.classes, key=lambda c: c.value)
+    observed = np.array([counts.get(c.value, 0) for c in classes])
+    expected = np.array([demand.classes[c].share for c in classes])
+    expected = expected / expected.sum() * N
+    assert stats.chisquare(observed, expected).pvalue > 1e-3
+
+
+@pytest.mark.parametrize("field", [f for f in DRIVER_FIELDS])
+def test_car_driver_parameters_follow_their_distributions(sampled, field):
+    demand, table = sampled
+    dist = getattr(demand.driver, field)
+    values = table.loc[table["cls"] == "car", field].to_numpy()
+    if not isinstance(dist, (TruncNormal, LogNormal, Uniform)):
+        assert np.all(values == dist.value)
+        return
+    assert stats.kstest(values, dist.cdf).pvalue > 1e-3
+    lo, hi = getattr(dist, "low", -np.inf), getattr(dist, "high", np.inf)
+    assert values.min() >= lo and values.max() <= hi
+
+
+def test_class_override_and_sizes(sampled):
+    demand, table = sampled
+    trucks = table[table["cls"] == "truck"]
+    override = demand.classes["truck"].driver
+    assert stats.kstest(trucks["tau_s"], override.tau_s.cdf).pvalue > 1e-3
+    assert stats.kstest(trucks["length_m"], demand.classes["truck"].length_m.cdf).pvalue > 1e-3
+    colors = {tuple(c) for c in demand.classes["truck"].colors}
+    assert set(map(tuple, trucks[["color_r", "color_g", "color_b"]].to_numpy().tolist())) <= colors
+
+
+def test_a_wrong_distribution_is_rejected(sampled):
+    # The KS test above has power: shifting the mean by a fifth of a std is detected at this sample size.
+    demand, table = sampled
+    dist = demand.driver.tau_s
+    shifted = dist.model_copy(update={"mean": dist.mean + 0.2 * dist.std})
+    values = table.loc[table["cls"] == "car", "tau_s"].to_numpy()
+    assert stats.kstest(values, shifted.cdf).pvalue < 1e-3
+
+
+def test_written_vtypes_carry_each_vehicles_parameters(small_highway_run):
+    import pandas as pd
+
+    vehicles = pd.read_parquet(small_highway_run / "vehicles.parquet").set_index("vehicle_id")
+    root = ET.parse(small_highway_run / "demand.rou.xml").getroot()
+    vtypes = {v.get("id"): v for v in root.iter("vType")}
+    assert len(vtypes) == len(vehicles) == 40
+    for vid, row in vehicles.iterrows():
+        vt = vtypes[f"t_{vid}"]
+        assert vt.get("carFollowModel") == "IDM"
+        assert float(vt.get("tau")) == pytest.approx(row["tau_s"], abs=1e-12)
+        assert float(vt.get("accel")) == pytest.approx(row["accel_mps2"], abs=1e-12)
+        assert float(vt.get("speedFactor")) == pytest.approx(row["speed_factor"], abs=1e-12)
+        assert float(vt.get("length")) == pytest.approx(row["length_m"], abs=1e-12)
