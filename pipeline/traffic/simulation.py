@@ -76,18 +76,18 @@ class _Columns:
     def add(self, frame: int, time_s: float, results: dict[str, dict[int, object]], person: bool) -> None:
         if not results:
             return
-        ids = sorted(results)
-        rows = np.empty((len(ids), 7))
-        for i, ident in enumerate(ids):
-            res = results[ident]
-            x, y, z = res[VAR_POSITION3D]
-            rows[i] = (x, y, z, res[VAR_ANGLE], res[VAR_SPEED],
-                       0.0 if person else res[VAR_ACCELERATION], 0 if person else res[VAR_SIGNALS])
-            self.lane_id.append(res[VAR_ROAD_ID] if person else res[VAR_LANE_ID])
-        self.actor_id.extend(ids)
-        self.values.append(rows)
-        self.frame.append(np.full(len(ids), frame, dtype=np.int32))
-        self.time_s.append(np.full(len(ids), time_s))
+        # One tuple per actor, built in a comprehension: this runs for every actor of every frame.
+        if person:
+            rows = [(*r[VAR_POSITION3D], r[VAR_ANGLE], r[VAR_SPEED], 0.0, 0) for r in results.values()]
+            self.lane_id.extend(r[VAR_ROAD_ID] for r in results.values())
+        else:
+            rows = [(*r[VAR_POSITION3D], r[VAR_ANGLE], r[VAR_SPEED], r[VAR_ACCELERATION], r[VAR_SIGNALS])
+                    for r in results.values()]
+            self.lane_id.extend(r[VAR_LANE_ID] for r in results.values())
+        self.actor_id.extend(results)
+        self.values.append(np.array(rows, dtype=np.float64))
+        self.frame.append(np.full(len(rows), frame, dtype=np.int32))
+        self.time_s.append(np.full(len(rows), time_s))
 
 
 @dataclass(frozen=True)
