@@ -1,0 +1,63 @@
+"""``roadsynth evaluate``: score a detector's output against ground truth (COCO JSON or KITTI label dirs).
+
+A thin adapter over :func:`evaluation.evaluate`; the output folder (metrics.json, plots/, report.md,
+meta.json) is written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from pipeline.stages.common import atomic_output_dir, write_meta
+
+HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from evaluation.api import METRICS
+    from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD
+
+    parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory")
+    parser.add_argument("--detections", type=Path, required=True,
+                        help="COCO results JSON, or a KITTI label directory with a 16th column (score)")
+    parser.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
+    parser.add_argument("--iou", type=float, nargs="+", default=list(DEFAULT_IOU_THRESHOLDS), metavar="T",
+                        help="IoU thresholds of the precision/recall table (default: %(default)s)")
+    parser.add_argument("--group-by", metavar="KEY", help="image attribute giving one table row per value, "
+                        "e.g. condition")
+    parser.add_argument("--metrics", default=",".join(METRICS),
+                        help=f"comma-separated subset of {','.join(METRICS)} (default: all)")
+    parser.add_argument("--score-threshold", type=float, default=DEFAULT_SCORE_THRESHOLD, metavar="S",
+                        help="detections scoring below S are not counted in the table and errors "
+                        "(default: %(default)s; the F1-optimal threshold is reported too)")
+    parser.add_argument("--kitti-mode", choices=("official", "exact"), default="official",
+                        help="KITTI AP semantics: the devkit's (official) or with its known defects fixed (exact)")
+    parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
+    parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
+
+
+def main(args: argparse.Namespace) -> int:
+    from evaluation import evaluate, parse_metrics
+
+    metrics = parse_metrics(args.metrics)
+    kitti_options = {"mode": args.kitti_mode}
+    if args.calib is not None:
+        kitti_options["calib_dir"] = args.calib
+    result = evaluate(args.gt, args.detections, iou_thresholds=args.iou, group_by=args.group_by, metrics=metrics,
+                      score_threshold=args.score_threshold, kitti_options=kitti_options)
+    config = {"gt": str(args.gt), "detections": str(args.detections), "iou": list(args.iou),
+              "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
+              "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
+    with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:
+        result.write(tmp)
+        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    table = result.metrics["table"]
+    for row in table.get("rows", []):
+        if row["group"] == "all" and row["class"] == "all":
+            log.info("IoU %.2f: precision %s recall %s", row["iou"], row["precision"], row["recall"])
+    if "stats" in result.metrics["coco"]:
+        log.info("COCO AP %.4f AP50 %.4f", *result.metrics["coco"]["stats"][:2])
+    return 0

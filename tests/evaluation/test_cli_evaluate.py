@@ -1,0 +1,36 @@
+"""``roadsynth evaluate`` end to end: atomic output folder, meta.json, exit code 2 on bad input."""
+
+from __future__ import annotations
+
+import json
+
+from pipeline.stages.cli import main
+
+GT = {"images": [{"id": 1}], "categories": [{"id": 3, "name": "car"}],
+      "annotations": [{"id": 1, "image_id": 1, "category_id": 3, "bbox": [0, 0, 10, 10], "area": 100.0,
+                       "iscrowd": 0}]}
+
+
+def test_cli_writes_outputs(tmp_path):
+    (tmp_path / "gt.json").write_text(json.dumps(GT))
+    (tmp_path / "res.json").write_text(json.dumps([{"image_id": 1, "category_id": 3, "bbox": [0, 0, 10, 10],
+                                                    "score": 0.9}]))
+    out = tmp_path / "eval"
+    rc = main(["evaluate", "--gt", str(tmp_path / "gt.json"), "--detections", str(tmp_path / "res.json"),
+               "--out", str(out), "--iou", "0.5", "0.7", "--metrics", "table,coco,errors"])
+    assert rc == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert [r["iou"] for r in metrics["table"]["rows"] if r["class"] == "all"] == [0.5, 0.7]
+    assert json.loads((out / "meta.json").read_text())["stage"] == "evaluate"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["eval", "gt.json", "res.json"]  # no temporaries
+
+
+def test_cli_bad_input_exits_2_and_leaves_nothing(tmp_path, capsys):
+    (tmp_path / "gt.json").write_text(json.dumps(GT))
+    (tmp_path / "res.json").write_text(json.dumps([{"image_id": 1, "category_id": 3, "bbox": [0, 0, 10, 10]}]))
+    out = tmp_path / "eval"
+    rc = main(["evaluate", "--gt", str(tmp_path / "gt.json"), "--detections", str(tmp_path / "res.json"),
+               "--out", str(out)])
+    assert rc == 2
+    assert "results[0]: missing field 'score'" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gt.json", "res.json"]
