@@ -52,6 +52,14 @@ MATERIALS: dict[str, Material] = {
     "cloth": Material((0.20, 0.22, 0.30), reflectivity=0.25),
     # Appended by the actor meshes (pipeline/world/actor_shapes.py).
     "cargo": Material((0.70, 0.70, 0.68), specular=0.2, reflectivity=0.55),
+    # Appended by the static world (pipeline/world/static.py): signal lamps (the renderer swaps signal_off for
+    # the lit colour per frame from the TLS state), building facade variants.
+    "signal_off": Material((0.03, 0.03, 0.03), specular=0.6, shininess=64.0, reflectivity=0.10),
+    "signal_red": Material((0.6, 0.05, 0.03), specular=0.6, reflectivity=0.10, emissive_rgb=(6.0, 0.3, 0.1)),
+    "signal_yellow": Material((0.6, 0.4, 0.03), specular=0.6, reflectivity=0.10, emissive_rgb=(6.0, 3.5, 0.2)),
+    "signal_green": Material((0.05, 0.6, 0.2), specular=0.6, reflectivity=0.10, emissive_rgb=(0.3, 6.0, 2.0)),
+    "building_light": Material((0.66, 0.62, 0.55), reflectivity=0.35),
+    "building_dark": Material((0.30, 0.28, 0.28), reflectivity=0.25),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)

@@ -1,0 +1,119 @@
+"""A top-down occupancy raster of the world: which ground cells are paved, built on or taken.
+
+Props (buildings, trees, lamps, barriers) are placed by querying it so they never stand on roads, and
+each other. Cells are square, ``cell_m`` wide; cell (i, j) covers x in [x0 + j*cell, x0 + (j+1)*cell) and
+y in [y0 + i*cell, ...). A cell is marked when its centre lies inside a rasterised triangle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+_MAX_EDGE_CELLS = 8.0  # triangles are split until every edge spans at most this many cells
+
+
+@dataclass
+class Grid:
+    """Raster frame: origin (x0, y0) in metres, cell size, shape (rows, cols)."""
+
+    x0: float
+    y0: float
+    cell_m: float
+    shape: tuple[int, int]
+
+    @staticmethod
+    def covering(bounds: tuple[float, float, float, float], cell_m: float = 0.5, max_cells: int = 16_000_000) -> Grid:
+        """A grid over [xmin, ymin, xmax, ymax]; the cell grows when the area would exceed ``max_cells``."""
+        xmin, ymin, xmax, ymax = bounds
+        cell = max(cell_m, float(np.sqrt((xmax - xmin) * (ymax - ymin) / max_cells)))
+        shape = (int(np.ceil((ymax - ymin) / cell)) + 1, int(np.ceil((xmax - xmin) / cell)) + 1)
+        return Grid(xmin, ymin, cell, shape)
+
+    def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row and column (int64) of points (n, >=2), and a mask of those inside the grid."""
+        col = np.floor((xy[:, 0] - self.x0) / self.cell_m).astype(np.int64)
+        row = np.floor((xy[:, 1] - self.y0) / self.cell_m).astype(np.int64)
+        ok = (row >= 0) & (row < self.shape[0]) & (col >= 0) & (col < self.shape[1])
+        return row, col, ok
+
+    def lookup(self, raster: np.ndarray, xy: np.ndarray, outside: bool = False) -> np.ndarray:
+        """Raster values (n,) at points (n, >=2); ``outside`` for points off the grid."""
+        row, col, ok = self.cells(xy)
+        out = np.full(len(xy), outside, dtype=raster.dtype)
+        out[ok] = raster[row[ok], col[ok]]
+        return out
+
+    def rasterise(self, tri_xy: np.ndarray, raster: np.ndarray | None = None) -> np.ndarray:
+        """Mark cells whose centres lie in any triangle (T, 3, 2); returns the (rows, cols) bool raster."""
+        raster = np.zeros(self.shape, dtype=bool) if raster is None else raster
+        tri = _split_large(np.asarray(tri_xy, dtype=np.float64)[..., :2], _MAX_EDGE_CELLS * self.cell_m)
+        if not len(tri):
+            return raster
+        span = int(_MAX_EDGE_CELLS) + 2
+        lo = np.floor((tri.min(axis=1) - (self.x0, self.y0)) / self.cell_m).astype(np.int64)
+        for chunk in range(0, len(tri), 20_000):
+            t, base = tri[chunk : chunk + 20_000], lo[chunk : chunk + 20_000]
+            off = np.stack(np.meshgrid(np.arange(span), np.arange(span), indexing="xy"), -1).reshape(-1, 2)
+            cols, rows = base[:, None, 0] + off[None, :, 0], base[:, None, 1] + off[None, :, 1]
+            px = self.x0 + (cols + 0.5) * self.cell_m
+            py = self.y0 + (rows + 0.5) * self.cell_m
+            inside = np.ones(px.shape, dtype=bool)
+            orient = np.sign(_edge(t[:, 0], t[:, 1], t[:, 2]))[:, None]
+            for a, b in ((0, 1), (1, 2), (2, 0)):
+                inside &= orient * _edge_pts(t[:, a], t[:, b], px, py) >= -1e-9
+            ok = inside & (rows >= 0) & (rows < self.shape[0]) & (cols >= 0) & (cols < self.shape[1])
+            raster[rows[ok], cols[ok]] = True
+        return raster
+
+    def mark_convex(self, poly_xy: np.ndarray, raster: np.ndarray) -> None:
+        """Mark cells whose centres lie in one convex polygon (k, >=2), either orientation, in place."""
+        poly = np.asarray(poly_xy, dtype=np.float64)[:, :2]
+        (c0, r0), (c1, r1) = (np.floor((f(poly, axis=0) - (self.x0, self.y0)) / self.cell_m).astype(int)
+                              for f in (np.min, np.max))
+        c0, r0 = max(c0, 0), max(r0, 0)
+        c1, r1 = min(c1, self.shape[1] - 1), min(r1, self.shape[0] - 1)
+        if c0 > c1 or r0 > r1:
+            return
+        px, py = np.meshgrid(self.x0 + (np.arange(c0, c1 + 1) + 0.5) * self.cell_m,
+                             self.y0 + (np.arange(r0, r1 + 1) + 0.5) * self.cell_m)
+        a, b = poly, np.roll(poly, -1, axis=0)
+        side = (b[:, None, None, 0] - a[:, None, None, 0]) * (py - a[:, None, None, 1]) - (
+            b[:, None, None, 1] - a[:, None, None, 1]) * (px - a[:, None, None, 0])
+        inside = (side >= -1e-9).all(axis=0) | (side <= 1e-9).all(axis=0)
+        raster[r0 : r1 + 1, c0 : c1 + 1] |= inside
+
+    def dilate(self, raster: np.ndarray, radius_m: float) -> np.ndarray:
+        """Cells within ``radius_m`` of a marked cell (Euclidean, exact on the cell centres)."""
+        if radius_m <= 0:
+            return raster.copy()
+        return ndimage.distance_transform_edt(~raster) * self.cell_m <= radius_m
+
+
+def _edge(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+def _edge_pts(a: np.ndarray, b: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    dx, dy = b[:, None, 0] - a[:, None, 0], b[:, None, 1] - a[:, None, 1]
+    return dx * (py - a[:, None, 1]) - dy * (px - a[:, None, 0])
+
+
+def _split_large(tri: np.ndarray, max_edge_m: float) -> np.ndarray:
+    """Bisect triangles (T, 3, 2) across their longest edge until every edge is <= ``max_edge_m``.
+
+    Longest-edge bisection keeps long thin triangles (lane strips) to about length/max_edge pieces.
+    """
+    done = []
+    while len(tri):
+        edges = np.linalg.norm(tri - np.roll(tri, -1, axis=1), axis=2)  # edge k runs from vertex k to k+1
+        big = edges.max(axis=1) > max_edge_m
+        done.append(tri[~big])
+        t, k = tri[big], edges[big].argmax(axis=1)
+        order = (k[:, None] + np.arange(3)[None, :]) % 3
+        t = np.take_along_axis(t, order[:, :, None], axis=1)  # longest edge is now (0, 1)
+        mid = (t[:, 0] + t[:, 1]) / 2
+        tri = np.concatenate([np.stack([t[:, 0], mid, t[:, 2]], 1), np.stack([mid, t[:, 1], t[:, 2]], 1)])
+    return np.concatenate(done) if done else tri
