@@ -67,7 +67,7 @@ def main() -> None:
     rows = [
         ("scenario", f"highway, {args.vehicles} vehicles, {args.warmup:g} s warm-up + {args.duration:g} s at "
                      f"{sim.record_hz:g} Hz"),
-        ("bare libsumo stepping (best of %d)" % args.repeats, f"{b:.2f} s"),
+        (f"bare libsumo stepping (best of {args.repeats})", f"{b:.2f} s"),
         ("simulate stage loop + table + parquet", f"{r:.2f} s"),
         ("recorded actor-states", f"{states}"),
         ("recorded actor-states per second", f"{states / r:,.0f}"),

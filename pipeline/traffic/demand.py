@@ -96,6 +96,10 @@ def _random_routes(net_file: Path, count: int, seed: int, min_distance_m: float,
         route = veh.find("route")
         if route is not None:
             out.append((veh.get("id"), route.get("edges").split()))
+    for person in root.iter("person"):
+        walk = person.find("walk")
+        if walk is not None and walk.get("edges"):
+            out.append((person.get("id"), walk.get("edges").split()))
     return out
 
 

@@ -79,3 +79,17 @@ def test_failed_run_leaves_nothing_behind(tmp_path):
     with pytest.raises(RuntimeError, match="no_such_vehicle"):
         simulate(bad, 1, tmp_path / "out", progress=False)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
+    config, _ = resolve_scenario("urban", vehicles=60, duration_s=1.0, warmup_s=30.0)
+    stats = simulate(config, 3, tmp_path / "urban", progress=False)
+    traj = pd.read_parquet(tmp_path / "urban" / "trajectories.parquet")
+    assert (traj["cls"] == "pedestrian").any()
+    departs = [float(p.get("depart")) for p in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person")]
+    assert len(departs) == config.demand.pedestrians
+    last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
+    assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
+    tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")
+    assert tls["tls_id"].nunique() == stats["network"]["traffic_lights"]
+    assert set("".join(tls["state"])) <= set("rRyYgGuoOs")
