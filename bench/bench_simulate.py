@@ -19,7 +19,7 @@ from pipeline.core.tables import write_parquet
 from pipeline.stages.simulate import resolve_scenario
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
-from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
+from pipeline.traffic.simulation import VEHICLE_VARS, run, to_trajectories, write_sumocfg
 from pipeline.traffic.sumo_tools import binary
 
 
@@ -30,6 +30,24 @@ def bare(sumocfg: Path, steps: int) -> float:
     libsumo.start([binary("sumo"), "-c", str(sumocfg), "--no-warnings", "true"])
     for _ in range(steps):
         libsumo.simulationStep()
+    libsumo.close()
+    return time.perf_counter() - start
+
+
+def subscribed(sumocfg: Path, steps: int, warm_steps: int, retrieve: bool) -> float:
+    """Bare stepping plus the stage's vehicle subscriptions (and, optionally, reading them each step)."""
+    import libsumo
+
+    start = time.perf_counter()
+    libsumo.start([binary("sumo"), "-c", str(sumocfg), "--no-warnings", "true"])
+    for step in range(steps):
+        libsumo.simulationStep()
+        if step >= warm_steps:
+            new = libsumo.vehicle.getIDList() if step == warm_steps else libsumo.simulation.getDepartedIDList()
+            for vid in new:
+                libsumo.vehicle.subscribe(vid, VEHICLE_VARS)
+            if retrieve:
+                libsumo.vehicle.getAllSubscriptionResults()
     libsumo.close()
     return time.perf_counter() - start
 
@@ -58,16 +76,22 @@ def main() -> None:
         sumocfg = write_sumocfg(tmp, net.name, demand.routes_file.name, config.simulation, 1)
         sim = config.simulation
         steps = round(sim.warmup_s / sim.step_length_s) + (sim.num_frames - 1) * sim.record_every_steps + 1
-        bare_times, rec_times, states = [], [], 0
+        warm = round(sim.warmup_s / sim.step_length_s)
+        bare_times, sub_times, get_times, rec_times, states = [], [], [], [], 0
         for _ in range(args.repeats):
             bare_times.append(bare(sumocfg, steps))
+            sub_times.append(subscribed(sumocfg, steps, warm, retrieve=False))
+            get_times.append(subscribed(sumocfg, steps, warm, retrieve=True))
             elapsed, states = recorded(sumocfg, config, demand, tmp)
             rec_times.append(elapsed)
     b, r = min(bare_times), min(rec_times)
+    sub, get = min(sub_times), min(get_times)
     rows = [
         ("scenario", f"highway, {args.vehicles} vehicles, {args.warmup:g} s warm-up + {args.duration:g} s at "
                      f"{sim.record_hz:g} Hz"),
         (f"bare libsumo stepping (best of {args.repeats})", f"{b:.2f} s"),
+        ("  + vehicle subscriptions (SUMO computes them each step)", f"{sub:.2f} s ({sub / b:.2f}x)"),
+        ("  + getAllSubscriptionResults each step", f"{get:.2f} s ({get / b:.2f}x)"),
         ("simulate stage loop + table + parquet", f"{r:.2f} s"),
         ("recorded actor-states", f"{states}"),
         ("recorded actor-states per second", f"{states / r:,.0f}"),

@@ -1,0 +1,222 @@
+"""The canonical dataset record: one folder per (simulated run, condition), written by ``render``.
+
+Exporters and the renderer meet only here. Layout (schema version :data:`SCHEMA_VERSION`;
+field-by-field description in docs/dataset.md)::
+
+    record.json                      RecordInfo: schema version, scenario, seed, condition, sensors
+    frames.parquet                   one row per frame: time and ego pose in the world
+    labels.parquet                   one row per (frame, sensor, object)
+    cameras/<cam>/rgb/NNNNNN.png     8-bit sRGB
+    cameras/<cam>/instance/NNNNNN.png  uint16 track id per pixel, 0 = no object
+    cameras/<cam>/semantic/NNNNNN.png  uint8 SemanticClass per pixel
+    cameras/<cam>/depth/NNNNNN.png   uint16, z-depth in metres x 256 (KITTI depth convention), 0 = no hit
+    lidars/<lidar>/NNNNNN.parquet    one row per point, LiDAR frame
+    meta.json                        versions, resolved config, its hash, seed, command line
+
+Frames are numbered as in the simulation's ``trajectories.parquet``. Extrinsics are stored as
+``T_ego_sensor``: the 4x4 transform taking points from the sensor frame (cameras: OpenCV optical frame;
+LiDARs: x fwd, y left, z up) to the ego frame (x fwd, y left, z up, origin at the ego box centre).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.core.tables import read_parquet
+
+SCHEMA_VERSION = 1
+RECORD_FILE = "record.json"
+DEPTH_SCALE = 256.0  # depth PNG value = metres * 256
+
+FRAME_COLUMNS = {
+    "frame": "int32", "time_s": "float64", "ego_track_id": "int32",
+    "ego_x_m": "float64", "ego_y_m": "float64", "ego_z_m": "float64", "ego_yaw_rad": "float64",
+    "ego_speed_mps": "float64",
+}
+LABEL_COLUMNS = {
+    # identity
+    "frame": "int32", "sensor": "str", "sensor_type": "str", "track_id": "int32", "cls": "str",
+    "category_id": "int32",
+    # 3D box in the world (centre, size, yaw about +z)
+    "x_m": "float64", "y_m": "float64", "z_m": "float64", "length_m": "float64", "width_m": "float64",
+    "height_m": "float64", "yaw_rad": "float64",
+    # 3D box centre in the sensor frame; cameras: rotation_y about the optical +y (KITTI ry),
+    # LiDARs: yaw about +z
+    "sensor_x_m": "float64", "sensor_y_m": "float64", "sensor_z_m": "float64", "sensor_yaw_rad": "float64",
+    "distance_m": "float64",
+    # 2D (cameras; null for LiDAR rows). Tight box valid only where visible.
+    "visible": "bool", "x1": "Float64", "y1": "Float64", "x2": "Float64", "y2": "Float64",
+    "amodal_x1": "Float64", "amodal_y1": "Float64", "amodal_x2": "Float64", "amodal_y2": "Float64",
+    "amodal_clip_x1": "Float64", "amodal_clip_y1": "Float64", "amodal_clip_x2": "Float64",
+    "amodal_clip_y2": "Float64",
+    "visible_px": "Int64", "unoccluded_px": "Int64", "occlusion": "Float64", "truncation": "Float64",
+    # LiDAR points carrying this object's id (cameras: summed over the rig's LiDARs)
+    "lidar_points": "int32",
+}
+POINT_COLUMNS = {
+    "x_m": "float32", "y_m": "float32", "z_m": "float32", "intensity": "float32", "ring": "uint16",
+    "instance_id": "int32", "semantic": "uint8",
+}
+
+
+class RecordError(ValueError):
+    """A record is missing, incomplete or of another schema version; names the path and the problem."""
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    name: str
+    width_px: int
+    height_px: int
+    K: list[list[float]]  # 3x3 intrinsics, pixels
+    distortion: list[float]  # k1, k2, p1, p2, k3 (OpenCV order)
+    T_ego_sensor: list[list[float]]  # 4x4, optical frame -> ego frame
+
+    @property
+    def K_array(self) -> np.ndarray:
+        return np.asarray(self.K, dtype=np.float64)
+
+    @property
+    def T_array(self) -> np.ndarray:
+        return np.asarray(self.T_ego_sensor, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LidarInfo:
+    name: str
+    channels: int
+    range_m: float
+    rotation_hz: float
+    T_ego_sensor: list[list[float]]  # 4x4, LiDAR frame -> ego frame
+
+    @property
+    def T_array(self) -> np.ndarray:
+        return np.asarray(self.T_ego_sensor, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class RecordInfo:
+    scenario: str
+    seed: int
+    condition: str
+    rig: str
+    frame_rate_hz: float
+    cameras: list[CameraInfo] = field(default_factory=list)
+    lidars: list[LidarInfo] = field(default_factory=list)
+    schema_version: int = SCHEMA_VERSION
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True, indent=2) + "\n"
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str) -> RecordInfo:
+        try:
+            cams = [CameraInfo(**c) for c in data.get("cameras", [])]
+            lidars = [LidarInfo(**lidar) for lidar in data.get("lidars", [])]
+            rest = {k: v for k, v in data.items() if k not in ("cameras", "lidars")}
+            return cls(cameras=cams, lidars=lidars, **rest)
+        except TypeError as exc:
+            raise RecordError(f"{source}: malformed record description ({exc})") from None
+
+    def camera(self, name: str) -> CameraInfo:
+        for cam in self.cameras:
+            if cam.name == name:
+                return cam
+        raise KeyError(f"no camera {name!r}; cameras: {', '.join(c.name for c in self.cameras) or '(none)'}")
+
+
+def frame_stem(frame: int) -> str:
+    return f"{frame:06d}"
+
+
+def camera_path(root: Path, camera: str, channel: str, frame: int) -> Path:
+    """Path of a camera image; ``channel`` is rgb, instance, semantic or depth."""
+    if channel not in ("rgb", "instance", "semantic", "depth"):
+        raise KeyError(f"unknown camera channel {channel!r}; known: rgb, instance, semantic, depth")
+    return root / "cameras" / camera / channel / f"{frame_stem(frame)}.png"
+
+
+def lidar_path(root: Path, lidar: str, frame: int) -> Path:
+    return root / "lidars" / lidar / f"{frame_stem(frame)}.parquet"
+
+
+def conform(frame: pd.DataFrame, columns: dict[str, str], what: str) -> pd.DataFrame:
+    """Select and type ``columns`` (in order); fail naming any that are missing."""
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise RecordError(f"{what}: missing columns {', '.join(missing)}")
+    return frame[list(columns)].astype(columns)
+
+
+class DatasetRecord:
+    """Read access to one canonical record (validated on open)."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+        info_path = self.root / RECORD_FILE
+        if not info_path.is_file():
+            raise RecordError(f"{self.root}: not a roadsynth dataset record (no {RECORD_FILE}); "
+                              "make one with `roadsynth render`")
+        try:
+            data = json.loads(info_path.read_text())
+        except json.JSONDecodeError as exc:
+            raise RecordError(f"{info_path}: not valid JSON ({exc})") from None
+        version = data.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise RecordError(f"{info_path}: schema_version {version!r} is not supported "
+                              f"(this roadsynth reads version {SCHEMA_VERSION}); re-render the record")
+        self.info = RecordInfo.from_dict(data, str(info_path))
+        for name in ("frames.parquet", "labels.parquet"):
+            if not (self.root / name).is_file():
+                raise RecordError(f"{self.root}: incomplete record, {name} is missing")
+
+    @property
+    def frames(self) -> pd.DataFrame:
+        return conform(read_parquet(self.root / "frames.parquet"), FRAME_COLUMNS, str(self.root / "frames.parquet"))
+
+    @property
+    def labels(self) -> pd.DataFrame:
+        return conform(read_parquet(self.root / "labels.parquet"), LABEL_COLUMNS, str(self.root / "labels.parquet"))
+
+    def image_path(self, camera: str, channel: str, frame: int) -> Path:
+        path = camera_path(self.root, camera, channel, frame)
+        if not path.is_file():
+            raise RecordError(f"{path}: missing from the record")
+        return path
+
+    def rgb(self, camera: str, frame: int) -> np.ndarray:
+        """(H, W, 3) uint8 RGB."""
+        import cv2
+
+        return cv2.imread(str(self.image_path(camera, "rgb", frame)), cv2.IMREAD_COLOR)[:, :, ::-1]
+
+    def instance(self, camera: str, frame: int) -> np.ndarray:
+        """(H, W) int32 track id per pixel, 0 where no object."""
+        import cv2
+
+        return cv2.imread(str(self.image_path(camera, "instance", frame)), cv2.IMREAD_UNCHANGED).astype(np.int32)
+
+    def semantic(self, camera: str, frame: int) -> np.ndarray:
+        """(H, W) uint8 SemanticClass."""
+        import cv2
+
+        return cv2.imread(str(self.image_path(camera, "semantic", frame)), cv2.IMREAD_UNCHANGED)
+
+    def depth_m(self, camera: str, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W) float32 z-depth in metres and (H, W) bool validity mask."""
+        import cv2
+
+        raw = cv2.imread(str(self.image_path(camera, "depth", frame)), cv2.IMREAD_UNCHANGED)
+        return raw.astype(np.float32) / DEPTH_SCALE, raw > 0
+
+    def points(self, lidar: str, frame: int) -> pd.DataFrame:
+        """One LiDAR sweep: x_m, y_m, z_m (LiDAR frame), intensity, ring, instance_id, semantic."""
+        path = lidar_path(self.root, lidar, frame)
+        if not path.is_file():
+            raise RecordError(f"{path}: missing from the record")
+        return conform(read_parquet(path), POINT_COLUMNS, str(path))
