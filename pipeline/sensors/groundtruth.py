@@ -1,0 +1,242 @@
+"""Camera ground truth computed from rays, never estimated (DESIGN.md, "Ground truth is computed").
+
+Per frame and camera, one row per actor whose own (unoccluded) projection covers at least one pixel
+centre of the image:
+
+- visible pixels: pixels whose centre ray hits the actor first (the instance image);
+- tight box: from the visible pixels, continuous (x1, y1, x2, y2) with x2 = last covered column + 1;
+- amodal box: bounding box of the projected mesh (vertices, plus the points where mesh edges cross the
+  near plane, plus 8 samples per edge when the lens distorts straight edges), unclipped and clipped;
+- unoccluded pixels: the pixels of the (clipped) amodal region whose centre ray hits the actor *alone*
+  (:meth:`FrameScene.cast_alone`); visible pixels count as unoccluded by definition;
+- occlusion = 1 - visible / unoccluded;
+- truncation = 1 - unoccluded / full, where "full" counts the actor's pixels on a *virtual image plane*
+  extending the sensor over the whole unclipped amodal box (same pixel grid, same lens model, rays cast
+  against the actor alone). Off-image parts larger than a quarter image are sampled with a stride s and
+  each sample weighted s*s (documented estimate; the in-image part is always exact). Parts behind the near
+  plane, and virtual pixels beyond the fold of a strong distortion polynomial, are not counted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.core.geometry import Transform
+from pipeline.sensors.camera import Camera
+from pipeline.world.scene import FrameScene, make_rays
+
+VIRTUAL_SAMPLES_PER_IMAGE = 0.25
+"""Off-image parts of the virtual plane are sampled with at most this many images' worth of rays per object."""
+
+
+@dataclass(frozen=True)
+class AmodalBoxes:
+    """Projected extent of every actor of the frame (K actors).
+
+    Attributes:
+        box: (K, 4) float64 unclipped (x1, y1, x2, y2) pixels; valid where ``valid``.
+        valid: (K,) bool, some part of the actor lies in front of the near plane.
+    """
+
+    box: np.ndarray
+    valid: np.ndarray
+
+    def clipped(self, width: int, height: int) -> np.ndarray:
+        """(K, 4) float64 boxes clipped to the image [0, width] x [0, height]."""
+        return np.clip(self.box, 0.0, [width, height, width, height])
+
+    def pixel_mask(self, width: int, height: int, margin_px: int = 1) -> np.ndarray:
+        """(H*W,) bool row-major union of the boxes' pixels (grown by ``margin_px``): rays that may hit actors."""
+        box = self.clipped(width, height)[self.valid]
+        x0 = np.clip(np.floor(box[:, 0]).astype(np.int64) - margin_px, 0, width)
+        y0 = np.clip(np.floor(box[:, 1]).astype(np.int64) - margin_px, 0, height)
+        x1 = np.clip(np.ceil(box[:, 2]).astype(np.int64) + margin_px, 0, width)
+        y1 = np.clip(np.ceil(box[:, 3]).astype(np.int64) + margin_px, 0, height)
+        diff = np.zeros((height + 1, width + 1), np.int32)
+        for ys, xs, sign in ((y0, x0, 1), (y0, x1, -1), (y1, x0, -1), (y1, x1, 1)):
+            np.add.at(diff, (ys, xs), sign)
+        return (diff.cumsum(0).cumsum(1)[:height, :width] > 0).reshape(-1)
+
+
+def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -> AmodalBoxes:
+    """Amodal 2D boxes of all actors from their placed meshes (vectorised over all vertices).
+
+    Actors whose bounding sphere lies outside the camera's frustum (behind the near plane or beyond the
+    widest border ray) are culled first: no ray of the image can reach them, so they get no box.
+    """
+    geo, k = scene.geometry, len(scene.actors)
+    world_to_cam = cam_to_world.inverse()
+    centre = world_to_cam.apply(scene.actors.boxes.center)
+    radius = 0.5 * np.linalg.norm(scene.actors.boxes.size, axis=1)
+    near = camera.config.near_m * (1.0 + 1e-6)
+    tan_x, tan_y = camera.border_tangents
+    in_view = (centre[:, 2] + radius > near) & (
+        np.abs(centre[:, 0]) - tan_x * centre[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
+        np.abs(centre[:, 1]) - tan_y * centre[:, 2] <= radius * np.hypot(1.0, tan_y))
+    verts = world_to_cam.apply(geo.vertices)
+    tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)
+    vsel = np.flatnonzero(in_view[geo.vertex_actor])
+    edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    z0, z1 = verts[edges[:, 0], 2], verts[edges[:, 1], 2]
+    cross = (z0 > near) != (z1 > near)
+    a, b = verts[edges[cross, 0]], verts[edges[cross, 1]]
+    clip_pts = a + ((near - a[:, 2]) / (b[:, 2] - a[:, 2]))[:, None] * (b - a)
+    points = [verts[vsel], clip_pts]
+    owner = [geo.vertex_actor[vsel], geo.vertex_actor[edges[cross, 0]]]
+    if camera.has_distortion:  # straight edges project to curves: sample them
+        front = (z0 > near) & (z1 > near)
+        s = np.linspace(0.0, 1.0, 10)[1:-1]
+        a, b = verts[edges[front, 0]], verts[edges[front, 1]]
+        points.append((a[:, None, :] + s[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3))
+        owner.append(np.repeat(geo.vertex_actor[edges[front, 0]], len(s)))
+    pts, own = np.concatenate(points), np.concatenate(owner)
+    keep = pts[:, 2] >= near * (1.0 - 1e-9)
+    uv, _ = camera.project(np.where(keep[:, None], pts, [[0.0, 0.0, 1.0]]))
+    uv, own = uv[keep], own[keep]
+    box = np.full((k, 4), np.nan)
+    lo, hi = np.full((k, 2), np.inf), np.full((k, 2), -np.inf)
+    np.minimum.at(lo, own, uv)
+    np.maximum.at(hi, own, uv)
+    valid = np.isfinite(lo[:, 0])
+    box[valid] = np.column_stack([lo[valid], hi[valid]])
+    return AmodalBoxes(box, valid)
+
+
+@dataclass(frozen=True)
+class CameraLabels:
+    """One row per labelled actor (N rows). Boxes are continuous pixels (x1, y1, x2, y2).
+
+    Attributes:
+        actor_index: (N,) int32 position in the frame's Actors; track_id: (N,) int32.
+        center_cam: (N, 3) float64 box centre in the optical frame, metres.
+        rotation_cam: (N, 3, 3) float64 rotation from the box frame (x fwd, y left, z up) to the optical frame.
+        size: (N, 3) float64 (length, width, height), metres.
+        box_tight: (N, 4) float64 from visible pixels; valid where ``visible``.
+        box_amodal: (N, 4) float64 full projection, unclipped; box_amodal_clipped: clipped to the image.
+        visible: (N,) bool, at least one visible pixel.
+        visible_px, unoccluded_px: (N,) int64 pixel counts inside the image.
+        full_px: (N,) float64 pixels of the whole unclipped projection (virtual image plane).
+        occlusion, truncation: (N,) float32 fractions in [0, 1].
+        distance_m: (N,) float32 from the optical centre to the box centre.
+    """
+
+    actor_index: np.ndarray
+    track_id: np.ndarray
+    center_cam: np.ndarray
+    rotation_cam: np.ndarray
+    size: np.ndarray
+    box_tight: np.ndarray
+    box_amodal: np.ndarray
+    box_amodal_clipped: np.ndarray
+    visible: np.ndarray
+    visible_px: np.ndarray
+    unoccluded_px: np.ndarray
+    full_px: np.ndarray
+    occlusion: np.ndarray
+    truncation: np.ndarray
+    distance_m: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.actor_index)
+
+
+def _tight_boxes(instance: np.ndarray, k: int) -> np.ndarray:
+    """(K, 4) float64 tight boxes of dense ids 1..K in an (H, W) image (0 = none); NaN where absent."""
+    h, w = instance.shape
+    idx = np.flatnonzero(instance)
+    ids = instance.reshape(-1)[idx].astype(np.int64) - 1
+    rows, cols = np.divmod(idx, w)
+    row_seen = np.zeros((k, h), bool)
+    col_seen = np.zeros((k, w), bool)
+    row_seen[ids, rows] = True
+    col_seen[ids, cols] = True
+    box = np.full((k, 4), np.nan)
+    any_px = row_seen.any(axis=1)
+    box[any_px, 0] = col_seen[any_px].argmax(axis=1)
+    box[any_px, 1] = row_seen[any_px].argmax(axis=1)
+    box[any_px, 2] = w - col_seen[any_px, ::-1].argmax(axis=1)
+    box[any_px, 3] = h - row_seen[any_px, ::-1].argmax(axis=1)
+    return box
+
+
+def _grid_pairs(x0: np.ndarray, y0: np.ndarray, nx: np.ndarray, ny: np.ndarray, stride: np.ndarray) -> tuple:
+    """All (object, col, row) of per-object strided pixel grids, vectorised: (obj, cols, rows) int64."""
+    counts = nx * ny
+    obj = np.repeat(np.arange(len(counts)), counts)
+    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    ly, lx = np.divmod(local, nx[obj])
+    return obj, x0[obj] + lx * stride[obj], y0[obj] + ly * stride[obj]
+
+
+def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, amodal: AmodalBoxes,
+                  actor_image: np.ndarray) -> CameraLabels:
+    """Labels of one camera frame.
+
+    Args:
+        actor_image: (H, W) int32 dense actor index + 1 of the first hit per pixel centre (0 = no actor).
+    """
+    w, h, k = camera.width, camera.height, len(scene.actors)
+    flat = actor_image.reshape(-1)
+    visible_px = np.bincount(flat, minlength=k + 1)[1:]
+    tight = _tight_boxes(actor_image, k)
+    valid = amodal.valid | (visible_px > 0)
+    box = np.where(np.isnan(amodal.box), tight, amodal.box)
+    box = np.column_stack([np.fmin(box[:, :2], tight[:, :2]), np.fmax(box[:, 2:], tight[:, 2:])])
+    x0 = np.floor(np.where(valid, box[:, 0], 0.0)).astype(np.int64)
+    y0 = np.floor(np.where(valid, box[:, 1], 0.0)).astype(np.int64)
+    x1 = np.where(valid, np.ceil(box[:, 2]), 0.0).astype(np.int64)
+    y1 = np.where(valid, np.ceil(box[:, 3]), 0.0).astype(np.int64)
+    # In-image part, stride 1: exact unoccluded pixel counts.
+    cx0, cy0, cx1, cy1 = np.clip(x0, 0, w), np.clip(y0, 0, h), np.clip(x1, 0, w), np.clip(y1, 0, h)
+    obj_in, col_in, row_in = _grid_pairs(cx0, cy0, cx1 - cx0, cy1 - cy0, np.ones(k, np.int64))
+    pix_in = row_in * w + col_in
+    seen = flat[pix_in] == obj_in + 1  # visible pixels are unoccluded by definition: no need to cast them
+    obj_cast, pix_cast = obj_in[~seen], pix_in[~seen]
+    rays = make_rays(cam_to_world.translation, np.take(camera.pixel_directions, pix_cast, axis=0),
+                     cam_to_world.rotation)
+    alone, _ = scene.cast_alone_rays(rays, obj_cast)
+    unoccluded_px = visible_px + np.bincount(obj_cast[alone], minlength=k)
+
+    # Off-image part of the virtual plane, only for labelled objects reaching past the image border.
+    offside = (unoccluded_px > 0) & ((x0 < 0) | (y0 < 0) | (x1 > w) | (y1 > h))
+    x0, y0, x1, y1 = (np.where(offside, a, 0) for a in (x0, y0, x1, y1))
+    area = (x1 - x0).astype(np.float64) * (y1 - y0)
+    stride = np.maximum(1, np.ceil(np.sqrt(area / (w * h * VIRTUAL_SAMPLES_PER_IMAGE)))).astype(np.int64)
+    obj_out, col_out, row_out = _grid_pairs(x0, y0, -(-(x1 - x0) // stride), -(-(y1 - y0) // stride), stride)
+    outside = (col_out < 0) | (col_out >= w) | (row_out < 0) | (row_out >= h)
+    obj_out, col_out, row_out = obj_out[outside], col_out[outside], row_out[outside]
+    dirs_out, invertible = camera.unproject(camera.pixel_uv(col_out, row_out))
+    obj_out, dirs_out = obj_out[invertible], dirs_out[invertible]  # beyond the lens fold: no ray, not counted
+    rays = make_rays(cam_to_world.translation, dirs_out.astype(np.float32), cam_to_world.rotation)
+    alone, _ = scene.cast_alone_rays(rays, obj_out)
+    full_px = unoccluded_px + np.bincount(obj_out, weights=alone * stride[obj_out] ** 2, minlength=k)
+
+    rows = np.flatnonzero(unoccluded_px > 0)
+    world_to_cam = cam_to_world.inverse()
+    boxes = scene.actors.boxes
+    center_cam = world_to_cam.apply(boxes.center[rows])
+    c, s = np.cos(boxes.yaw_rad[rows]), np.sin(boxes.yaw_rad[rows])
+    rot_world = np.zeros((len(rows), 3, 3))
+    rot_world[:, 0, 0], rot_world[:, 0, 1], rot_world[:, 1, 0], rot_world[:, 1, 1] = c, -s, s, c
+    rot_world[:, 2, 2] = 1.0
+    rot = world_to_cam.rotation @ rot_world
+    vis, unocc, full = visible_px[rows], unoccluded_px[rows], full_px[rows]
+    return CameraLabels(
+        actor_index=rows.astype(np.int32),
+        track_id=scene.actors.track_id[rows],
+        center_cam=center_cam,
+        rotation_cam=rot,
+        size=boxes.size[rows],
+        box_tight=tight[rows],
+        box_amodal=amodal.box[rows],
+        box_amodal_clipped=amodal.clipped(w, h)[rows],
+        visible=vis > 0,
+        visible_px=vis,
+        unoccluded_px=unocc,
+        full_px=full,
+        occlusion=(1.0 - vis / unocc).astype(np.float32),
+        truncation=np.clip(1.0 - unocc / np.maximum(full, unocc), 0.0, 1.0).astype(np.float32),
+        distance_m=np.linalg.norm(center_cam, axis=1).astype(np.float32),
+    )

@@ -1,0 +1,145 @@
+"""Day-light shading of camera hits: Lambert + Blinn-Phong under a sun with shadow rays, sky and ambient.
+
+Radiance is linear RGB (arbitrary units, ~1 = white paper in full sun after ``exposure``); the image is
+tone-mapped to 8-bit sRGB by :func:`to_srgb8`. Directions are world frame (x east, y north, z up).
+The condition model (morning / night / fog / rain) builds a :class:`Lighting`; this module only shades.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from pipeline.world.materials import material_arrays, material_index
+from pipeline.world.scene import FrameScene, Hits
+
+BRAKE_LIGHT_RGB = np.array([2.0, 0.08, 0.05], np.float32)
+TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
+HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
+STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Attributes:
+    sun_elevation_deg, sun_azimuth_deg: sun position; azimuth CCW from east (world +x).
+    sun_rgb: sun irradiance, linear RGB.
+    ambient_rgb: sky fill light on every surface, linear RGB.
+    sky_zenith_rgb, sky_horizon_rgb: background colour overhead and at the horizon.
+    exposure: scale applied before tone mapping.
+    shadows: cast shadow rays towards the sun.
+    lights_on: vehicles' head and tail lights and street lamps glow (dusk, night). They glow only;
+        the light they cast on other surfaces (headlight cones) is not modelled yet.
+    """
+
+    sun_elevation_deg: float = 50.0
+    sun_azimuth_deg: float = 135.0
+    sun_rgb: tuple[float, float, float] = (2.6, 2.45, 2.2)
+    ambient_rgb: tuple[float, float, float] = (0.45, 0.5, 0.6)
+    sky_zenith_rgb: tuple[float, float, float] = (0.18, 0.32, 0.65)
+    sky_horizon_rgb: tuple[float, float, float] = (0.65, 0.75, 0.85)
+    exposure: float = 1.0
+    shadows: bool = True
+    lights_on: bool = False
+
+    def __post_init__(self) -> None:
+        if not -90.0 <= self.sun_elevation_deg <= 90.0:
+            raise ValueError(f"sun_elevation_deg must be in [-90, 90], got {self.sun_elevation_deg}")
+        if self.exposure <= 0:
+            raise ValueError(f"exposure must be positive, got {self.exposure}")
+
+    @property
+    def sun_direction(self) -> np.ndarray:
+        """(3,) float32 unit vector towards the sun, world frame."""
+        el, az = np.radians(self.sun_elevation_deg), np.radians(self.sun_azimuth_deg)
+        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], np.float32)
+
+
+def sky(directions: np.ndarray, lighting: Lighting) -> np.ndarray:
+    """(N, 3) float32 sky radiance for (N, 3) unit view directions: horizon-to-zenith blend."""
+    up = np.sqrt(np.clip(directions[:, 2], 0.0, 1.0))[:, None]
+    zen, hor = np.asarray(lighting.sky_zenith_rgb, np.float32), np.asarray(lighting.sky_horizon_rgb, np.float32)
+    return (hor + (zen - hor) * up).astype(np.float32)
+
+
+def shade(scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting) -> np.ndarray:
+    """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
+
+    radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission; misses
+    see the sky. Whole-array maths runs per channel on contiguous 1D arrays split and merged by OpenCV:
+    numpy broadcasting and fancy indexing over strided (N, 3) views are several times slower.
+    """
+    mats = _materials()
+    sun = lighting.sun_direction
+    sun_rgb = np.asarray(lighting.sun_rgb, np.float32)
+    ambient = np.asarray(lighting.ambient_rgb, np.float32)
+    n_dot_l = cv2.transform(hits.normal.reshape(-1, 1, 3), sun.reshape(1, 3)).reshape(-1)
+    lit = np.flatnonzero(n_dot_l > 0.0)
+    if lighting.shadows and lighting.sun_elevation_deg > 0 and len(lit):
+        r = cv2.split(np.take(rays, lit, axis=0).reshape(-1, 1, 6))
+        n = cv2.split(np.take(hits.normal, lit, axis=0).reshape(-1, 1, 3))
+        t = hits.t_m[lit].reshape(-1, 1)
+        lift = 1e-3 + 1e-4 * t  # off the surface, against self-intersection
+        ones = np.ones_like(t)
+        shadow = cv2.merge([r[k] + r[3 + k] * t + n[k] * lift for k in range(3)] + [ones * sun[k] for k in range(3)])
+        blocked = scene.occluded_rays(shadow.reshape(-1, 6))
+        n_dot_l[lit[blocked]] = 0.0
+        lit = lit[~blocked]
+    direct = np.maximum(n_dot_l, 0.0)
+    mat = hits.material
+    spec = np.zeros(len(rays), np.float32)
+    shiny = lit[mats["specular"][mat[lit]] > 0]
+    if len(shiny):
+        r = cv2.split(np.take(rays, shiny, axis=0).reshape(-1, 1, 6))
+        n = cv2.split(np.take(hits.normal, shiny, axis=0).reshape(-1, 1, 3))
+        half = [sun[k] - r[3 + k] for k in range(3)]
+        n_dot_h = (n[0] * half[0] + n[1] * half[1] + n[2] * half[2]) / (
+            np.sqrt(half[0] * half[0] + half[1] * half[1] + half[2] * half[2]) + 1e-12)
+        m = mat[shiny]
+        spec[shiny] = mats["specular"][m] * np.clip(n_dot_h.reshape(-1), 0.0, 1.0) ** mats["shininess"][m]
+    albedo = cv2.split(hits.color.reshape(-1, 1, 3))
+    out = cv2.merge([albedo[k].reshape(-1) * (ambient[k] + sun_rgb[k] * direct) + sun_rgb[k] * spec
+                     for k in range(3)]).reshape(-1, 3)
+    glowing = np.flatnonzero(mats["glows"][mat] & hits.hit)
+    out[glowing] += np.take(mats["emissive"], mat[glowing], axis=0)
+    on_actor = hits.instance_id[glowing] > 0
+    tail = glowing[(mat[glowing] == material_index("taillight")) & on_actor]
+    out[tail[scene.actors.brake[hits.actor_index[tail]]]] += BRAKE_LIGHT_RGB
+    if lighting.lights_on:
+        out[tail] += TAIL_LIGHT_RGB
+        out[glowing[(mat[glowing] == material_index("headlight")) & on_actor]] += HEAD_LIGHT_RGB
+        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB
+    miss = np.flatnonzero(~hits.hit)
+    out[miss] = sky(np.take(rays, miss, axis=0)[:, 3:], lighting)
+    if lighting.exposure != 1.0:
+        out *= lighting.exposure
+    return out
+
+
+def _materials() -> dict[str, np.ndarray]:
+    mats = material_arrays()
+    lights = [material_index(n) for n in ("taillight", "headlight", "lamp")]
+    mats["glows"] = (mats["emissive"].max(axis=1) > 0) | np.isin(np.arange(len(mats["specular"])), lights)
+    return mats
+
+
+def _srgb_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
+    x = np.linspace(0.0, max_linear, size, dtype=np.float64)
+    x = np.where(x > 0.8, 0.8 + 0.2 * np.tanh((x - 0.8) / 0.2), x)  # soft shoulder for highlights
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+    return np.clip(np.rint(srgb * 255.0), 0, 255).astype(np.uint8)
+
+
+_LUT = _srgb_lut()
+_LUT_SCALE = (len(_LUT) - 1) / 4.0
+
+
+def to_srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB (any shape (..., 3)) to 8-bit sRGB with a soft shoulder above 0.8 (values above 4 clip),
+    through a 65536-entry lookup table (finer than one 8-bit step everywhere)."""
+    x = np.asarray(linear, np.float32)
+    # One channel for OpenCV: a scalar bound on a 3-channel array would apply to the first channel only.
+    scaled = cv2.min(cv2.max(x.reshape(-1, 1) * np.float32(_LUT_SCALE), 0.0), float(len(_LUT) - 1))
+    return _LUT[scaled.astype(np.uint16)].reshape(x.shape)

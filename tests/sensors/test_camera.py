@@ -1,0 +1,95 @@
+"""Camera model: intrinsics, frames, distortion round trip and agreement with OpenCV's projection."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from pipeline.core.geometry import Transform
+from pipeline.sensors.camera import Camera, CameraConfig
+
+DISTORTION = (-0.12, 0.02, 0.001, -0.0015, -0.002)
+
+
+def test_intrinsics_from_hfov():
+    cam = Camera(CameraConfig(width_px=800, height_px=600, hfov_deg=90.0))
+    assert cam.fx == pytest.approx(400.0) and cam.fy == pytest.approx(400.0)
+    assert (cam.cx, cam.cy) == (400.0, 300.0)
+    explicit = Camera(CameraConfig(intrinsics=(500.0, 510.0, 401.0, 299.0)))
+    np.testing.assert_allclose(explicit.K, [[500, 0, 401], [0, 510, 299], [0, 0, 1]])
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(width_px=0), dict(hfov_deg=180.0), dict(distortion=(0.1, 0.2)), dict(samples_per_pixel=0),
+     dict(intrinsics=(0.0, 1.0, 2.0, 3.0))],
+)
+def test_bad_config_raises(kwargs):
+    with pytest.raises(ValueError):
+        CameraConfig(**kwargs)
+
+
+def test_pixel_centre_rays():
+    cam = Camera(CameraConfig(width_px=8, height_px=6, hfov_deg=90.0))
+    d = cam.pixel_directions.reshape(6, 8, 3)
+    # pixel (col 4, row 3) has its centre at (4.5, 3.5): x = 0.5 / fx, y = 0.5 / fy in the optical frame.
+    expected = np.array([0.5 / cam.fx, 0.5 / cam.fy, 1.0])
+    np.testing.assert_allclose(d[3, 4], expected / np.linalg.norm(expected), atol=1e-7)
+
+
+def test_camera_to_world_looks_along_ego_x():
+    cam = Camera(CameraConfig(mount=Transform.from_xyz_rpy((1.0, 0.0, 1.5))))
+    pose = cam.camera_to_world(Transform.from_xyz_rpy((10.0, 5.0, 0.0), (0.0, 0.0, np.pi / 2)))
+    np.testing.assert_allclose(pose.translation, [10.0, 6.0, 1.5], atol=1e-12)
+    np.testing.assert_allclose(pose.apply_vectors([0.0, 0.0, 1.0]), [0.0, 1.0, 0.0], atol=1e-12)  # optical z = heading
+    np.testing.assert_allclose(pose.apply_vectors([1.0, 0.0, 0.0]), [1.0, 0.0, 0.0], atol=1e-12)  # x right = -left
+    np.testing.assert_allclose(pose.apply_vectors([0.0, 1.0, 0.0]), [0.0, 0.0, -1.0], atol=1e-12)  # y down
+
+
+def test_distortion_round_trip():
+    cam = Camera(CameraConfig(distortion=DISTORTION))
+    rng = np.random.default_rng(0)
+    uv = rng.uniform([0, 0], [800, 600], size=(5000, 2))
+    dirs, invertible = cam.unproject(uv)
+    back, in_front = cam.project(dirs)
+    assert invertible.all() and in_front.all()
+    np.testing.assert_allclose(back, uv, atol=1e-6)
+
+
+def test_projection_matches_opencv():
+    cam = Camera(CameraConfig(distortion=DISTORTION))
+    rng = np.random.default_rng(1)
+    pts = np.column_stack([rng.uniform(-4, 4, 500), rng.uniform(-3, 3, 500), rng.uniform(5, 30, 500)])
+    ours, _ = cam.project(pts)
+    ref, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), cam.K, np.array(DISTORTION))
+    np.testing.assert_allclose(ours, ref.reshape(-1, 2), atol=1e-6)
+
+
+def test_points_behind_are_masked():
+    cam = Camera(CameraConfig())
+    _, in_front = cam.project(np.array([[0.0, 0.0, 5.0], [0.0, 0.0, -5.0], [1.0, 0.0, 0.0]]))
+    assert in_front.tolist() == [True, False, False]
+
+
+def test_samples_are_stratified_inside_their_pixel_and_seeded():
+    cfg = CameraConfig(width_px=16, height_px=12, samples_per_pixel=4, distortion=DISTORTION, jitter_seed=3)
+    cam = Camera(cfg)
+    s = cam.sample_directions
+    assert s.shape == (4, 16 * 12, 3)
+    rows, cols = np.divmod(np.arange(16 * 12), 16)
+    for k in range(4):
+        uv, _ = cam.project(s[k].astype(np.float64))
+        assert np.all((uv[:, 0] >= cols - 1e-4) & (uv[:, 0] < cols + 1 + 1e-4))
+        assert np.all((uv[:, 1] >= rows - 1e-4) & (uv[:, 1] < rows + 1 + 1e-4))
+    u_strata = np.stack([np.floor((cam.project(s[k].astype(np.float64))[0][:, 0] - cols) * 4) for k in range(4)])
+    assert np.all(np.sort(u_strata, axis=0) == np.arange(4)[:, None])  # one sample per column stratum
+    np.testing.assert_array_equal(s, Camera(cfg).sample_directions)
+
+
+def test_distortion_beyond_its_fold_is_refused():
+    cam = Camera(CameraConfig(hfov_deg=100.0, distortion=(-0.28, 0.09, 0.0, 0.0, -0.012)))
+    _, invertible = cam.unproject(np.array([[400.0, 300.0], [0.0, 0.0]]))
+    assert invertible.tolist() == [True, False]
+    with pytest.raises(ValueError, match="cannot be inverted"):
+        _ = cam.pixel_directions

@@ -1,0 +1,104 @@
+"""Ray casting against static geometry plus actors: closed-form hits, attributes, objects alone, shadows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.core.classes import ObjectClass, SemanticClass
+from pipeline.core.geometry import Boxes3D
+from pipeline.world.actors import Actors
+from pipeline.world.materials import material_arrays, material_index
+from pipeline.world.mesh import Mesh
+from pipeline.world.scene import FrameScene, StaticScene
+
+
+def ground(z: float = 0.0) -> Mesh:
+    v = np.array([[-100, -100, z], [100, -100, z], [100, 100, z], [-100, 100, z]], dtype=np.float64)
+    return Mesh(v, [[0, 1, 2], [0, 2, 3]], material_index("asphalt"), SemanticClass.ROAD)
+
+
+def car_at(x: float, y: float, yaw: float = 0.0, track_id: int = 7) -> Actors:
+    return Actors([track_id], [ObjectClass.CAR], Boxes3D([[x, y, 0.75]], [[4.5, 1.8, 1.5]], [yaw]), [[0.8, 0.1, 0.1]])
+
+
+def test_static_ground_hit_and_miss():
+    scene = FrameScene(StaticScene([ground()]), Actors.empty())
+    origins = np.array([[0, 0, 2.0], [0, 0, 2.0], [0, 0, -3.0]])
+    hits = scene.cast(origins, np.array([[3, 0, -4.0], [0, 0, 1], [0, 0, 1]]))
+    assert hits.hit.tolist() == [True, False, True]
+    np.testing.assert_allclose(hits.t_m[[0, 2]], [2.0 * 5 / 4, 3.0], rtol=1e-6)
+    assert np.isinf(hits.t_m[1])
+    assert hits.semantic.tolist() == [SemanticClass.ROAD, 0, SemanticClass.ROAD]
+    assert hits.instance_id.tolist() == [0, 0, 0]
+    np.testing.assert_allclose(hits.normal, [[0, 0, 1], [0, 0, 0], [0, 0, -1]], atol=1e-6)  # faces the origin
+    np.testing.assert_allclose(hits.color[0], material_arrays()["albedo"][material_index("asphalt")])
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.4, -2.0])
+def test_actor_side_hit_is_exact_and_carries_paint_and_id(yaw):
+    scene = FrameScene(StaticScene([ground()]), car_at(20.0, 3.0, yaw))
+    left = np.array([-np.sin(yaw), np.cos(yaw), 0.0])  # the car's +y in the world
+    # The body side (paint) spans the whole length at mid-body height (0.6 m above the road).
+    origin = np.array([20.0, 3.0, 0.6]) + 10.0 * left
+    hits = scene.cast(origin[None], -left[None])
+    assert hits.hit[0] and hits.instance_id[0] == 7 and hits.actor_index[0] == 0
+    assert hits.t_m[0] == pytest.approx(10.0 - 0.9, abs=1e-4)
+    assert hits.semantic[0] == SemanticClass.CAR and hits.material[0] == material_index("paint")
+    np.testing.assert_allclose(hits.color[0], [0.8, 0.1, 0.1])
+    np.testing.assert_allclose(hits.normal[0], left, atol=1e-5)
+
+
+def test_cast_alone_sees_through_occluders_and_matches_the_scene():
+    actors = Actors([4, 9], [ObjectClass.CAR, ObjectClass.BUS],
+                    Boxes3D([[20, 0, 0.75], [10, 0, 1.6]], [[4.5, 1.8, 1.5], [12, 2.55, 3.2]], [0.0, 0.3]),
+                    [[0.1, 0.2, 0.3], [0.9, 0.9, 0.1]])
+    scene = FrameScene(StaticScene([ground()]), actors)
+    o = np.zeros((3, 3)) + [0.0, 0.0, 0.6]
+    d = np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0.5, 0]])
+    hits = scene.cast(o, d)
+    assert hits.instance_id.tolist()[:2] == [9, 9]
+    alone, t = scene.cast_alone(o, d, [0, 1, 0])
+    assert alone.tolist() == [True, True, False]
+    # The car's rear face, behind the bus: within the 2 cm light plaques that bound the box.
+    assert 20 - 2.25 <= t[0] <= 20 - 2.25 + 0.03
+    assert t[1] == pytest.approx(hits.t_m[1], abs=1e-4)  # the bus alone = the bus in the scene
+    with pytest.raises(ValueError, match="out of range"):
+        scene.cast_alone(o, d, [0, 2, 0])
+
+
+def test_actor_mask_skips_actor_cast_only_where_told():
+    scene = FrameScene(StaticScene([ground()]), car_at(20.0, 0.0))
+    o, d = np.array([[0, 0, 0.6], [0, 0, 0.6]]), np.array([[1.0, 0, 0], [1.0, 0, 0]])
+    hits = scene.cast(o, d, actor_rays=np.array([True, False]))
+    assert hits.instance_id.tolist() == [7, 0]
+
+
+def test_shadow_rays():
+    scene = FrameScene(StaticScene([ground()]), car_at(0.0, 0.0))
+    blocked = scene.occluded(np.array([[0, 0, 10.0], [0, 0, 10.0], [0, 5.0, 0.01]]),
+                             np.array([[0, 0, -1.0], [0, 0, 1.0], [0, 0, 1.0]]), t_max_m=20.0)
+    assert blocked.tolist() == [True, False, False]
+    assert scene.occluded(np.array([[0, 0, 10.0]]), np.array([[0, 0, -1.0]]), t_max_m=5.0).tolist() == [False]
+
+
+def test_bad_rays_raise():
+    scene = FrameScene(StaticScene([]), Actors.empty())
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        scene.cast(np.zeros((2, 3)), np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="non-zero"):
+        scene.cast(np.zeros((1, 3)), np.zeros((1, 3)))
+    assert not scene.cast(np.zeros((1, 3)), np.ones((1, 3))).hit[0]
+
+
+def test_static_materials_can_change_per_frame():
+    empty = Mesh(np.zeros((0, 3)), np.zeros((0, 3)), 0, SemanticClass.ROAD)
+    static = StaticScene([empty, ground(-1.0), ground(0.0)])
+    np.testing.assert_array_equal(static.mesh_offsets, [0, 0, 2, 4])
+    scene = FrameScene(static, Actors.empty())
+    ray = (np.array([[0, 0, 5.0]]), np.array([[0, 0, -1.0]]))
+    assert scene.cast(*ray).material[0] == material_index("asphalt")
+    static.set_triangle_materials(2, [0, 1], material_index("lamp"))
+    assert scene.cast(*ray).material[0] == material_index("lamp")
+    with pytest.raises(ValueError, match="out of range"):
+        static.set_triangle_materials(1, [2], 0)
