@@ -1,55 +1,73 @@
-"""Environmental conditions: lighting, fog, sensor noise and LiDAR degradation, by name.
+"""Environmental conditions: lighting, night lights, fog, rain, lens and sensor effects, LiDAR degradation.
 
-A :class:`Condition` bundles what changes between a morning and a foggy night: the :class:`Lighting`
-(sun, sky, ambient, vehicle and street lights), Koschmieder fog applied with the exact per-ray distance,
-image noise, and LiDAR range / attenuation / noise factors. The presets below (morning, noon, dusk, night,
-fog, rain) are a first model; configs/conditions/ YAML files are meant to deserialise into this class.
+A condition is a YAML file under configs/conditions/ (or any path) validated into
+:class:`pipeline.core.config.ConditionConfig`; :func:`condition_from_config` turns it into the
+:class:`Condition` the renderer uses; :func:`get_condition` does both for a NAME or PATH. Users add a
+condition by adding a YAML file.
 
 Fog (Koschmieder): L = L0 * T + L_fog * (1 - T), T = exp(-beta * d), beta = 3.912 / visibility (the
-distance at which contrast falls to 2 %); rays that hit nothing see the fog colour (d = infinity).
+distance at which contrast falls to 2 %), with d the exact distance along each ray; rays that hit nothing
+see the fog colour (d = infinity).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from pipeline.core.config import ConditionConfig, load_config
+from pipeline.core.config.sensors import (
+    HeadlightConfig,
+    LensConfig,
+    LidarConditionConfig,
+    RainConfig,
+    SensorNoiseConfig,
+    StreetLampConfig,
+)
+from pipeline.core.geometry import Transform
 from pipeline.sensors.lidar import LidarConfig
+from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
+from pipeline.sensors.post import sensor_noise
 from pipeline.sensors.shading import Lighting
+from pipeline.world.actors import Actors
 
 KOSCHMIEDER = 3.912  # -ln(0.02): contrast threshold of 2 %
+SHIPPED = ("morning", "noon", "dusk", "night", "fog", "rain")
 
 
 @dataclass(frozen=True)
 class Condition:
     """Attributes:
     name: condition name.
-    lighting: sun, sky, ambient and lights.
+    lighting: sun, sky, ambient, exposure, glowing lamps, road wetness.
     fog_visibility_m: meteorological visibility, metres; None = clear air.
-    fog_rgb: fog (airlight) colour, linear RGB.
-    image_noise_std: Gaussian noise added to linear radiance (grows at night).
-    lidar_range_scale, lidar_attenuation_scale, lidar_noise_scale, lidar_dropout_add: LiDAR degradation.
+    fog_rgb: fog (airlight) colour, linear RGB (before exposure).
+    headlights: headlight cones (None = off). street_lamps: street-lamp pools (None = off).
+    rain: streaks and drops (None = dry; wetness is ``lighting.wetness``).
+    noise: sensor noise. lens: exposure, vignetting, bloom, flare, motion blur.
+    lidar_effects: LiDAR degradation factors.
     """
 
     name: str
     lighting: Lighting
     fog_visibility_m: float | None = None
     fog_rgb: tuple[float, float, float] = (0.62, 0.65, 0.68)
-    image_noise_std: float = 0.004
-    lidar_range_scale: float = 1.0
-    lidar_attenuation_scale: float = 1.0
-    lidar_noise_scale: float = 1.0
-    lidar_dropout_add: float = 0.0
+    headlights: HeadlightConfig | None = None
+    street_lamps: StreetLampConfig | None = None
+    rain: RainConfig | None = None
+    noise: SensorNoiseConfig = field(default_factory=SensorNoiseConfig)
+    lens: LensConfig = field(default_factory=LensConfig)
+    lidar_effects: LidarConditionConfig = field(default_factory=LidarConditionConfig)
 
     def __post_init__(self) -> None:
         if self.fog_visibility_m is not None and self.fog_visibility_m <= 0:
             raise ValueError(f"condition {self.name!r}: fog_visibility_m must be positive")
-        if self.image_noise_std < 0 or self.lidar_noise_scale < 0 or self.lidar_attenuation_scale < 0:
-            raise ValueError(f"condition {self.name!r}: noise and attenuation scales must be >= 0")
-        if not 0.0 < self.lidar_range_scale <= 1.0 or not 0.0 <= self.lidar_dropout_add < 1.0:
-            raise ValueError(f"condition {self.name!r}: need 0 < lidar_range_scale <= 1, 0 <= lidar_dropout_add < 1")
+        if self.lens.exposure != self.lighting.exposure:
+            # One exposure: the shading applies it, the noise model reads it as the gain.
+            object.__setattr__(self, "lens", self.lens.model_copy(update={"exposure": self.lighting.exposure}))
 
     def fog(self, radiance: np.ndarray, distance_m: np.ndarray, hit: np.ndarray) -> np.ndarray:
         """Apply fog to (N, 3) float32 radiance given (N,) distances along the rays and the (N,) hit mask."""
@@ -61,52 +79,76 @@ class Condition:
         return radiance * transmittance[:, None] + fog * (1.0 - transmittance[:, None])
 
     def noisy(self, radiance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Add sensor noise (Gaussian in linear radiance) drawn from ``rng``."""
-        if self.image_noise_std == 0:
-            return radiance
-        noise = rng.standard_normal(radiance.shape, dtype=np.float32)
-        noise *= np.float32(self.image_noise_std)
-        return radiance + noise
+        """Shot + read noise (no grain) on radiance of any shape, drawn from ``rng`` (see
+        :func:`pipeline.sensors.post.sensor_noise`; the renderer applies the full model through the post effects)."""
+        return sensor_noise(radiance, self.noise.model_copy(update={"grain_std": 0.0}), self.lens.exposure, rng)
+
+    def frame_lights(
+        self,
+        actors: Actors,
+        ego_pose: Transform,
+        camera_xyz_m: np.ndarray,
+        street_lights_m: np.ndarray | None = None,
+        ego_size_m: tuple[float, float, float] | None = None,
+    ) -> SpotLights:
+        """The spot lights of one frame: the ego's and other vehicles' headlights, the nearest street lamps."""
+        parts = []
+        if self.headlights is not None:
+            if self.headlights.ego:
+                parts.append(ego_headlights(ego_pose, self.headlights, *(() if ego_size_m is None else (ego_size_m,))))
+            if self.headlights.others:
+                parts.append(vehicle_headlights(actors, self.headlights, camera_xyz_m, ego_pose.rotation[:, 0]))
+        if self.street_lamps is not None and street_lights_m is not None:
+            parts.append(street_lamp_lights(street_lights_m, self.street_lamps, camera_xyz_m))
+        return SpotLights.concatenate(parts)
 
     def lidar(self, config: LidarConfig) -> LidarConfig:
-        """The LiDAR config under this condition."""
+        """The LiDAR config under this condition (range, attenuation, noise, drop-out; intensity factor and
+        detection threshold are applied by :func:`pipeline.sensors.lidar.render_lidar`)."""
+        fx = self.lidar_effects
         return dataclasses.replace(
             config,
-            range_max_m=config.range_max_m * self.lidar_range_scale,
-            attenuation_per_m=config.attenuation_per_m * self.lidar_attenuation_scale,
-            range_noise_std_m=config.range_noise_std_m * self.lidar_noise_scale,
-            dropout_prob=min(0.99, config.dropout_prob + self.lidar_dropout_add),
+            range_max_m=max(config.range_max_m * fx.range_factor, config.range_min_m + 1e-3),
+            attenuation_per_m=config.attenuation_per_m * fx.attenuation_factor,
+            range_noise_std_m=config.range_noise_std_m * fx.noise_factor,
+            dropout_prob=min(0.99, config.dropout_prob + fx.extra_dropout),
         )
 
 
-CONDITIONS: dict[str, Condition] = {
-    c.name: c
-    for c in (
-        Condition("morning", Lighting(sun_elevation_deg=12.0, sun_azimuth_deg=80.0, sun_rgb=(2.6, 2.1, 1.5),
-                                      ambient_rgb=(0.35, 0.38, 0.48), sky_zenith_rgb=(0.2, 0.32, 0.6),
-                                      sky_horizon_rgb=(0.85, 0.72, 0.6))),
-        Condition("noon", Lighting(sun_elevation_deg=65.0, sun_azimuth_deg=170.0)),
-        Condition("dusk", Lighting(sun_elevation_deg=3.0, sun_azimuth_deg=260.0, sun_rgb=(1.6, 0.8, 0.4),
-                                   ambient_rgb=(0.15, 0.14, 0.2), sky_zenith_rgb=(0.08, 0.1, 0.25),
-                                   sky_horizon_rgb=(0.7, 0.38, 0.2), lights_on=True), image_noise_std=0.008),
-        Condition("night", Lighting(sun_elevation_deg=-20.0, sun_rgb=(0.0, 0.0, 0.0), ambient_rgb=(0.02, 0.022, 0.035),
-                                    sky_zenith_rgb=(0.002, 0.003, 0.008), sky_horizon_rgb=(0.01, 0.012, 0.02),
-                                    lights_on=True, exposure=2.5),
-                  image_noise_std=0.012, lidar_noise_scale=1.5),
-        Condition("fog", Lighting(sun_elevation_deg=40.0, sun_rgb=(0.8, 0.8, 0.8), ambient_rgb=(0.55, 0.56, 0.58),
-                                  shadows=False), fog_visibility_m=80.0, lidar_range_scale=0.5,
-                  lidar_attenuation_scale=8.0, lidar_dropout_add=0.05),
-        Condition("rain", Lighting(sun_elevation_deg=35.0, sun_rgb=(0.6, 0.6, 0.62), ambient_rgb=(0.4, 0.42, 0.46),
-                                   sky_zenith_rgb=(0.35, 0.37, 0.4), sky_horizon_rgb=(0.5, 0.52, 0.55),
-                                   shadows=False), fog_visibility_m=600.0, image_noise_std=0.006,
-                  lidar_range_scale=0.8, lidar_attenuation_scale=3.0, lidar_noise_scale=2.0, lidar_dropout_add=0.03),
+def condition_from_config(cfg: ConditionConfig) -> Condition:
+    """The renderer's :class:`Condition` from a validated config."""
+    sun = np.asarray(cfg.sun.color_rgb) * cfg.sun.intensity
+    vl = cfg.vehicle_lights
+    lighting = Lighting(
+        sun_elevation_deg=cfg.sun.elevation_deg,
+        sun_azimuth_deg=cfg.sun.azimuth_deg,
+        sun_rgb=tuple(float(v) for v in sun) if cfg.sun.elevation_deg > 0 else (0.0, 0.0, 0.0),
+        ambient_rgb=cfg.sky.ambient_rgb,
+        sky_zenith_rgb=cfg.sky.zenith_rgb,
+        sky_horizon_rgb=cfg.sky.horizon_rgb,
+        exposure=cfg.lens.exposure,
+        shadows=cfg.sun.shadows,
+        lights_on=vl.glow,
+        tail_glow=vl.tail_glow,
+        head_glow=vl.head_glow,
+        lamp_glow=vl.lamp_glow,
+        wetness=cfg.rain.wetness if cfg.rain is not None else 0.0,
     )
-}
+    return Condition(
+        name=cfg.name,
+        lighting=lighting,
+        fog_visibility_m=cfg.fog.visibility_m if cfg.fog is not None else None,
+        fog_rgb=cfg.fog.color_rgb if cfg.fog is not None else (0.62, 0.65, 0.68),
+        headlights=cfg.headlights,
+        street_lamps=cfg.street_lamps,
+        rain=cfg.rain,
+        noise=cfg.noise,
+        lens=cfg.lens,
+        lidar_effects=cfg.lidar,
+    )
 
 
-def get_condition(name: str) -> Condition:
-    """A preset by name; unknown names fail listing the known ones."""
-    try:
-        return CONDITIONS[name]
-    except KeyError:
-        raise KeyError(f"unknown condition {name!r}; known: {', '.join(CONDITIONS)}") from None
+def get_condition(name_or_path: str | Path) -> Condition:
+    """A condition by NAME (configs/conditions/NAME.yaml) or PATH, read afresh; unknown names and invalid files
+    fail with a :class:`pipeline.core.config.ConfigError` naming the file and key (or listing the names)."""
+    return condition_from_config(load_config(ConditionConfig, name_or_path, "conditions")[0])

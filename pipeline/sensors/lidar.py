@@ -13,6 +13,8 @@ Conventions:
   Gaussian noise is added to the reported range; drop-out removes points at random. Both draw from the
   caller's generator, one draw per ray (hit or not), so a change in one part of the scene does not
   reshuffle the noise elsewhere.
+- A condition (fog, rain; :class:`pipeline.sensors.conditions.Condition`), when given, scales range,
+  attenuation, noise and drop-out, multiplies the intensity and drops returns below its detection threshold.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from pipeline.core.config.sensors import LidarConditionConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rowdot
@@ -143,9 +146,16 @@ class Lidar:
         return ((col_ok.T.astype(np.float32) @ ring_ok.astype(np.float32)) > 0).reshape(-1)
 
 
-def render_lidar(scene: FrameScene, lidar: Lidar, ego_pose: Transform, rng: np.random.Generator) -> LidarSweep:
-    """Cast one sweep of ``lidar`` on the ego at ``ego_pose`` (ego -> world) and apply the sensor model."""
-    cfg = lidar.config
+def render_lidar(
+    scene: FrameScene, lidar: Lidar, ego_pose: Transform, rng: np.random.Generator, *, condition=None
+) -> LidarSweep:
+    """Cast one sweep of ``lidar`` on the ego at ``ego_pose`` (ego -> world) and apply the sensor model.
+
+    ``condition`` (a :class:`pipeline.sensors.conditions.Condition`, optional) degrades the sweep; do not also
+    build ``lidar`` from ``condition.lidar(...)``, which would apply the factors twice.
+    """
+    cfg = lidar.config if condition is None else condition.lidar(lidar.config)
+    effects = LidarConditionConfig() if condition is None else condition.lidar_effects
     to_world = lidar.lidar_to_world(ego_pose)
     dirs_l = lidar.directions
     n = len(dirs_l)
@@ -157,12 +167,18 @@ def render_lidar(scene: FrameScene, lidar: Lidar, ego_pose: Transform, rng: np.r
     t = hits.t_m[keep]
     cos_inc = np.abs(rowdot(np.take(hits.normal, keep, axis=0), np.take(rays, keep, axis=0)[:, 3:]))
     reflectivity = material_arrays()["reflectivity"][hits.material[keep]]
-    intensity = reflectivity * cos_inc * np.exp(-cfg.attenuation_per_m * t)
+    intensity = reflectivity * cos_inc * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
+    if effects.min_intensity > 0:  # returns too weak to detect are lost
+        strong = intensity >= effects.min_intensity
+        keep, t, intensity = keep[strong], t[strong], intensity[strong]
     column, ring = np.divmod(keep, cfg.channels)
     instance = hits.instance_id[keep]
     on_actor = instance > 0
+    ranges = np.repeat(np.maximum(t + noise[keep], 0)[:, None], 3, 1)
+    # cv2.multiply returns None for empty inputs (a sweep that sees nothing, e.g. in thick fog).
+    points = cv2.multiply(np.take(dirs_l, keep, axis=0), ranges) if len(keep) else np.zeros((0, 3), np.float32)
     return LidarSweep(
-        points_m=cv2.multiply(np.take(dirs_l, keep, axis=0), np.repeat(np.maximum(t + noise[keep], 0)[:, None], 3, 1)),
+        points_m=points,
         intensity=intensity.astype(np.float32),
         ring=ring.astype(np.uint8),
         column=column.astype(np.uint16),

@@ -2,7 +2,9 @@
 
 Label images (instance, semantic, depth) come from the pixel-centre rays; the colour image averages
 ``samples_per_pixel`` stratified rays (reusing the centre rays when there is one sample), each shaded
-and fogged under the :class:`Condition`, then noised and tone-mapped. Depth is the
+and fogged under the :class:`Condition` (sun, sky, and at night the frame's spot lights: headlights and street
+lamps), then given the condition's post effects (:mod:`pipeline.sensors.post`: rain, motion blur, bloom,
+flare, vignetting, noise) and tone-mapped. Depth is the
 **z-depth** in the optical frame (metres along the camera's z axis, not along the ray), valid where
 ``depth_valid``; it is 0 elsewhere.
 """
@@ -15,9 +17,10 @@ import numpy as np
 
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.conditions import CONDITIONS, Condition
+from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
-from pipeline.sensors.shading import shade, to_srgb8
+from pipeline.sensors.post import apply_post, motion_flow
+from pipeline.sensors.shading import shade, sky, to_srgb8
 from pipeline.world.scene import FrameScene, make_rays
 
 
@@ -50,13 +53,21 @@ def render_camera(
     ego_pose: Transform,
     condition: Condition | None = None,
     rng: np.random.Generator | None = None,
+    *,
+    street_lights_m: np.ndarray | None = None,
+    ego_speed_mps: float = 0.0,
+    ego_size_m: tuple[float, float, float] | None = None,
 ) -> CameraFrame:
-    """Render ``camera`` on the ego at ``ego_pose`` (ego frame -> world) in ``scene``.
+    """Render ``camera`` on the ego at ``ego_pose`` (ego frame -> world, origin at the ego's box centre).
 
     The ego must not be one of the scene's actors (the camera would sit inside its mesh). ``condition``
-    defaults to noon; ``rng`` draws the image noise (none without it, so labels never depend on it).
+    defaults to noon; ``rng`` draws the image noise, rain streaks and drops (none without it; labels never
+    depend on it). ``street_lights_m`` (S, 3): the static world's lamp positions
+    (:attr:`pipeline.world.static.StaticWorld.street_lights`), lit where the condition has street lamps;
+    ``ego_speed_mps`` (forward) drives motion blur where the condition has a shutter time; ``ego_size_m``
+    (length, width, height) places the ego's headlights (a 4.5 x 1.8 x 1.5 m car by default).
     """
-    condition = CONDITIONS["noon"] if condition is None else condition
+    condition = get_condition("noon") if condition is None else condition
     lighting = condition.lighting
     h, w = camera.height, camera.width
     cam_to_world = camera.camera_to_world(ego_pose)
@@ -70,21 +81,28 @@ def render_camera(
     labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image)
     depth = np.where(hits.hit, hits.t_m * dirs_cam[:, 2], 0.0).astype(np.float32)
 
+    lights = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
     samples = camera.sample_directions
     if len(samples) == 1:
-        radiance = condition.fog(shade(scene, rays, hits, lighting), hits.t_m, hits.hit)
+        radiance = condition.fog(shade(scene, rays, hits, lighting, lights), hits.t_m, hits.hit)
     else:
         radiance = np.zeros((h * w, 3), np.float32)
         for sample in samples:  # loop over samples; all pixels vectorised
             sample_rays = make_rays(cam_to_world.translation, sample, cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, actor_rays)
-            radiance += condition.fog(shade(scene, sample_rays, sample_hits, lighting), sample_hits.t_m,
+            radiance += condition.fog(shade(scene, sample_rays, sample_hits, lighting, lights), sample_hits.t_m,
                                       sample_hits.hit)
         radiance /= len(samples)
-    if rng is not None:
-        radiance = condition.noisy(radiance, rng)
+    flow = None
+    shutter_s = condition.lens.motion_blur_exposure_s
+    if shutter_s > 0 and ego_speed_mps != 0:
+        shift_world = ego_pose.rotation[:, 0] * (ego_speed_mps * shutter_s)
+        points = np.where(hits.hit[:, None], dirs_cam * hits.t_m[:, None], np.inf)
+        flow = motion_flow(points, cam_to_world.rotation.T @ shift_world, camera.fx, camera.fy).reshape(h, w, 2)
+    image = apply_post(radiance.reshape(h, w, 3), condition.lens, condition.noise, condition.rain, rng, flow=flow,
+                       sky_level=_sky_level(condition))
     return CameraFrame(
-        rgb=to_srgb8(radiance.reshape(h, w, 3)),
+        rgb=to_srgb8(image),
         instance_id=hits.instance_id.reshape(h, w),
         semantic=hits.semantic.reshape(h, w),
         depth_m=depth.reshape(h, w),
@@ -92,3 +110,13 @@ def render_camera(
         labels=labels,
         cam_to_world=cam_to_world,
     )
+
+
+def _sky_level(condition: Condition) -> float:
+    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure."""
+    lighting = condition.lighting
+    if condition.fog_visibility_m is not None:
+        level = float(np.mean(condition.fog_rgb))
+    else:
+        level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), lighting).mean())
+    return level * lighting.exposure

@@ -1,24 +1,35 @@
-"""Day-light shading of camera hits: Lambert + Blinn-Phong under a sun with shadow rays, sky and ambient.
+"""Shading of camera hits: Lambert + Blinn-Phong under a sun with shadow rays, sky, ambient, local lights.
 
 Radiance is linear RGB (arbitrary units, ~1 = white paper in full sun after ``exposure``); the image is
 tone-mapped to 8-bit sRGB by :func:`to_srgb8`. Directions are world frame (x east, y north, z up).
-The condition model (morning / night / fog / rain) builds a :class:`Lighting`; this module only shades.
+The condition model (morning / night / fog / rain) builds a :class:`Lighting` and the frame's spot lights
+(:mod:`pipeline.sensors.lights`: headlights, street lamps); this module only shades.
+
+Wet surfaces (``Lighting.wetness`` w in [0, 1], road-like materials only): albedo x (1 - 0.55 w), specular
+raised to at least 0.6 w with a sharper highlight, plus a Fresnel (Schlick, water F0 = 0.02) mirror of the
+sky scaled by w: the sheen of a wet road. Reflections of the scene itself are not traced.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from pipeline.sensors.lights import SpotLights, light_radiance
 from pipeline.world.materials import material_arrays, material_index
-from pipeline.world.scene import FrameScene, Hits
+from pipeline.world.scene import FrameScene, Hits, rowdot
 
 BRAKE_LIGHT_RGB = np.array([2.0, 0.08, 0.05], np.float32)
 TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
 HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
 STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
+WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
+WET_SHININESS = 80.0
+WATER_F0 = 0.02
+WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
 @dataclass(frozen=True)
@@ -30,8 +41,10 @@ class Lighting:
     sky_zenith_rgb, sky_horizon_rgb: background colour overhead and at the horizon.
     exposure: scale applied before tone mapping.
     shadows: cast shadow rays towards the sun.
-    lights_on: vehicles' head and tail lights and street lamps glow (dusk, night). They glow only;
-        the light they cast on other surfaces (headlight cones) is not modelled yet.
+    lights_on: vehicles' head and tail lights and street lamps glow (dusk, night); the light they cast
+        on other surfaces comes from the spot lights passed to :func:`shade`.
+    tail_glow, head_glow, lamp_glow: emission scales of tail lights, headlights and street lamps.
+    wetness: 0 dry .. 1 soaked road-like surfaces (see the module docstring).
     """
 
     sun_elevation_deg: float = 50.0
@@ -43,12 +56,18 @@ class Lighting:
     exposure: float = 1.0
     shadows: bool = True
     lights_on: bool = False
+    tail_glow: float = 1.0
+    head_glow: float = 1.0
+    lamp_glow: float = 1.0
+    wetness: float = 0.0
 
     def __post_init__(self) -> None:
         if not -90.0 <= self.sun_elevation_deg <= 90.0:
             raise ValueError(f"sun_elevation_deg must be in [-90, 90], got {self.sun_elevation_deg}")
         if self.exposure <= 0:
             raise ValueError(f"exposure must be positive, got {self.exposure}")
+        if not 0.0 <= self.wetness <= 1.0 or min(self.tail_glow, self.head_glow, self.lamp_glow) < 0:
+            raise ValueError("wetness must be in [0, 1] and glow scales >= 0")
 
     @property
     def sun_direction(self) -> np.ndarray:
@@ -64,14 +83,20 @@ def sky(directions: np.ndarray, lighting: Lighting) -> np.ndarray:
     return (hor + (zen - hor) * up).astype(np.float32)
 
 
-def shade(scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting) -> np.ndarray:
+def shade(
+    scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting, lights: SpotLights | None = None
+) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
-    radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission; misses
-    see the sky. Whole-array maths runs per channel on contiguous 1D arrays split and merged by OpenCV:
-    numpy broadcasting and fancy indexing over strided (N, 3) views are several times slower.
+    radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
+    ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
+    sky. Whole-array maths runs per channel on contiguous 1D arrays split and merged by OpenCV: numpy
+    broadcasting and fancy indexing over strided (N, 3) views are several times slower.
     """
     mats = _materials()
+    wet = None
+    if lighting.wetness > 0:
+        wet, hits, mats = _wet(hits, mats, lighting.wetness)
     sun = lighting.sun_direction
     sun_rgb = np.asarray(lighting.sun_rgb, np.float32)
     ambient = np.asarray(lighting.ambient_rgb, np.float32)
@@ -108,14 +133,42 @@ def shade(scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting) -
     tail = glowing[(mat[glowing] == material_index("taillight")) & on_actor]
     out[tail[scene.actors.brake[hits.actor_index[tail]]]] += BRAKE_LIGHT_RGB
     if lighting.lights_on:
-        out[tail] += TAIL_LIGHT_RGB
-        out[glowing[(mat[glowing] == material_index("headlight")) & on_actor]] += HEAD_LIGHT_RGB
-        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB
+        out[tail] += TAIL_LIGHT_RGB * np.float32(lighting.tail_glow)
+        out[glowing[(mat[glowing] == material_index("headlight")) & on_actor]] += HEAD_LIGHT_RGB * np.float32(
+            lighting.head_glow)
+        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB * np.float32(lighting.lamp_glow)
+    if lights is not None and len(lights):
+        out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
+    if wet is not None and len(wet):
+        out[wet] += _wet_sheen(np.take(rays, wet, axis=0), np.take(hits.normal, wet, axis=0), lighting)
     miss = np.flatnonzero(~hits.hit)
     out[miss] = sky(np.take(rays, miss, axis=0)[:, 3:], lighting)
     if lighting.exposure != 1.0:
         out *= lighting.exposure
     return out
+
+
+def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:
+    """Wet hits (indices), the hits with darkened albedo there, and the material table made shinier."""
+    wet_ids = np.array([material_index(n) for n in WET_MATERIALS])
+    wet = np.flatnonzero(hits.hit & np.isin(hits.material, wet_ids))
+    color = hits.color.copy()
+    color[wet] *= np.float32(1.0 - 0.55 * wetness)
+    mats = dict(mats)
+    mats["specular"] = mats["specular"].copy()
+    mats["shininess"] = mats["shininess"].copy()
+    mats["specular"][wet_ids] = np.maximum(mats["specular"][wet_ids], 0.6 * wetness)
+    mats["shininess"][wet_ids] = WET_SHININESS
+    return wet, dataclasses.replace(hits, color=color), mats
+
+
+def _wet_sheen(rays: np.ndarray, normal: np.ndarray, lighting: Lighting) -> np.ndarray:
+    """(M, 3) float32 sky mirrored by a water film: wetness * Fresnel(Schlick) * sky(reflected direction)."""
+    d = rays[:, 3:]
+    cos_v = np.clip(-rowdot(d, normal), 0.0, 1.0)
+    fresnel = WATER_F0 + (1.0 - WATER_F0) * (1.0 - cos_v) ** 5
+    reflected = d + 2.0 * cos_v[:, None] * normal
+    return (sky(reflected, lighting) * (WET_SHEEN * lighting.wetness * fresnel)[:, None]).astype(np.float32)
 
 
 def _materials() -> dict[str, np.ndarray]:

@@ -1,32 +1,69 @@
-"""Conditions: night darker than morning, Koschmieder fog with the exact distance, seeded noise, registry."""
+"""Conditions: shipped YAML configs, validation errors, Koschmieder fog with the exact distance, rain, LiDAR."""
 
 from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from pipeline.core.classes import SemanticClass
+from pipeline.core.config import ConditionConfig, ConfigError, config_dir, load_config
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera, CameraConfig
-from pipeline.sensors.conditions import CONDITIONS, KOSCHMIEDER, Condition, get_condition
-from pipeline.sensors.lidar import LidarConfig
+from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, condition_from_config, get_condition
+from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
 from pipeline.sensors.render import render_camera
-from pipeline.sensors.shading import Lighting
-from pipeline.world.scene import FrameScene, StaticScene
+from pipeline.sensors.shading import Lighting, shade
+from pipeline.world.materials import material_index
+from pipeline.world.mesh import Mesh
+from pipeline.world.scene import FrameScene, StaticScene, make_rays
 
 SMALL = dict(width_px=160, height_px=120)
 
 
-def _scene(actors_factory, wall):
-    actors = actors_factory([[15.0, 1.0, -0.5], [30.0, -3.0, -0.5]], [[4.5, 1.8, 1.5]] * 2, brake=[True, False])
-    return FrameScene(StaticScene([wall(60.0)]), actors)
+def ground(material: str = "asphalt", half_m: float = 200.0) -> Mesh:
+    """A flat square at z = 0 facing up."""
+    h = half_m
+    v = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    return Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]), material_index(material), SemanticClass.ROAD)
 
 
-def test_night_is_darker_than_morning(actors_factory, wall):
-    scene = _scene(actors_factory, wall)
-    cam = Camera(CameraConfig(**SMALL))
-    morning = render_camera(scene, cam, Transform.identity(), get_condition("morning")).rgb.mean()
-    night = render_camera(scene, cam, Transform.identity(), get_condition("night")).rgb.mean()
-    assert night < 0.5 * morning
+def test_every_shipped_yaml_validates():
+    files = sorted((config_dir() / "conditions").glob("*.yaml"))
+    assert {f.stem for f in files} >= set(SHIPPED)
+    for f in files:
+        cfg, path = load_config(ConditionConfig, f.stem, "conditions")
+        assert cfg.name == f.stem and path == f
+        assert condition_from_config(cfg).name == f.stem
+
+
+@pytest.mark.parametrize(("body", "key"), [
+    ("name: bad\nheadlights: {intensity: -1.0}\n", "headlights.intensity"),
+    ("name: bad\nfog: {visibility: 50.0}\n", "fog.visibility"),
+    ("name: bad\nlens: {vignetting: 1.5}\n", "lens.vignetting"),
+    ("name: bad\nsky: {ambient_rgb: [0.1, -0.2, 0.1]}\n", "sky"),
+    ("name: bad\nrain: {streak_length_px: [50.0, 10.0]}\n", "rain"),
+])
+def test_bad_yaml_names_file_and_key(tmp_path: Path, body: str, key: str):
+    path = tmp_path / "mine.yaml"
+    path.write_text(body)
+    with pytest.raises(ConfigError) as err:
+        get_condition(path)
+    assert str(path) in str(err.value) and key in str(err.value)
+
+
+def test_unknown_name_lists_the_shipped_ones():
+    with pytest.raises(ConfigError, match="available: .*morning"):
+        get_condition("snow")
+
+
+def test_user_condition_from_any_path(tmp_path: Path):
+    path = tmp_path / "storm.yaml"
+    path.write_text("name: storm\nfog: {visibility_m: 40.0}\nrain: {intensity: 1.0}\n")
+    cond = get_condition(path)
+    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.lighting.wetness > 0
 
 
 def test_fog_follows_koschmieder():
@@ -39,6 +76,25 @@ def test_fog_follows_koschmieder():
     np.testing.assert_allclose(out[2], [0.5, 0.5, 0.5])  # the sky is all fog
 
 
+def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
+    # Contrast against the airlight A of every pixel of a real scene: (L - A) / (L0 - A) = exp(-3.912 d / V)
+    # with d the distance along that pixel's ray (not the z-depth, not a per-object distance).
+    fog = get_condition("fog")
+    scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[12.0, 1.0, 0.75], [35.0, -4.0, 0.75]],
+                                                                           [[4.5, 1.8, 1.5]] * 2))
+    cam = Camera(CameraConfig(**SMALL))
+    to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 1.5)))
+    rays = make_rays(to_world.translation, cam.pixel_directions, to_world.rotation)
+    hits = scene.cast_rays(rays)
+    clear = shade(scene, rays, hits, fog.lighting)
+    foggy = fog.fog(clear, hits.t_m, hits.hit)
+    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.lighting.exposure
+    ok = hits.hit & (np.abs(clear[:, 0] - airlight[0]) > 0.05)
+    assert ok.sum() > 1000 and np.ptp(hits.t_m[ok]) > 30.0
+    ratio = (foggy[ok, 0] - airlight[0]) / (clear[ok, 0] - airlight[0])
+    np.testing.assert_allclose(ratio, np.exp(-KOSCHMIEDER * hits.t_m[ok] / fog.fog_visibility_m), rtol=1e-4)
+
+
 def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
     # The same dark box at 10 m and at 60 m in front of a bright wall: fog shrinks the far one's contrast.
     cam = Camera(CameraConfig(**SMALL))
@@ -49,26 +105,59 @@ def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
                            box_meshes)
         frame = render_camera(scene, cam, Transform.identity(), get_condition("fog"))
         grey = frame.rgb.astype(float).mean(axis=2)
-        contrast.append(grey[frame.instance_id == 0].mean() - grey[frame.instance_id == 1].mean())
-    assert contrast[1] < 0.5 * contrast[0]
+        contrast.append(grey[frame.instance_id == 1].mean() - grey[frame.instance_id == 0].mean())
+    assert abs(contrast[1]) < 0.5 * abs(contrast[0])
+
+
+def test_rain_near_road_is_darker_than_dry():
+    # The near road, seen steeply, is darker when wet; at grazing angles it mirrors the sky (not tested here).
+    rain = get_condition("rain")
+    dry = dataclasses.replace(rain, lighting=dataclasses.replace(rain.lighting, wetness=0.0), rain=None)
+    scene = FrameScene(StaticScene([ground()]), _no_actors())
+    cam = Camera(CameraConfig(**SMALL))
+    pose = Transform.from_xyz_rpy((0.0, 0.0, 1.5))
+    wet_img = render_camera(scene, cam, pose, rain).rgb.astype(float)
+    dry_img = render_camera(scene, cam, pose, dry).rgb.astype(float)
+    near, nearest = slice(SMALL["height_px"] * 3 // 4, None), slice(SMALL["height_px"] - 10, None)
+    assert wet_img[near].mean() < dry_img[near].mean()
+    assert wet_img[nearest].mean() < 0.9 * dry_img[nearest].mean()  # asphalt x 0.53 in linear units
+
+
+def _no_actors():
+    from pipeline.world.actors import Actors
+
+    return Actors.empty()
 
 
 def test_same_seed_same_noisy_image(actors_factory, wall):
-    scene = _scene(actors_factory, wall)
+    scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[15.0, 1.0, 0.75]], [[4.5, 1.8, 1.5]]))
     cam = Camera(CameraConfig(**SMALL))
-    night = get_condition("night")
-    a = render_camera(scene, cam, Transform.identity(), night, np.random.default_rng(4)).rgb
-    b = render_camera(scene, cam, Transform.identity(), night, np.random.default_rng(4)).rgb
-    c = render_camera(scene, cam, Transform.identity(), night, np.random.default_rng(5)).rgb
-    np.testing.assert_array_equal(a, b)
-    assert not np.array_equal(a, c)
+    pose = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
+    for name in ("night", "rain"):
+        cond = get_condition(name)
+        a = render_camera(scene, cam, pose, cond, np.random.default_rng(4)).rgb
+        b = render_camera(scene, cam, pose, cond, np.random.default_rng(4)).rgb
+        c = render_camera(scene, cam, pose, cond, np.random.default_rng(5)).rgb
+        np.testing.assert_array_equal(a, b)
+        assert not np.array_equal(a, c)
 
 
-def test_registry_and_lidar_degradation():
-    assert set(CONDITIONS) == {"morning", "noon", "dusk", "night", "fog", "rain"}
-    with pytest.raises(KeyError, match="known: morning"):
-        get_condition("snow")
-    fog = get_condition("fog").lidar(LidarConfig())
-    assert fog.range_max_m < LidarConfig().range_max_m and fog.attenuation_per_m > LidarConfig().attenuation_per_m
-    with pytest.raises(ValueError):
-        Condition("bad", Lighting(), fog_visibility_m=0.0)
+def test_fog_cuts_lidar_range_and_intensity(wall):
+    fog = get_condition("fog")
+    lidar = Lidar(LidarConfig(channels=8, fov_upper_deg=2.0, fov_lower_deg=-2.0, horizontal_resolution_deg=1.0,
+                              dropout_prob=0.0, range_noise_std_m=0.0))
+    near = FrameScene(StaticScene([wall(30.0)]), _no_actors())
+    clear = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0))
+    foggy = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)
+    assert 0 < len(foggy) < len(clear)  # extra drop-out and the detection threshold lose points
+    key_c = clear.column.astype(int) * 8 + clear.ring
+    key_f = foggy.column.astype(int) * 8 + foggy.ring
+    both = np.isin(key_c, key_f)
+    fx = fog.lidar_effects
+    a = lidar.config.attenuation_per_m
+    d = np.linalg.norm(clear.points_m[both], axis=1)
+    expected = clear.intensity[both] * fx.intensity_factor * np.exp(-a * (fx.attenuation_factor - 1.0) * d)
+    np.testing.assert_allclose(foggy.intensity, expected, rtol=1e-4)
+    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_max_m)]), _no_actors())
+    assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0))) > 0
+    assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)) == 0

@@ -77,23 +77,156 @@ class RigConfig(_Model):
         return self
 
 
-class ConditionConfig(_Model):
-    """Lighting and weather. Directions: sun azimuth CCW from east (world +x), elevation above horizon."""
+RGB = tuple[float, float, float]
 
-    name: str = Field(pattern=r"^[A-Za-z0-9_-]+$")
-    sun_azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0)
-    sun_elevation_deg: float = Field(45.0, ge=-90.0, le=90.0)
-    sun_color: tuple[float, float, float] = (1.0, 0.98, 0.95)
-    sun_intensity: float = Field(1.0, ge=0.0)
-    sky_color: tuple[float, float, float] = (0.55, 0.70, 0.90)
-    ambient: float = Field(0.35, ge=0.0)
-    headlights: bool = False
-    street_lamps: bool = False
-    fog_visibility_m: float | None = Field(None, gt=0.0, description="Koschmieder meteorological visibility")
-    rain: float = Field(0.0, ge=0.0, le=1.0, description="rain intensity: wet road, streaks, visibility")
-    noise_std: float = Field(0.01, ge=0.0, description="sensor noise, fraction of full scale")
-    vignetting: float = Field(0.2, ge=0.0, le=1.0)
-    motion_blur: bool = False
-    lens_flare: bool = False
-    lidar_range_factor: float = Field(1.0, gt=0.0, le=1.0)
-    lidar_intensity_factor: float = Field(1.0, gt=0.0, le=1.0)
+
+def _rgb(description: str, default: RGB) -> RGB:
+    return Field(default, description=f"{description}; linear RGB, each channel >= 0")
+
+
+class _ConditionPart(_Model):
+    @model_validator(mode="after")
+    def _check_rgb(self) -> _ConditionPart:
+        for name in type(self).model_fields:
+            if name.endswith("_rgb") and min(getattr(self, name)) < 0:
+                raise ValueError(f"{name}: colour channels must be >= 0, got {getattr(self, name)}")
+        return self
+
+
+class SunConfig(_ConditionPart):
+    """The sun: direction (azimuth CCW from east = world +x, elevation above the horizon), colour, strength."""
+
+    azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0, description="CCW from east (world +x), degrees")
+    elevation_deg: float = Field(45.0, ge=-90.0, le=90.0, description="above the horizon, degrees; <= 0: no sun")
+    color_rgb: RGB = _rgb("colour of the sunlight (scaled by intensity)", (1.0, 0.94, 0.85))
+    intensity: float = Field(2.6, ge=0.0, description="irradiance scale; 1 lights white paper to ~1 at exposure 1")
+    shadows: bool = Field(True, description="cast shadow rays towards the sun")
+
+
+class SkyConfig(_ConditionPart):
+    """Background radiance (rays that hit nothing) and the fill light it gives every surface."""
+
+    zenith_rgb: RGB = _rgb("sky radiance straight up", (0.18, 0.32, 0.65))
+    horizon_rgb: RGB = _rgb("sky radiance at the horizon", (0.65, 0.75, 0.85))
+    ambient_rgb: RGB = _rgb("ambient (sky fill) irradiance on every surface", (0.45, 0.5, 0.6))
+
+
+class HeadlightConfig(_ConditionPart):
+    """Vehicle low beams: elliptical spot cones with a soft edge, aimed slightly down, 1/d^2 fall-off."""
+
+    ego: bool = Field(True, description="the ego's two headlights light the scene")
+    others: bool = Field(True, description="other vehicles' headlights light the scene")
+    intensity: float = Field(60.0, ge=0.0, description="on-axis irradiance at 1 m per lamp (x color_rgb)")
+    color_rgb: RGB = _rgb("headlight colour", (1.0, 0.95, 0.85))
+    half_angle_h_deg: float = Field(32.0, gt=0.0, lt=89.0, description="horizontal half-width of the cone, degrees")
+    half_angle_v_deg: float = Field(9.0, gt=0.0, lt=89.0, description="half-height of the cone below its axis, degrees")
+    half_angle_up_deg: float = Field(
+        3.0, gt=0.0, lt=89.0, description="half-height above the axis, degrees: the low beam's cut-off (axis + this)")
+    soft_edge: float = Field(0.5, gt=0.0, le=1.0, description="fraction of the cone radius over which it fades out")
+    pitch_down_deg: float = Field(2.5, ge=-10.0, le=45.0, description="low-beam aim below the horizontal, degrees")
+    range_m: float = Field(80.0, gt=0.0, description="cut-off distance of the light, metres")
+    max_other_vehicles: int = Field(8, ge=0, le=64, description="other vehicles lit, nearest to the camera first")
+    shadows: bool = Field(False, description="shadow rays for other vehicles' headlights (the ego's never need them)")
+
+
+class StreetLampConfig(_ConditionPart):
+    """Street lamps (positions from the static world): downward spot lights lighting pools below them."""
+
+    intensity: float = Field(40.0, ge=0.0, description="on-axis irradiance at 1 m (x color_rgb)")
+    color_rgb: RGB = _rgb("lamp colour (sodium-ish warm by default)", (1.0, 0.75, 0.45))
+    half_angle_deg: float = Field(70.0, gt=0.0, lt=89.0, description="half-angle of the downward cone, degrees")
+    soft_edge: float = Field(0.5, gt=0.0, le=1.0, description="fraction of the cone radius over which it fades out")
+    range_m: float = Field(25.0, gt=0.0, description="cut-off distance of the light, metres")
+    max_lamps: int = Field(16, ge=0, le=128, description="lamps lit per frame, nearest to the camera first")
+    max_distance_m: float = Field(120.0, gt=0.0, description="lamps farther from the camera light nothing")
+    shadows: bool = Field(True, description="shadow rays from lit surfaces to each lamp")
+
+
+class VehicleLightConfig(_Model):
+    """Lamps that glow (emissive; they light nothing by themselves)."""
+
+    glow: bool = Field(False, description="head and tail lights of every vehicle and street lamps glow")
+    tail_glow: float = Field(1.0, ge=0.0, description="tail-light emission scale")
+    head_glow: float = Field(1.0, ge=0.0, description="headlight emission scale")
+    lamp_glow: float = Field(1.0, ge=0.0, description="street-lamp emission scale")
+
+
+class FogConfig(_ConditionPart):
+    """Koschmieder fog: T = exp(-3.912 d / visibility_m) with the exact distance d of each ray."""
+
+    visibility_m: float = Field(gt=0.0, description="meteorological visibility (2 % contrast), metres")
+    color_rgb: RGB = _rgb("airlight colour (before exposure)", (0.62, 0.65, 0.68))
+
+
+class RainConfig(_Model):
+    """Rain: wet road, image-space streaks (seeded) and, through ``fog``, lower visibility."""
+
+    intensity: float = Field(0.5, ge=0.0, le=1.0, description="0 dry .. 1 downpour; scales streak count and alpha")
+    wetness: float = Field(0.8, ge=0.0, le=1.0, description="road wetness: darker albedo, stronger specular")
+    streaks_per_megapixel: float = Field(2500.0, ge=0.0, description="streaks at intensity 1 per million pixels")
+    streak_length_px: tuple[float, float] = Field((18.0, 60.0), description="min, max streak length, pixels")
+    streak_angle_deg: float = Field(8.0, ge=-60.0, le=60.0, description="tilt from vertical (wind), degrees")
+    streak_brightness: float = Field(0.25, ge=0.0, description="streak radiance relative to the mean sky")
+    drops: int = Field(0, ge=0, le=200, description="blurry raindrops on the lens (0 = none)")
+
+    @model_validator(mode="after")
+    def _check_lengths(self) -> RainConfig:
+        lo, hi = self.streak_length_px
+        if not 0.0 < lo <= hi:
+            raise ValueError(f"streak_length_px must be (min, max) with 0 < min <= max, got {self.streak_length_px}")
+        return self
+
+
+class SensorNoiseConfig(_Model):
+    """Shot + read noise in linear units after the exposure gain: var = gain*shot*s + (gain*read)^2; grain is
+    spatially correlated luminance noise. Larger exposure (night) therefore means more noise."""
+
+    shot: float = Field(0.0004, ge=0.0, description="shot-noise variance per unit signal at exposure 1")
+    read_std: float = Field(0.002, ge=0.0, description="read-noise std at exposure 1, linear units")
+    grain_std: float = Field(0.0, ge=0.0, description="grain (blurred luminance noise) std at exposure 1")
+    grain_size_px: float = Field(1.2, gt=0.0, le=10.0, description="grain blur sigma, pixels")
+
+
+class LensConfig(_Model):
+    """Optics and exposure effects, applied to linear radiance before tone mapping."""
+
+    exposure: float = Field(1.0, gt=0.0, description="exposure / gain applied before tone mapping")
+    vignetting: float = Field(0.2, ge=0.0, lt=1.0, description="fraction of light lost at the image corners")
+    bloom_threshold: float = Field(1.5, gt=0.0, description="linear radiance above which light blooms")
+    bloom_strength: float = Field(0.0, ge=0.0, description="bloom added (0 = off)")
+    bloom_sigma_px: float = Field(6.0, gt=0.0, description="bloom blur sigma, pixels")
+    lens_flare: float = Field(0.0, ge=0.0, description="strength of ghosts from bright sources (0 = off)")
+    motion_blur_exposure_s: float = Field(0.0, ge=0.0, le=0.2, description="shutter time for motion blur (0 = off)")
+
+
+class LidarConditionConfig(_Model):
+    """LiDAR degradation (multiplying the rig's values)."""
+
+    range_factor: float = Field(1.0, gt=0.0, le=1.0, description="x maximum range")
+    intensity_factor: float = Field(1.0, gt=0.0, le=1.0, description="x returned intensity")
+    attenuation_factor: float = Field(1.0, ge=0.0, description="x attenuation coefficient a in exp(-a d)")
+    noise_factor: float = Field(1.0, ge=0.0, description="x range-noise std")
+    extra_dropout: float = Field(0.0, ge=0.0, lt=1.0, description="added drop-out probability")
+    min_intensity: float = Field(0.0, ge=0.0, lt=1.0, description="returns weaker than this are lost (0 = none)")
+
+
+class ConditionConfig(_Model):
+    """Lighting, weather and sensor effects of one condition (configs/conditions/NAME.yaml).
+
+    Units: angles in degrees, distances in metres, colours linear RGB, radiance in the renderer's linear
+    units (1 ~ white paper in full sun at exposure 1). Sections left out take their defaults; ``headlights``,
+    ``street_lamps``, ``fog`` and ``rain`` are off when left out.
+    """
+
+    name: str = Field(pattern=r"^[A-Za-z0-9_-]+$", description="condition name, recorded with every image")
+    description: str = Field("", description="free text")
+    sun: SunConfig = Field(default_factory=SunConfig)
+    sky: SkyConfig = Field(default_factory=SkyConfig)
+    vehicle_lights: VehicleLightConfig = Field(default_factory=VehicleLightConfig)
+    headlights: HeadlightConfig | None = Field(None, description="headlight cones (night, dusk); None = off")
+    street_lamps: StreetLampConfig | None = Field(None, description="street-lamp light pools; None = off")
+    fog: FogConfig | None = Field(None, description="Koschmieder fog; None = clear air")
+    rain: RainConfig | None = Field(None, description="rain; None = dry")
+    noise: SensorNoiseConfig = Field(default_factory=SensorNoiseConfig)
+    lens: LensConfig = Field(default_factory=LensConfig)
+    lidar: LidarConditionConfig = Field(default_factory=LidarConditionConfig)

@@ -1,0 +1,301 @@
+"""Local lights at night: vehicle headlights and street lamps as spot lights, shaded over all hits at once.
+
+A :class:`SpotLights` holds L spot lights (world frame, metres). Each has an elliptical cone about its axis
+(half-widths ``tan_h`` / ``tan_v`` measured as tangents in the light's left / up directions) whose edge fades
+over the fraction ``soft`` of its radius (smoothstep), an inverse-square fall-off windowed to zero at
+``range_m`` ((1 - (d/R)^4)^2, so a light's reach is bounded), and an RGB intensity = irradiance at 1 m on
+the axis. Lamps are downward circular cones; low beams are wide, flat cones pitched slightly down.
+
+Shading is vectorised over (light, hit) pairs: hit points are bucketed once per call in a 2D grid
+(:class:`PointGrid`, radix-sorted cell ids), and each light only visits the points in the cells its range
+covers (cells outside its range or, seen from above, outside its horizontal half-angle are skipped), then
+a cheap exact test (range, in front, facing) precedes the cone and shading terms, and pairs whose light is
+below MIN_IRRADIANCE are dropped. The number of lights per frame is bounded by the condition (the ego, the
+nearest ``max_other_vehicles`` vehicles ahead of the camera, the nearest ``max_lamps`` lamps).
+
+Shadow rays (per light family, ``shadows`` in the config): one Embree occlusion call per shadowed light with
+ray directions spanning the segment to the light (``t`` in [0, 1]). Shipped conditions cast them for street
+lamps (a car's shadow under a lamp is visible) but not for headlights: the ego's lamps sit next to the camera,
+which therefore sees almost none of their shadows, and other vehicles' ones cost as much again for little.
+The ego is not in the scene, so it shadows nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.core.classes import ObjectClass
+from pipeline.core.config.sensors import HeadlightConfig, StreetLampConfig
+from pipeline.core.geometry import Transform
+from pipeline.world.actors import Actors, unit_to_world
+from pipeline.world.scene import FrameScene, Hits
+
+# A vehicle's pair of low beams is modelled as ONE light of twice the intensity at the middle of the front
+# (unit box frame: x forward, y left, z up; lamps of the procedural car at 41 % of the height): from a few
+# metres on the two cones are indistinguishable, and it halves the work.
+HEADLIGHT_UNIT_XYZ = np.array([0.5, 0.0, -0.09])
+HEADLIGHT_AHEAD_M = 0.1  # lights sit just ahead of the lamp plaques, so a car never shadows its own beam
+LIT_CLASSES = (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.BUS, ObjectClass.MOTORCYCLE)
+DEFAULT_EGO_SIZE_M = (4.5, 1.8, 1.5)
+MIN_DISTANCE_M = 0.5  # the inverse-square law is clamped closer than this
+MIN_IRRADIANCE = 2e-3  # light below this (before exposure) is not shaded: under one 8-bit step on dark asphalt
+
+
+@dataclass(frozen=True)
+class SpotLights:
+    """L spot lights, struct of arrays (world frame).
+
+    Attributes:
+        position_m: (L, 3) float64 light positions. axis: (L, 3) unit beam axes. up: (L, 3) unit vectors
+            normal to the axis (the cone's vertical direction).
+        rgb: (L, 3) float32 irradiance at 1 m on the axis, linear RGB.
+        tan_h, tan_v: (L,) float64 tangents of the cone's horizontal / vertical (below the axis) half-angles.
+        tan_up: (L,) float64 tangent of the half-angle above the axis (a low beam's cut-off; = tan_v for lamps).
+        soft: (L,) float64 fraction of the cone radius over which the edge fades, in (0, 1].
+        range_m: (L,) float64 cut-off distance. shadows: (L,) bool, cast shadow rays.
+    """
+
+    position_m: np.ndarray
+    axis: np.ndarray
+    up: np.ndarray
+    rgb: np.ndarray
+    tan_h: np.ndarray
+    tan_v: np.ndarray
+    tan_up: np.ndarray
+    soft: np.ndarray
+    range_m: np.ndarray
+    shadows: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.position_m)
+
+    @classmethod
+    def empty(cls) -> SpotLights:
+        z3, z = np.zeros((0, 3)), np.zeros(0)
+        return cls(z3, z3, z3, z3.astype(np.float32), z, z, z, z, z, np.zeros(0, bool))
+
+    @classmethod
+    def concatenate(cls, parts: list[SpotLights]) -> SpotLights:
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return cls.empty()
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__))
+
+
+def _spots(position, axis, up, rgb, tan_h, tan_v, tan_up, soft, range_m, shadows) -> SpotLights:
+    n = len(position)
+    full = lambda v: np.broadcast_to(np.asarray(v, np.float64), (n,)).copy()  # noqa: E731
+    return SpotLights(np.asarray(position, np.float64).reshape(n, 3), np.asarray(axis, np.float64).reshape(n, 3),
+                      np.asarray(up, np.float64).reshape(n, 3),
+                      np.broadcast_to(np.asarray(rgb, np.float32), (n, 3)).copy(), full(tan_h), full(tan_v),
+                      full(tan_up), full(soft), full(range_m), np.broadcast_to(np.asarray(shadows, bool), (n,)).copy())
+
+
+def _beam_axes(yaw_rad: np.ndarray, pitch_down_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) beam axes and up vectors of headlights on vehicles with the given yaw (flat road)."""
+    p = np.radians(pitch_down_deg)
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    axis = np.column_stack([c * np.cos(p), s * np.cos(p), np.full_like(c, -np.sin(p))])
+    up = np.column_stack([c * np.sin(p), s * np.sin(p), np.full_like(c, np.cos(p))])
+    return axis, up
+
+
+def _headlight_spots(position: np.ndarray, axis: np.ndarray, up: np.ndarray, lamps: np.ndarray,
+                     cfg: HeadlightConfig, shadows: bool) -> SpotLights:
+    """One light per vehicle carrying ``lamps`` (n,) lamps' worth of intensity."""
+    rgb = cfg.intensity * np.asarray(cfg.color_rgb)[None, :] * np.asarray(lamps, np.float64)[:, None]
+    return _spots(position, axis, up, rgb, np.tan(np.radians(cfg.half_angle_h_deg)),
+                  np.tan(np.radians(cfg.half_angle_v_deg)), np.tan(np.radians(cfg.half_angle_up_deg)), cfg.soft_edge,
+                  cfg.range_m, shadows)
+
+
+def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT_EGO_SIZE_M) -> SpotLights:
+    """The ego's low beams (one light of two lamps); ``ego_pose`` maps the ego frame (origin at its box centre)
+    to the world. No shadow rays: the camera sits next to the lamps, so it sees almost none of their shadows.
+    """
+    local = HEADLIGHT_UNIT_XYZ * np.asarray(ego_size_m, np.float64) + [HEADLIGHT_AHEAD_M, 0.0, 0.0]
+    fwd = ego_pose.rotation[:, 0]
+    axis, up = _beam_axes(np.array([np.arctan2(fwd[1], fwd[0])]), cfg.pitch_down_deg)
+    return _headlight_spots(ego_pose.apply(local[None]), axis, up, np.array([2.0]), cfg, False)
+
+
+def vehicle_headlights(
+    actors: Actors, cfg: HeadlightConfig, camera_xyz_m: np.ndarray, forward: np.ndarray | None = None
+) -> SpotLights:
+    """Low beams of the ``cfg.max_other_vehicles`` motor vehicles whose beams come nearest the camera: one light
+    per vehicle at the middle of its front face, two lamps' worth (one for a motorcycle).
+
+    With ``forward`` (3,) (the ego's heading), vehicles whose lamps are behind the camera are left out: the
+    ego (not in the scene, so it casts no shadow) would block most of their light.
+    """
+    lit = np.isin(actors.class_codes, [list(ObjectClass).index(c) for c in LIT_CLASSES])
+    if forward is not None and len(actors):
+        yaw_all = actors.boxes.yaw_rad
+        front = actors.boxes.center + 0.5 * actors.boxes.size[:, :1] * np.column_stack(
+            [np.cos(yaw_all), np.sin(yaw_all), np.zeros(len(actors))])
+        lit &= (front - camera_xyz_m) @ np.asarray(forward, np.float64) > 0.0
+    lit = np.flatnonzero(lit)
+    if not len(lit) or cfg.max_other_vehicles == 0:
+        return SpotLights.empty()
+    boxes = actors.boxes
+    yaw = boxes.yaw_rad[lit]
+    fwd = np.column_stack([np.cos(yaw), np.sin(yaw), np.zeros(len(lit))])
+    # Distance from the camera to the middle of the lit region (the beam reaches ~range ahead).
+    mid = boxes.center[lit] + fwd * (0.5 * boxes.size[lit, :1] + 0.25 * cfg.range_m)
+    dist = np.linalg.norm(mid - camera_xyz_m, axis=1) - 0.3 * cfg.range_m
+    order = np.argsort(dist, kind="stable")[: cfg.max_other_vehicles]
+    chosen = lit[order][dist[order] < cfg.range_m + 60.0]
+    if not len(chosen):
+        return SpotLights.empty()
+    lamps = np.array([1.0 if actors.object_class[i] == ObjectClass.MOTORCYCLE else 2.0 for i in chosen])
+    affine = unit_to_world(boxes)[chosen]  # (n, 3, 4)
+    yaw_c = boxes.yaw_rad[chosen]
+    pos = affine[:, :, :3] @ HEADLIGHT_UNIT_XYZ + affine[:, :, 3]
+    pos += np.column_stack([np.cos(yaw_c), np.sin(yaw_c), np.zeros(len(chosen))]) * HEADLIGHT_AHEAD_M
+    axis, up = _beam_axes(yaw_c, cfg.pitch_down_deg)
+    return _headlight_spots(pos, axis, up, lamps, cfg, cfg.shadows)
+
+
+def street_lamp_lights(positions_m: np.ndarray, cfg: StreetLampConfig, camera_xyz_m: np.ndarray) -> SpotLights:
+    """The ``cfg.max_lamps`` lamps nearest the camera within ``cfg.max_distance_m``: downward cones."""
+    positions_m = np.asarray(positions_m, np.float64).reshape(-1, 3)
+    if not len(positions_m) or cfg.max_lamps == 0:
+        return SpotLights.empty()
+    dist = np.linalg.norm(positions_m - camera_xyz_m, axis=1)
+    order = np.argsort(dist, kind="stable")[: cfg.max_lamps]
+    chosen = positions_m[order[dist[order] <= cfg.max_distance_m]]
+    n = len(chosen)
+    tan = np.tan(np.radians(cfg.half_angle_deg))
+    return _spots(chosen, np.tile([0.0, 0.0, -1.0], (n, 1)), np.tile([1.0, 0.0, 0.0], (n, 1)),
+                  cfg.intensity * np.asarray(cfg.color_rgb), tan, tan, tan, cfg.soft_edge, cfg.range_m, cfg.shadows)
+
+
+class PointGrid:
+    """Points bucketed in a 2D (x, y) grid of at most 256 x 256 cells (cell ids radix-sorted once), for range
+    queries by light. ``order`` lists the points cell by cell; a query returns positions in that order."""
+
+    def __init__(self, x: np.ndarray, y: np.ndarray, min_cell_m: float = 2.0) -> None:
+        self.lo = np.array([x.min(), y.min()], np.float64) if len(x) else np.zeros(2)
+        extent = np.array([x.max(), y.max()], np.float64) - self.lo if len(x) else np.zeros(2)
+        self.cell = np.maximum(min_cell_m, extent / 255.999)
+        self.n = np.minimum(np.floor(extent / self.cell).astype(np.int64) + 1, 256)
+        i = np.minimum((x - np.float32(self.lo[0])) * np.float32(1.0 / self.cell[0]), self.n[0] - 1).astype(np.uint16)
+        j = np.minimum((y - np.float32(self.lo[1])) * np.float32(1.0 / self.cell[1]), self.n[1] - 1).astype(np.uint16)
+        cid = i * np.uint16(self.n[1]) + j
+        self.order = np.argsort(cid, kind="stable")  # radix sort on 16-bit keys
+        self.start = np.concatenate([[0], np.cumsum(np.bincount(cid, minlength=int(self.n.prod())))])
+
+    def query_cone(self, lights: SpotLights, k: int) -> np.ndarray:
+        """Positions (in ``order``) of the points in the cells that light ``k`` may reach: cells within its
+        range (horizontally) and, seen from above, inside its horizontal half-angle, each grown by a cell radius
+        (vectorised over cells; the exact per-point test is the caller's)."""
+        ny = int(self.n[1])
+        cells = np.flatnonzero(self.start[1:] > self.start[:-1])  # non-empty cells
+        centre = self.lo + (np.column_stack([cells // ny, cells % ny]) + 0.5) * self.cell
+        grow = 0.5 * float(np.hypot(*self.cell))
+        rel = centre - lights.position_m[k, :2]
+        dist = np.hypot(rel[:, 0], rel[:, 1])
+        axis = lights.axis[k, :2]
+        flat = float(np.hypot(*axis))
+        reach = lights.range_m[k]
+        if flat < 0.2:  # pointing (nearly) straight down or up: a disc under the cone
+            half = np.arctan(max(lights.tan_h[k], lights.tan_v[k]))
+            reach = lights.range_m[k] * min(1.0, np.sin(half) + flat)
+            near = dist <= reach + grow
+        else:
+            cos_angle = (rel @ (axis / flat)) / np.maximum(dist, 1e-9)
+            spread = np.arctan(lights.tan_h[k]) + np.arcsin(np.clip(grow / np.maximum(dist, 1e-9), 0.0, 1.0))
+            near = (dist <= reach + grow) & ((cos_angle >= np.cos(np.minimum(spread, np.pi))) | (dist <= grow))
+        cells = cells[near]
+        if not len(cells):
+            return np.zeros(0, np.int64)
+        lengths = self.start[cells + 1] - self.start[cells]
+        # Positions of all points of the chosen cells, without a Python loop over cells.
+        offsets = np.repeat(self.start[cells] - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+        return np.arange(int(lengths.sum())) + offsets
+
+
+def light_radiance(
+    scene: FrameScene,
+    rays: np.ndarray,
+    hits: Hits,
+    lights: SpotLights,
+    albedo: np.ndarray,
+    specular: np.ndarray,
+    shininess: np.ndarray,
+) -> np.ndarray:
+    """(N, 3) float32 radiance that ``lights`` add to N camera hits: albedo * E + specular highlights.
+
+    Args:
+        rays: (N, 6) float32 [origin | unit direction], world. hits: their first hits.
+        albedo: (N, 3) float32 per-hit albedo; specular, shininess: (N,) float32 per-hit Blinn-Phong terms.
+
+    Everything runs on contiguous float32 columns: a cheap test (range, in front of the light, facing it) on
+    each light's grid candidates, the cone and shading terms on the survivors only.
+    """
+    n = len(rays)
+    out = np.zeros((n, 3), np.float32)
+    hit_idx = np.flatnonzero(hits.hit)
+    if not len(lights) or not len(hit_idx):
+        return out
+    t = hits.t_m[hit_idx]
+    ray = [np.take(rays[:, k], hit_idx) for k in range(6)]
+    px, py = ray[0] + ray[3] * t, ray[1] + ray[4] * t
+    grid = PointGrid(px, py)
+    src_all = hit_idx[grid.order]
+    # Sorted columns: position, normal, view direction (towards the camera).
+    pos = [np.take(c, grid.order) for c in (px, py, ray[2] + ray[5] * t)]
+    nrm = [np.take(hits.normal[:, k], src_all) for k in range(3)]
+    view = [-np.take(ray[3 + k], grid.order) for k in range(3)]
+    diffuse = [np.zeros(n, np.float32) for _ in range(3)]
+    shine = [np.zeros(n, np.float32) for _ in range(3)]
+    for k in range(len(lights)):  # loop over lights; every point in reach is vectorised
+        cand = grid.query_cone(lights, k)
+        if not len(cand):
+            continue
+        lp, ax = lights.position_m[k].astype(np.float32), lights.axis[k].astype(np.float32)
+        v = [lp[c] - np.take(pos[c], cand) for c in range(3)]  # surface -> light, unnormalised
+        d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        axial = -(v[0] * ax[0] + v[1] * ax[1] + v[2] * ax[2])
+        nv = [np.take(nrm[c], cand) for c in range(3)]
+        n_dot_v = nv[0] * v[0] + nv[1] * v[1] + nv[2] * v[2]
+        ok = np.flatnonzero((d2 < np.float32(lights.range_m[k] ** 2)) & (axial > 0) & (n_dot_v > 0))
+        if not len(ok):
+            continue
+        cand, d2, axial, n_dot_v = cand[ok], d2[ok], axial[ok], n_dot_v[ok]
+        v, nv = [c[ok] for c in v], [c[ok] for c in nv]
+        left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
+        a = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / (axial * np.float32(lights.tan_h[k]))
+        b = -(v[0] * up[0] + v[1] * up[1] + v[2] * up[2]) / axial  # > 0 above the axis (v points to the light)
+        b /= np.where(b > 0, np.float32(lights.tan_up[k]), np.float32(lights.tan_v[k]))
+        edge = np.clip((1.0 - np.sqrt(a * a + b * b)) * np.float32(1.0 / lights.soft[k]), 0.0, 1.0)
+        window = np.clip(1.0 - (d2 * np.float32(1.0 / lights.range_m[k] ** 2)) ** 2, 0.0, 1.0) ** 2
+        inv_d = 1.0 / np.sqrt(d2)
+        strength = edge * edge * (3.0 - 2.0 * edge) * window / np.maximum(d2, np.float32(MIN_DISTANCE_M ** 2))
+        # Drop pairs whose light is negligible (below MIN_IRRADIANCE on a white surface, highlights included).
+        bright = np.flatnonzero(strength * np.float32(lights.rgb[k].max()) > MIN_IRRADIANCE)
+        if not len(bright):
+            continue
+        cand, strength, inv_d, n_dot_v = cand[bright], strength[bright], inv_d[bright], n_dot_v[bright]
+        v, nv = [c[bright] for c in v], [c[bright] for c in nv]
+        src = src_all[cand]
+        # Blinn-Phong: half vector between the light and view directions.
+        h = [v[c] * inv_d + np.take(view[c], cand) for c in range(3)]
+        n_dot_h = (nv[0] * h[0] + nv[1] * h[1] + nv[2] * h[2]) / np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]
+                                                                           + np.float32(1e-12))
+        spec = specular[src] * np.clip(n_dot_h, 0.0, 1.0) ** shininess[src]
+        w, s = strength * n_dot_v * inv_d, strength * spec
+        if lights.shadows[k]:
+            start = np.stack([np.take(pos[c], cand) + nv[c] * np.float32(2e-3) for c in range(3)], axis=1)
+            seg = np.stack(v, axis=1) * (1.0 - 0.05 * inv_d)[:, None]  # stop 5 cm short of the lamp
+            # Directions span the segment to the light, so tfar = 1 covers exactly the part that can shadow.
+            lit = ~scene.occluded_rays(np.concatenate([start, seg], axis=1), 1.0)
+            src, w, s = src[lit], w[lit], s[lit]
+        for c in range(3):  # ``src`` is unique within one light, so fancy-index accumulation is exact
+            diffuse[c][src] += w * np.float32(lights.rgb[k, c])
+            shine[c][src] += s * np.float32(lights.rgb[k, c])
+    for c in range(3):
+        out[:, c] = albedo[:, c] * diffuse[c] + shine[c]
+    return out

@@ -1,0 +1,201 @@
+"""Image post effects on linear radiance (after exposure, before tone mapping), with OpenCV, seeded.
+
+Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
+lens), lens effects (bloom, flare ghosts, vignetting), then the sensor's noise. Images are (H, W, 3) float32
+linear RGB; every random draw comes from the caller's generator, in a fixed order, so the same generator
+state gives the same image. Effects that need randomness are skipped when no generator is given.
+
+- Vignetting: gain(r) = 1 - v * (r / r_corner)^2 with r the distance from the image centre; the corners
+  keep exactly 1 - v.
+- Noise (shot + read, at gain g = exposure): sigma^2 = g * shot * max(s, 0) + (g * read_std)^2 per channel,
+  plus grain: luminance noise blurred by a Gaussian of ``grain_size_px`` and rescaled to std g * grain_std.
+- Motion blur: per-pixel image motion of the static world during the shutter time (from depth and the ego's
+  velocity), averaged over samples along it with ``cv2.remap``.
+- Bloom: light above a threshold, blurred (at quarter resolution) and added back. Lens flare: ghosts of the
+  brightest sources mirrored through the image centre.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
+
+MOTION_BLUR_SAMPLES = 16
+FLARE_SOURCES = 4
+FLARE_GHOSTS = ((0.55, 0.05, (0.6, 0.8, 1.0)), (1.3, 0.03, (1.0, 0.7, 0.4)), (1.8, 0.08, (0.5, 1.0, 0.6)),
+                (2.3, 0.04, (0.9, 0.6, 1.0)))  # (position along source -> mirror, radius / image diagonal, tint)
+
+
+@functools.lru_cache(maxsize=8)
+def vignette_gain(height: int, width: int, strength: float) -> np.ndarray:
+    """(H, W, 1) float32 gain 1 - strength * (r / r_corner)^2 (pixel centres; exactly 1 - strength at corners)."""
+    y = (np.arange(height, dtype=np.float64) + 0.5 - 0.5 * height) / (0.5 * height)
+    x = (np.arange(width, dtype=np.float64) + 0.5 - 0.5 * width) / (0.5 * width)
+    aspect = width / height
+    r2 = ((x[None, :] * aspect) ** 2 + y[:, None] ** 2) / (aspect ** 2 + 1.0)
+    return (1.0 - strength * r2).astype(np.float32)[:, :, None]
+
+
+def vignette(image: np.ndarray, strength: float) -> np.ndarray:
+    """Darken towards the corners by ``strength`` (fraction lost at a corner)."""
+    if strength == 0:
+        return image
+    return image * vignette_gain(image.shape[0], image.shape[1], float(strength))
+
+
+def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np.random.Generator) -> np.ndarray:
+    """Shot + read noise and grain at exposure gain ``gain`` (see the module docstring)."""
+    sigma = cv2.sqrt(np.maximum(image, 0.0) * np.float32(gain * cfg.shot) + np.float32((gain * cfg.read_std) ** 2))
+    out = image + sigma * rng.standard_normal(image.shape, dtype=np.float32)
+    if cfg.grain_std > 0:
+        grain = cv2.GaussianBlur(rng.standard_normal(image.shape[:2], dtype=np.float32), (0, 0), cfg.grain_size_px)
+        grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
+        out += grain[:, :, None]
+    return out
+
+
+def motion_flow(points_cam: np.ndarray, shift_cam: np.ndarray, fx: float, fy: float) -> np.ndarray:
+    """(N, 2) float32 image motion (pixels, pinhole) of (N, 3) optical-frame points when the camera moves by
+    ``shift_cam`` (3,) metres (optical frame); zero for points at infinity or that cross the near plane."""
+    p = np.asarray(points_cam, np.float64)
+    q = p - np.asarray(shift_cam, np.float64)
+    ok = np.isfinite(p).all(axis=1) & (p[:, 2] > 0.1) & (q[:, 2] > 0.1)
+    flow = np.zeros((len(p), 2), np.float32)
+    pz, qz = p[ok, 2], q[ok, 2]
+    flow[ok, 0] = fx * (q[ok, 0] / qz - p[ok, 0] / pz)
+    flow[ok, 1] = fy * (q[ok, 1] / qz - p[ok, 1] / pz)
+    return flow
+
+
+def motion_blur(image: np.ndarray, flow: np.ndarray, samples: int | None = None) -> np.ndarray:
+    """Average ``image`` (H, W, 3) over ``samples`` positions along each pixel's (H, W, 2) motion during the shutter
+    (centred), gathering with ``cv2.remap``; by default one sample per ~2 pixels of the largest motion
+    (3 to MOTION_BLUR_SAMPLES)."""
+    h, w = image.shape[:2]
+    if not np.any(flow):
+        return image
+    if samples is None:
+        longest = float(np.sqrt((flow * flow).sum(axis=2).max()))
+        samples = int(np.clip(np.ceil(longest / 2.0), 3, MOTION_BLUR_SAMPLES))
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    out = np.zeros_like(image)
+    for s in np.linspace(-0.5, 0.5, samples, dtype=np.float32):  # loop over samples; pixels vectorised
+        out += cv2.remap(image, gx + s * flow[:, :, 0], gy + s * flow[:, :, 1], cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE)
+    return out / np.float32(samples)
+
+
+def bloom(image: np.ndarray, threshold: float, strength: float, sigma_px: float) -> np.ndarray:
+    """Add the blurred excess above ``threshold`` (glow of lamps, headlights, the sun's reflections)."""
+    if strength == 0:
+        return image
+    h, w = image.shape[:2]
+    excess = np.maximum(image - np.float32(threshold), 0.0)
+    small = cv2.resize(excess, (max(w // 4, 1), max(h // 4, 1)), interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), max(sigma_px / 4.0, 0.5)) + cv2.GaussianBlur(
+        small, (0, 0), max(sigma_px, 0.5)) * np.float32(0.5)
+    return image + cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(strength)
+
+
+def lens_flare(image: np.ndarray, strength: float, threshold: float) -> np.ndarray:
+    """Ghosts of the brightest sources (above ``threshold``) along the line through the image centre."""
+    if strength == 0:
+        return image
+    h, w = image.shape[:2]
+    sw, sh = max(w // 8, 1), max(h // 8, 1)
+    small = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA)
+    lum = small.max(axis=2)
+    mask = (lum > threshold).astype(np.uint8)
+    count, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+    if count <= 1:
+        return image
+    power = stats[1:, cv2.CC_STAT_AREA] * 1.0
+    top = np.argsort(-power, kind="stable")[:FLARE_SOURCES]
+    layer = np.zeros((sh, sw, 3), np.float32)
+    centre = np.array([0.5 * sw, 0.5 * sh])
+    diag = np.hypot(sw, sh)
+    for k in top:  # a few sources x a few ghosts
+        src = centroids[1 + k]
+        amp = min(float(power[k]) / (sw * sh) * 40.0, 1.0)
+        for pos, radius, tint in FLARE_GHOSTS:
+            c = src + (centre - src) * pos
+            cv2.circle(layer, (round(c[0]), round(c[1])), max(round(radius * diag), 1),
+                       tuple(float(t * amp) for t in tint), -1, cv2.LINE_AA)
+    layer = cv2.GaussianBlur(layer, (0, 0), 1.5)
+    return image + cv2.resize(layer, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(strength)
+
+
+def rain_streaks(image: np.ndarray, cfg: RainConfig, sky_level: float, rng: np.random.Generator) -> np.ndarray:
+    """Add seeded rain streaks: anti-aliased lines, motion-blurred along their direction, as light scattered
+    towards the camera (``cfg.streak_brightness`` x ``sky_level``, the mean radiance of the sky)."""
+    h, w = image.shape[:2]
+    n = round(cfg.streaks_per_megapixel * cfg.intensity * h * w / 1e6)
+    if n == 0 or cfg.streak_brightness == 0:
+        return image
+    x, y = rng.uniform(0, w, n), rng.uniform(-0.1 * h, h, n)
+    length = rng.uniform(*cfg.streak_length_px, n)
+    angle = np.radians(cfg.streak_angle_deg + rng.normal(0.0, 2.0, n))
+    level = rng.integers(0, 3, n)  # three brightness levels, one draw call each
+    tip = np.column_stack([x + length * np.sin(angle), y + length * np.cos(angle)])
+    ends = np.stack([np.column_stack([x, y]), tip], axis=1)
+    layer = np.zeros((h, w), np.float32)
+    for lv in range(3):
+        pts = [np.round(e * 16).astype(np.int32) for e in ends[level == lv]]  # 4 fractional bits
+        cv2.polylines(layer, pts, False, (0.35 + 0.325 * lv,), 1, cv2.LINE_AA, 4)
+    k = 9
+    kernel = np.zeros((k, k), np.float32)
+    a = np.radians(cfg.streak_angle_deg)
+    t = np.linspace(-(k // 2), k // 2, 4 * k)
+    kernel[np.round(k // 2 + t * np.cos(a)).astype(int), np.round(k // 2 + t * np.sin(a)).astype(int)] = 1.0
+    layer = cv2.filter2D(layer, -1, kernel / kernel.sum())
+    scale = np.float32(cfg.streak_brightness * cfg.intensity * sky_level * 3.0)
+    return image + (layer * scale)[:, :, None]
+
+
+def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """Blurry raindrops on the lens: round soft regions showing a strongly blurred image."""
+    if count == 0:
+        return image
+    h, w = image.shape[:2]
+    centres = np.column_stack([rng.uniform(0, w, count), rng.uniform(0, h, count)]).round().astype(int)
+    radii = rng.uniform(0.01, 0.035, count) * w
+    mask = np.zeros((h, w), np.float32)
+    for (cx, cy), r in zip(centres, radii, strict=True):  # one draw per drop (tens), pixels vectorised
+        cv2.circle(mask, (int(cx), int(cy)), int(r), (1.0,), -1, cv2.LINE_AA)
+    mask = cv2.GaussianBlur(mask, (0, 0), 2.0)[:, :, None]
+    blurred = cv2.GaussianBlur(image, (0, 0), 0.02 * w) * np.float32(1.1)
+    return image * (1.0 - mask) + blurred * mask
+
+
+def apply_post(
+    image: np.ndarray,
+    lens: LensConfig,
+    noise: SensorNoiseConfig,
+    rain: RainConfig | None,
+    rng: np.random.Generator | None,
+    *,
+    flow: np.ndarray | None = None,
+    sky_level: float = 0.0,
+) -> np.ndarray:
+    """All post effects of a condition on an (H, W, 3) float32 linear image (see the module docstring).
+
+    ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``sky_level`` the
+    mean sky radiance after exposure (sets the brightness of rain streaks).
+    """
+    out = np.asarray(image, np.float32)
+    if flow is not None:
+        out = motion_blur(out, flow)
+    if rain is not None and rng is not None:  # streaks are drawn already blurred by their own fall
+        out = rain_streaks(out, rain, sky_level, rng)
+    out = bloom(out, lens.bloom_threshold, lens.bloom_strength, lens.bloom_sigma_px)
+    out = lens_flare(out, lens.lens_flare, 2.0 * lens.bloom_threshold)
+    if rain is not None and rng is not None:
+        out = rain_drops(out, rain.drops, rng)
+    out = vignette(out, lens.vignetting)
+    if rng is not None:
+        out = sensor_noise(out, noise, lens.exposure, rng)
+    return out

@@ -1,0 +1,132 @@
+"""Night: darker than morning, headlight cones and street-lamp pools in closed form, shadows, bounded lights."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pipeline.core.classes import SemanticClass
+from pipeline.core.geometry import Transform
+from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.lights import ego_headlights, street_lamp_lights, vehicle_headlights
+from pipeline.sensors.render import render_camera
+from pipeline.sensors.shading import shade
+from pipeline.world.actors import Actors
+from pipeline.world.materials import material_arrays, material_index
+from pipeline.world.mesh import Mesh
+from pipeline.world.scene import FrameScene, StaticScene
+
+EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))  # a car's box centre is 0.75 m above the road
+MATTE = "concrete"  # no specular term: closed forms hold for the diffuse light alone
+ALBEDO = material_arrays()["albedo"][material_index(MATTE)]
+
+
+def ground(half_m: float = 300.0, material: str = MATTE) -> Mesh:
+    h = half_m
+    v = np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+    return Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]), material_index(material), SemanticClass.ROAD)
+
+
+def night_without_others():
+    night = get_condition("night")
+    return dataclasses.replace(night, headlights=night.headlights.model_copy(update={"others": False}))
+
+
+def down_ray(point: np.ndarray) -> np.ndarray:
+    """A ray from 1 m above ``point`` straight down onto it."""
+    return np.array([[point[0], point[1], point[2] + 1.0, 0.0, 0.0, -1.0]], np.float32)
+
+
+def test_night_is_darker_than_morning(actors_factory, wall):
+    actors = actors_factory([[15.0, 1.0, 0.75], [30.0, -3.0, 0.75]], [[4.5, 1.8, 1.5]] * 2, brake=[True, False])
+    scene = FrameScene(StaticScene([wall(60.0), ground()]), actors)
+    cam = Camera(CameraConfig(width_px=160, height_px=120))
+    morning = render_camera(scene, cam, EGO, get_condition("morning")).rgb.mean()
+    night = render_camera(scene, cam, EGO, get_condition("night")).rgb.mean()
+    assert night < 0.5 * morning
+
+
+def test_headlight_on_axis_irradiance_is_closed_form():
+    # The ego's low beam (one light of two lamps) hits the road where its axis, pitched down by p, meets it:
+    # there the cone factor is 1 and E = 2 I rgb sin(p) window(s) / s^2, s the distance along the axis.
+    night = night_without_others()
+    cfg = night.headlights
+    light = ego_headlights(EGO, cfg)
+    assert len(light) == 1
+    p = np.radians(cfg.pitch_down_deg)
+    s = light.position_m[0, 2] / np.sin(p)
+    on_axis = light.position_m[0] + light.axis[0] * s
+    assert abs(on_axis[2]) < 1e-9
+    scene = FrameScene(StaticScene([ground()]), Actors.empty())
+    rays = down_ray(on_axis)
+    out = shade(scene, rays, scene.cast_rays(rays), night.lighting, light)
+    window = (1.0 - (s / cfg.range_m) ** 4) ** 2
+    irradiance = 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * np.sin(p) * window / s**2
+    ambient = np.asarray(night.lighting.ambient_rgb)
+    expected = ALBEDO * (ambient + irradiance) * night.lighting.exposure
+    np.testing.assert_allclose(out[0], expected, rtol=1e-4)
+    # Beyond the horizontal half-angle: no headlight at all, only the ambient light.
+    angle = np.radians(cfg.half_angle_h_deg + 5.0)
+    outside = np.array([s * np.cos(angle), s * np.sin(angle), 0.0])
+    rays = down_ray(outside)
+    out = shade(scene, rays, scene.cast_rays(rays), night.lighting, light)
+    np.testing.assert_allclose(out[0], ALBEDO * ambient * night.lighting.exposure, rtol=1e-5)
+
+
+def test_road_in_the_ego_headlight_cone_is_brighter_than_outside():
+    night = night_without_others()
+    cam = Camera(CameraConfig(width_px=320, height_px=240, hfov_deg=120.0,
+                              mount=Transform.from_xyz_rpy((0.6, 0.0, 0.65))))
+    scene = FrameScene(StaticScene([ground(material="asphalt")]), Actors.empty())
+    frame = render_camera(scene, cam, EGO, night)
+    world_to_cam = cam.camera_to_world(EGO).inverse()
+    uv, _ = cam.project(world_to_cam.apply(np.array([[12.0, 0.0, 0.0], [8.0, 9.0, 0.0], [8.0, -9.0, 0.0]])))
+    grey = frame.rgb.astype(float).mean(axis=2)
+    inside, left, right = (grey[int(v), int(u)] for u, v in uv)
+    assert inside > 3.0 * max(left, right)
+
+
+def test_street_lamp_pool_and_its_shadow(actors_factory):
+    night = get_condition("night")
+    cfg = night.street_lamps
+    lamp = np.array([[10.0, 0.0, 7.0]])
+    lights = street_lamp_lights(lamp, cfg, np.zeros(3))
+    below = np.array([10.0, 0.0, 0.0])
+    rays = down_ray(below)
+    ambient = np.asarray(night.lighting.ambient_rgb)
+    window = (1.0 - (7.0 / cfg.range_m) ** 4) ** 2
+    lit = ALBEDO * (ambient + cfg.intensity * np.asarray(cfg.color_rgb) * window / 49.0) * night.lighting.exposure
+    empty = FrameScene(StaticScene([ground()]), Actors.empty())
+    np.testing.assert_allclose(shade(empty, rays, empty.cast_rays(rays), night.lighting, lights)[0], lit, rtol=1e-4)
+    # A box between the lamp and the road (but not over the ray's start) shades the pool.
+    blocker = FrameScene(StaticScene([ground()]), actors_factory([[10.0, 0.0, 4.0]], [[1.0, 1.0, 0.2]]))
+    rays_below = np.array([[10.3, 0.3, 0.5, 0.0, 0.0, -1.0]], np.float32)  # starts under the box
+    hits = blocker.cast_rays(rays_below)
+    assert hits.instance_id[0] == 0
+    np.testing.assert_allclose(shade(blocker, rays_below, hits, night.lighting, lights)[0],
+                               ALBEDO * ambient * night.lighting.exposure, rtol=1e-4)
+
+
+def test_oncoming_headlights_light_the_road_in_front_of_them(actors_factory):
+    night = get_condition("night")
+    oncoming = actors_factory([[30.0, 0.0, 0.75]], [[4.5, 1.8, 1.5]], yaws=np.array([np.pi]))
+    lights = vehicle_headlights(oncoming, night.headlights, np.array([0.0, 0.0, 1.4]), np.array([1.0, 0.0, 0.0]))
+    assert len(lights) == 1 and lights.axis[0, 0] < -0.99
+    scene = FrameScene(StaticScene([ground()]), oncoming)
+    rays = np.concatenate([down_ray(np.array([15.0, 0.0, 0.0])), down_ray(np.array([45.0, 0.0, 0.0]))])
+    out = shade(scene, rays, scene.cast_rays(rays), night.lighting, lights)
+    assert out[0, 0] > 2.0 * out[1, 0]  # in front of the car versus behind it (ambient only)
+    behind = vehicle_headlights(oncoming, night.headlights, np.array([40.0, 0.0, 1.4]), np.array([1.0, 0.0, 0.0]))
+    assert len(behind) == 0  # lamps behind the camera are left out
+
+
+def test_lights_per_frame_are_bounded(actors_factory):
+    night = get_condition("night")
+    n = 60
+    actors = actors_factory(np.column_stack([np.arange(n) * 6.0 + 10.0, np.zeros(n), np.full(n, 0.75)]),
+                            [[4.5, 1.8, 1.5]] * n, yaws=np.full(n, np.pi))
+    lamps = np.column_stack([np.arange(200) * 5.0, np.full(200, 6.0), np.full(200, 7.0)])
+    lights = night.frame_lights(actors, EGO, np.array([0.6, 0.0, 1.4]), lamps)
+    assert len(lights) == 1 + night.headlights.max_other_vehicles + night.street_lamps.max_lamps

@@ -1,0 +1,84 @@
+"""Post effects: vignetting factor, shot + read noise statistics, seeded rain, motion blur, bloom."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
+from pipeline.sensors.post import apply_post, bloom, motion_blur, motion_flow, rain_streaks, sensor_noise, vignette
+
+H, W = 600, 800
+
+
+def test_vignetting_darkens_corners_by_the_configured_factor():
+    image = np.ones((H, W, 3), np.float32)
+    out = vignette(image, 0.3)
+    for row, col in ((0, 0), (0, W - 1), (H - 1, 0), (H - 1, W - 1)):
+        # The corner pixel's centre lies half a pixel inside the corner: within 0.5 % of 1 - 0.3.
+        assert out[row, col, 0] == pytest.approx(0.7, rel=5e-3)
+    assert out[H // 2, W // 2, 0] == pytest.approx(1.0, abs=1e-5)
+    assert np.all(np.diff(out[H // 2, W // 2:, 0]) <= 0)  # monotone towards the edge
+    lens = LensConfig(vignetting=0.3)
+    post = apply_post(image, lens, SensorNoiseConfig(), None, None)
+    np.testing.assert_allclose(post, out)
+
+
+def test_noise_follows_the_shot_plus_read_model():
+    cfg = SensorNoiseConfig(shot=0.001, read_std=0.004)
+    for gain, level in ((1.0, 0.2), (3.0, 0.05)):
+        image = np.full((400, 400, 3), level, np.float32)
+        noisy = sensor_noise(image, cfg, gain, np.random.default_rng(1))
+        expected = np.sqrt(gain * cfg.shot * level + (gain * cfg.read_std) ** 2)
+        assert noisy.std() == pytest.approx(expected, rel=0.02)
+        assert noisy.mean() == pytest.approx(level, abs=3 * expected / 400)
+
+
+def test_noise_grows_at_night():
+    from pipeline.sensors.conditions import get_condition
+
+    dark = np.full((200, 200, 3), 0.02, np.float32)
+    std = {}
+    for name in ("noon", "night"):
+        cond = get_condition(name)
+        std[name] = (sensor_noise(dark * cond.lens.exposure, cond.noise, cond.lens.exposure,
+                                  np.random.default_rng(0)) - dark * cond.lens.exposure).std()
+    assert std["night"] > 2.0 * std["noon"]
+
+
+def test_same_seed_same_post_and_rain_only_adds_light():
+    rng_image = np.random.default_rng(9).random((120, 160, 3)).astype(np.float32) * 0.5
+    lens = LensConfig(vignetting=0.2, bloom_strength=0.3, lens_flare=0.1)
+    rain = RainConfig(intensity=1.0, drops=3)
+    a = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(3))
+    b = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(3))
+    c = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(4))
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    streaks = rain_streaks(rng_image, rain, 0.4, np.random.default_rng(0))
+    added = streaks - rng_image
+    assert added.min() >= 0.0 and (added > 1e-3).mean() > 0.01  # light scattered by drops, on >1 % of pixels
+
+
+def test_motion_flow_closed_form_and_blur():
+    # Moving 1 m forward: a point 10 m ahead on the axis stays put, one 1 m to the right moves outwards by
+    # fx * (1/9 - 1/10) pixels.
+    flow = motion_flow(np.array([[0.0, 0.0, 10.0], [1.0, 0.0, 10.0], [np.inf, np.inf, np.inf]]),
+                       np.array([0.0, 0.0, 1.0]), 400.0, 400.0)
+    np.testing.assert_allclose(flow, [[0, 0], [400.0 * (1 / 9 - 1 / 10), 0], [0, 0]], atol=1e-4)
+    edge = np.zeros((40, 40, 3), np.float32)
+    edge[:, 20:] = 1.0
+    assert motion_blur(edge, np.zeros((40, 40, 2), np.float32)) is edge
+    blurred = motion_blur(edge, np.tile(np.array([8.0, 0.0], np.float32), (40, 40, 1)))
+    row = blurred[20, :, 0]
+    assert row[10] == 0.0 and row[30] == 1.0 and 0.2 < row[19] < 0.8 and 0.2 < row[20] < 0.8
+    np.testing.assert_allclose(blurred.mean(), edge.mean(), atol=0.02)
+
+
+def test_bloom_adds_light_only_around_bright_sources():
+    image = np.full((120, 160, 3), 0.1, np.float32)
+    image[60, 80] = 50.0
+    out = bloom(image, threshold=1.0, strength=0.5, sigma_px=6.0)
+    assert out[60, 86, 0] > 0.1 + 1e-3  # glow a few pixels away
+    np.testing.assert_allclose(out[5, 5], image[5, 5], atol=1e-4)  # far away: (nearly) untouched
+    np.testing.assert_array_equal(bloom(image, 1.0, 0.0, 6.0), image)
