@@ -29,3 +29,14 @@ def small_highway_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("sim") / "highway-7"
     simulate(config, 7, out, progress=False)
     return out
+
+
+@pytest.fixture(scope="session")
+def dense_highway_run(tmp_path_factory) -> Path:
+    """A highway run with traffic around the ego: 200 vehicles, 90 s warm-up, 1 s recorded."""
+    from pipeline.stages.simulate import resolve_scenario, simulate
+
+    config, _ = resolve_scenario("highway", vehicles=200, duration_s=1.0, warmup_s=90.0)
+    out = tmp_path_factory.mktemp("sim") / "highway-3"
+    simulate(config, 3, out, progress=False)
+    return out

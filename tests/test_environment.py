@@ -24,7 +24,7 @@ libsumo.close()
 def test_libsumo_and_pyarrow_work_quietly_in_one_process(small_highway_run):
     proc = subprocess.run([sys.executable, "-c", _BOTH, str(small_highway_run / "network.net.xml")],
                           capture_output=True, text=True, cwd=REPO, check=False)
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}"
     assert "time 1.0" in proc.stdout  # default step length 1 s
     # libsumo prints a warning when pyarrow differs from the libarrow it was built against.
     assert "might be incompatible" not in proc.stdout + proc.stderr

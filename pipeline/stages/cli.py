@@ -14,7 +14,10 @@ import sys
 
 STAGE_MODULES: dict[str, str] = {
     "simulate": "pipeline.stages.simulate",
+    "render": "pipeline.stages.render",
+    "preview": "pipeline.stages.preview",
     "evaluate": "pipeline.stages.evaluate",
+    "export": "pipeline.stages.export",
 }
 
 

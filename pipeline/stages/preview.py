@@ -1,0 +1,111 @@
+"""``roadsynth preview``: a contact sheet of a record's frames for people to look at.
+
+Each row shows one frame: the first camera's image with tight 2D boxes (solid, class colour) and amodal
+boxes clipped to the image (thin grey), labelled with class, track id and occlusion; and a bird's-eye
+view of the first LiDAR's sweep (points coloured by intensity, object points by class) with the 3D
+boxes of the LiDAR's labels and the camera's field of view.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pipeline.core.geometry import Boxes3D
+from pipeline.core.record import DatasetRecord
+
+log = logging.getLogger(__name__)
+
+HELP = "draw a contact sheet of a dataset record: boxes on images and a bird's-eye LiDAR view"
+CLASS_BGR = {"car": (60, 200, 60), "van": (200, 200, 60), "truck": (40, 140, 255), "bus": (255, 120, 40),
+             "motorcycle": (200, 60, 200), "bicycle": (255, 60, 160), "pedestrian": (60, 60, 255)}
+BEV_RANGE_M, BEV_PX = 60.0, 600
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--dataset", type=Path, required=True, help="a record folder from `roadsynth render`")
+    parser.add_argument("--out", type=Path, required=True, help="PNG to write")
+    parser.add_argument("--frames", type=int, default=4, help="frames shown, evenly spaced (default 4)")
+    parser.add_argument("--min-visible-px", type=int, default=20, help="hide boxes with fewer visible pixels")
+
+
+def _camera_panel(record: DatasetRecord, camera: str, frame: int, labels, min_px: int) -> np.ndarray:
+    img = np.ascontiguousarray(record.rgb(camera, frame)[:, :, ::-1])
+    rows = labels[(labels["frame"] == frame) & (labels["sensor"] == camera) & labels["visible"]
+                  & (labels["visible_px"] >= min_px)]
+    for r in rows.itertuples(index=False):
+        colour = CLASS_BGR.get(r.cls, (255, 255, 255))
+        a = [round(v) for v in (r.amodal_clip_x1, r.amodal_clip_y1, r.amodal_clip_x2, r.amodal_clip_y2)]
+        cv2.rectangle(img, (a[0], a[1]), (a[2] - 1, a[3] - 1), (170, 170, 170), 1, cv2.LINE_AA)
+        t = [round(v) for v in (r.x1, r.y1, r.x2, r.y2)]
+        cv2.rectangle(img, (t[0], t[1]), (t[2] - 1, t[3] - 1), colour, 2, cv2.LINE_AA)
+        text = f"{r.cls} #{r.track_id} occ {r.occlusion:.2f}"
+        cv2.putText(img, text, (t[0], max(t[1] - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(img, text, (t[0], max(t[1] - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1, cv2.LINE_AA)
+    return img
+
+
+def _to_bev(xy: np.ndarray) -> np.ndarray:
+    """LiDAR x (forward) up, y (left) to the left; ego at the centre."""
+    scale = BEV_PX / (2 * BEV_RANGE_M)
+    return np.column_stack([BEV_PX / 2 - xy[:, 1] * scale, BEV_PX / 2 - xy[:, 0] * scale])
+
+
+def _bev_panel(record: DatasetRecord, lidar: str, frame: int, labels, height: int) -> np.ndarray:
+    img = np.full((BEV_PX, BEV_PX, 3), 18, np.uint8)
+    pts = record.points(lidar, frame)
+    uv = _to_bev(pts[["x_m", "y_m"]].to_numpy()).astype(np.int32)
+    inside = (uv >= 0).all(1) & (uv < BEV_PX).all(1)
+    level = np.clip(60 + 400 * pts["intensity"].to_numpy(), 60, 255).astype(np.uint8)
+    colours = np.repeat(level[:, None], 3, axis=1)
+    colours[pts["instance_id"].to_numpy() > 0] = (0, 220, 255)
+    img[uv[inside, 1], uv[inside, 0]] = colours[inside]
+    rows = labels[(labels["frame"] == frame) & (labels["sensor"] == lidar)]
+    if len(rows):
+        boxes = Boxes3D(rows[["sensor_x_m", "sensor_y_m", "sensor_z_m"]].to_numpy(),
+                        rows[["length_m", "width_m", "height_m"]].to_numpy(), rows["sensor_yaw_rad"].to_numpy())
+        for corners, cls in zip(boxes.corners()[:, :4, :2], rows["cls"], strict=True):
+            poly = _to_bev(corners).astype(np.int32)
+            cv2.polylines(img, [poly], True, CLASS_BGR.get(cls, (255, 255, 255)), 1, cv2.LINE_AA)
+    cv2.circle(img, (BEV_PX // 2, BEV_PX // 2), 3, (255, 255, 255), -1)
+    cv2.putText(img, f"{lidar}: {len(pts)} points, {BEV_RANGE_M:.0f} m", (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                (220, 220, 220), 1, cv2.LINE_AA)
+    return cv2.resize(img, (height, height), interpolation=cv2.INTER_NEAREST)
+
+
+def contact_sheet(record: DatasetRecord, frames: int = 4, min_visible_px: int = 20) -> np.ndarray:
+    """(H, W, 3) uint8 BGR sheet of ``frames`` evenly spaced frames."""
+    all_frames = record.frames["frame"].to_numpy()
+    if not len(all_frames):
+        raise ValueError(f"{record.root}: the record has no frames")
+    chosen = all_frames[np.unique(np.round(np.linspace(0, len(all_frames) - 1, min(frames, len(all_frames)))))
+                        .astype(int)]
+    labels = record.labels
+    info = record.info
+    rows = []
+    for frame in chosen:
+        panels = []
+        if info.cameras:
+            panels.append(_camera_panel(record, info.cameras[0].name, int(frame), labels, min_visible_px))
+        height = panels[0].shape[0] if panels else BEV_PX
+        if info.lidars:
+            panels.append(_bev_panel(record, info.lidars[0].name, int(frame), labels, height))
+        row = np.concatenate(panels, axis=1)
+        title = f"{info.scenario} seed {info.seed} | {info.condition} | frame {frame}"
+        cv2.putText(row, title, (8, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(row, title, (8, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+        rows.append(row)
+    return np.concatenate(rows, axis=0)
+
+
+def main(args: argparse.Namespace) -> int:
+    sheet = contact_sheet(DatasetRecord(args.dataset), args.frames, args.min_visible_px)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(args.out), sheet):
+        raise OSError(f"{args.out}: could not write the contact sheet")
+    log.info("wrote %s (%dx%d)", args.out, sheet.shape[1], sheet.shape[0])
+    return 0

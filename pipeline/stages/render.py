@@ -1,0 +1,174 @@
+"""``roadsynth render``: one simulated run under one condition -> one canonical dataset record.
+
+Frames are split into shards rendered by a local process pool. Finished shards live in a hidden work
+folder next to OUT (``.OUT.partial``) keyed by the hash of everything that determines the output, so
+an interrupted render resumes with the shards already done; OUT itself appears only when the whole
+record is complete (renamed into place). Layout of the record: pipeline/core/record.py and docs/dataset.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import hashlib
+import json
+import logging
+import multiprocessing
+import os
+import pickle
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
+
+from pipeline.core.config import ConditionConfig, RigConfig, load_config
+from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
+from pipeline.core.tables import read_parquet, write_parquet
+from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
+from pipeline.stages.render_frames import ShardJob, render_shard
+from pipeline.stages.rig import build_sensors, camera_info, lidar_info
+
+log = logging.getLogger(__name__)
+
+HELP = "render a simulated run's camera and LiDAR under one condition, with exact ground truth"
+SIM_FILES = ("trajectories.parquet", "tls_states.parquet", "meta.json", "roads/lanes.parquet")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sim", type=Path, required=True, help="a `roadsynth simulate` output folder")
+    parser.add_argument("--condition", required=True, help="condition NAME (configs/conditions/) or YAML PATH")
+    parser.add_argument("--rig", default="default", help="rig NAME (configs/rigs/) or YAML PATH")
+    parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
+    parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run (default: all)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
+    parser.add_argument("--shard-size", type=int, default=4, help="frames per shard (the unit of resumption)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def select_frames(available: np.ndarray, count: int | None) -> list[int]:
+    """``count`` frames evenly spaced over the recorded ones (all of them when None)."""
+    available = np.sort(np.unique(available))
+    if count is None or count >= len(available):
+        return available.tolist()
+    if count < 1:
+        raise ValueError(f"--frames must be >= 1, got {count}")
+    return available[np.round(np.linspace(0, len(available) - 1, count)).astype(int)].tolist()
+
+
+def _check_sim(sim_dir: Path) -> dict:
+    for name in SIM_FILES:
+        if not (sim_dir / name).is_file():
+            raise FileNotFoundError(f"{sim_dir}: not a simulate output ({name} is missing); "
+                                    "make one with `roadsynth simulate`")
+    return json.loads((sim_dir / "meta.json").read_text())
+
+
+def _job_key(sim_meta: dict, sim_dir: Path, rig: RigConfig, condition: ConditionConfig, frames: list[int]) -> str:
+    digest = hashlib.sha256((sim_dir / "trajectories.parquet").read_bytes()).hexdigest()
+    return config_hash({"sim": sim_meta["config_hash"], "seed": sim_meta["seed"], "trajectories": digest,
+                        "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),
+                        "frames": frames, "schema": SCHEMA_VERSION, "roadsynth": software_versions()["roadsynth"]})
+
+
+def _prepare_work(work: Path, key: str) -> None:
+    manifest = work / "manifest.json"
+    if work.exists() and (not manifest.is_file() or json.loads(manifest.read_text()).get("key") != key):
+        log.info("discarding partial render in %s (made with other inputs)", work)
+        shutil.rmtree(work)
+    if not work.exists():
+        (work / "record").mkdir(parents=True)
+        (work / "shards").mkdir()
+        write_json(manifest, {"key": key})
+
+
+def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
+    if path.is_file():
+        return
+    from pipeline.world.static import build_static_world
+
+    world = build_static_world(sim_dir / "roads", seed=seed)
+    tmp = path.with_suffix(".tmp")
+    with tmp.open("wb") as fh:
+        pickle.dump(world, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    tmp.rename(path)
+
+
+def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
+           workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
+    """Render the record; returns a summary (frames, labels, shards resumed)."""
+    sim_meta = _check_sim(sim_dir)
+    seed = int(sim_meta["seed"])
+    selection = select_frames(read_parquet(sim_dir / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
+                              frames)
+    key = _job_key(sim_meta, sim_dir, rig, condition, selection)
+    work = out.with_name(f".{out.name}.partial")
+    _prepare_work(work, key)
+    _static_world(sim_dir, seed, work / "static.pkl")
+    shards = [tuple(selection[i: i + shard_size]) for i in range(0, len(selection), max(shard_size, 1))]
+    jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
+                     threads=1 if workers > 1 else 0)
+            for i, s in enumerate(shards) if not (work / "shards" / f"done-{i:05d}").is_file()]
+    resumed = len(shards) - len(jobs)
+    if resumed:
+        log.info("resuming: %d of %d shards already rendered", resumed, len(shards))
+    with tqdm(total=len(selection), unit="frame", desc=f"render {condition.name}", disable=not progress) as bar:
+        bar.update(len(selection) - sum(len(j.frames) for j in jobs))
+        _run(jobs, workers, bar)
+    summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, len(shards))
+    summary["shards_resumed"] = resumed
+    return summary
+
+
+def _run(jobs: list[ShardJob], workers: int, bar: tqdm) -> None:
+    if workers <= 1 or len(jobs) <= 1:
+        for job in jobs:
+            bar.update(render_shard(job))
+        return
+    # spawn, not fork: Embree's thread pool does not survive a fork.
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
+        for future in cf.as_completed([pool.submit(render_shard, job) for job in jobs]):
+            bar.update(future.result())
+
+
+def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConfig, condition: ConditionConfig,
+              seed: int, num_shards: int) -> dict[str, object]:
+    record = work / "record"
+    shards = work / "shards"
+    frames = pd.concat([read_parquet(shards / f"frames-{i:05d}.parquet") for i in range(num_shards)])
+    labels = pd.concat([read_parquet(shards / f"labels-{i:05d}.parquet") for i in range(num_shards)])
+    frames = frames.sort_values("frame").reset_index(drop=True).astype(FRAME_COLUMNS)
+    labels = labels.sort_values(["frame", "sensor", "track_id"], kind="stable").reset_index(drop=True)
+    write_parquet(frames, record / "frames.parquet")
+    write_parquet(labels[list(LABEL_COLUMNS)].astype(LABEL_COLUMNS), record / "labels.parquet")
+    cameras, lidars = build_sensors(rig)
+    info = RecordInfo(scenario=sim_meta["config"]["name"], seed=seed, condition=condition.name, rig=rig.name,
+                      frame_rate_hz=float(sim_meta["config"]["simulation"]["record_hz"]),
+                      cameras=[camera_info(c) for c in cameras], lidars=[lidar_info(lidar) for lidar in lidars])
+    (record / RECORD_FILE).write_text(info.to_json())
+    config = {"sim": {"config_hash": sim_meta["config_hash"], "scenario": info.scenario, "seed": seed},
+              "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),
+              "frames": frames["frame"].tolist()}
+    write_meta(record, stage="render", config=config, seed=seed)
+    old = out.with_name(f".{out.name}.old-{os.getpid()}")
+    if out.exists():
+        out.rename(old)
+    record.rename(out)
+    shutil.rmtree(work)
+    if old.exists():
+        shutil.rmtree(old)
+    visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
+    return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible)}
+
+
+def main(args: argparse.Namespace) -> int:
+    condition, cpath = load_config(ConditionConfig, args.condition, "conditions")
+    rig, rpath = load_config(RigConfig, args.rig, "rigs")
+    log.info("rendering %s under %s (%s) with rig %s", args.sim, condition.name, cpath, rpath)
+    summary = render(args.sim, condition, rig, args.out, frames=args.frames, workers=args.workers,
+                     shard_size=args.shard_size, progress=not args.no_progress)
+    log.info("wrote %s: %d frames, %d labels (%d visible in cameras)", args.out, summary["frames"], summary["labels"],
+             summary["visible_camera_labels"])
+    return 0

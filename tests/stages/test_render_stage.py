@@ -1,0 +1,165 @@
+"""The render stage on a small real run: a complete canonical record whose labels agree with its images."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.core.config import ConditionConfig, RigConfig, load_config
+from pipeline.core.geometry import Boxes3D, Transform
+from pipeline.core.record import DatasetRecord, RecordError
+from pipeline.stages import render as render_module
+from pipeline.stages.render import render
+from tests.conftest import tree_hashes
+
+FRAMES = 3
+
+
+@pytest.fixture(scope="module")
+def rig() -> RigConfig:
+    return load_config(RigConfig, "default", "rigs")[0]
+
+
+@pytest.fixture(scope="module")
+def noon() -> ConditionConfig:
+    return load_config(ConditionConfig, "noon", "conditions")[0]
+
+
+@pytest.fixture(scope="module")
+def record_dir(dense_highway_run, rig, noon, tmp_path_factory):
+    out = tmp_path_factory.mktemp("render") / "highway-7-noon"
+    render(dense_highway_run, noon, rig, out, frames=FRAMES, workers=1, shard_size=2, progress=False)
+    return out
+
+
+def test_record_is_complete_and_readable(record_dir):
+    record = DatasetRecord(record_dir)
+    assert record.info.scenario == "highway" and record.info.seed == 3 and record.info.condition == "noon"
+    frames = record.frames
+    assert len(frames) == FRAMES
+    assert frames["frame"].tolist() == sorted(frames["frame"])
+    for frame in frames["frame"]:
+        assert record.rgb("front", frame).shape == (600, 800, 3)
+        assert len(record.points("top", frame)) > 10000
+    assert not list(record_dir.parent.glob(".*partial"))
+
+
+def test_tight_boxes_and_pixel_counts_come_from_the_instance_image(record_dir):
+    record = DatasetRecord(record_dir)
+    labels = record.labels
+    cams = labels[labels["sensor_type"] == "camera"]
+    assert cams["visible"].any()
+    for frame, rows in cams.groupby("frame"):
+        inst = record.instance("front", frame)
+        for r in rows.itertuples(index=False):
+            ys, xs = np.nonzero(inst == r.track_id)
+            assert bool(r.visible) == (len(xs) > 0)
+            if not r.visible:
+                assert r.x1 is pd.NA  # no visible pixel: no tight box
+                continue
+            assert r.visible_px == len(xs)
+            assert (r.x1, r.y1, r.x2, r.y2) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
+            assert 0.0 <= r.occlusion <= 1.0 and r.unoccluded_px >= r.visible_px
+
+
+def test_lidar_points_of_an_object_lie_in_its_box(record_dir):
+    record = DatasetRecord(record_dir)
+    labels = record.labels
+    lidar = record.info.lidars[0]
+    checked = 0
+    for frame, rows in labels[labels["sensor"] == "top"].groupby("frame"):
+        pts = record.points("top", frame)
+        for r in rows[rows["lidar_points"] > 0].itertuples(index=False):
+            own = pts[pts["instance_id"] == r.track_id][["x_m", "y_m", "z_m"]].to_numpy()
+            assert len(own) == r.lidar_points
+            box = Boxes3D([[r.sensor_x_m, r.sensor_y_m, r.sensor_z_m]], [[r.length_m, r.width_m, r.height_m]],
+                          [r.sensor_yaw_rad])
+            # range noise is 2 cm (std) along the beam; allow 4 std
+            assert box.contains(own, margin_m=0.08).all()
+            checked += 1
+    assert checked > 0
+    assert np.allclose(np.asarray(lidar.T_ego_sensor)[:3, 3], [0.0, 0.0, 1.05])
+
+
+def test_world_and_sensor_boxes_agree(record_dir):
+    record = DatasetRecord(record_dir)
+    frames = record.frames.set_index("frame")
+    cam = record.info.camera("front")
+    labels = record.labels
+    rows = labels[labels["sensor"] == "front"]
+    for r in rows.head(20).itertuples(index=False):
+        f = frames.loc[r.frame]
+        ego = Transform.from_xyz_rpy((f.ego_x_m, f.ego_y_m, f.ego_z_m), (0.0, 0.0, f.ego_yaw_rad))
+        world_to_cam = (ego @ Transform.from_matrix(cam.T_array)).inverse()
+        np.testing.assert_allclose(world_to_cam.apply([r.x_m, r.y_m, r.z_m]),
+                                   [r.sensor_x_m, r.sensor_y_m, r.sensor_z_m], atol=1e-6)
+
+
+def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_dir, tmp_path):
+    again = tmp_path / "again"
+    render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
+    assert tree_hashes(again, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
+
+
+def test_an_interrupted_render_resumes_with_the_shards_done(dense_highway_run, rig, noon, record_dir, tmp_path,
+                                                            monkeypatch):
+    real, done = render_module.render_shard, []
+
+    def killed_after_first_shard(job):
+        if done:
+            raise KeyboardInterrupt("killed")
+        done.append(job.index)
+        return real(job)
+
+    out = tmp_path / "resumed"
+    monkeypatch.setattr(render_module, "render_shard", killed_after_first_shard)
+    with pytest.raises(KeyboardInterrupt):
+        render(dense_highway_run, noon, rig, out, frames=FRAMES, workers=1, shard_size=2, progress=False)
+    assert not out.exists()  # nothing half-written where DVC looks
+    assert (tmp_path / ".resumed.partial" / "shards" / "done-00000").is_file()
+    monkeypatch.undo()
+    summary = render(dense_highway_run, noon, rig, out, frames=FRAMES, workers=1, shard_size=2, progress=False)
+    assert summary["shards_resumed"] == 1
+    assert tree_hashes(out, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
+    assert not (tmp_path / ".resumed.partial").exists()
+
+
+def test_missing_or_foreign_inputs_fail_clearly(tmp_path, rig, noon, record_dir):
+    with pytest.raises(FileNotFoundError, match="not a simulate output .trajectories.parquet is missing"):
+        render(tmp_path, noon, rig, tmp_path / "out", progress=False)
+    foreign = tmp_path / "foreign"
+    shutil.copytree(record_dir, foreign)
+    text = (foreign / "record.json").read_text().replace('"schema_version": 1', '"schema_version": 99')
+    (foreign / "record.json").write_text(text)
+    with pytest.raises(RecordError, match="schema_version 99 is not supported"):
+        DatasetRecord(foreign)
+
+
+def test_a_rig_with_two_cameras_and_two_lidars(dense_highway_run, noon, tmp_path):
+    import yaml
+
+    from tests.conftest import REPO
+
+    data = yaml.safe_load((REPO / "configs" / "rigs" / "default.yaml").read_text())
+    rear = dict(data["cameras"][0], name="rear", width_px=320, height_px=240,
+                mount={"xyz_m": [-2.0, 0.0, 0.6], "rpy_rad": [0.0, 0.0, 3.141592653589793]})
+    low = dict(data["lidars"][0], name="low", channels=16, mount={"xyz_m": [2.0, 0.0, 0.0], "rpy_rad": [0, 0, 0]})
+    data.update(name="two_by_two", cameras=[data["cameras"][0], rear], lidars=[data["lidars"][0], low])
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml.safe_dump(data))
+    rig, _ = load_config(RigConfig, path, "rigs")
+    out = tmp_path / "record"
+    render(dense_highway_run, noon, rig, out, frames=1, workers=1, progress=False)
+    record = DatasetRecord(out)
+    assert [c.name for c in record.info.cameras] == ["front", "rear"]
+    assert [lidar.name for lidar in record.info.lidars] == ["top", "low"]
+    frame = int(record.frames["frame"].iloc[0])
+    assert record.rgb("rear", frame).shape == (240, 320, 3)
+    assert record.points("low", frame)["ring"].max() == 15
+    # The rear camera looks backwards: its optical axis is the ego's -x.
+    np.testing.assert_allclose(record.info.camera("rear").T_array[:3, 2], [-1.0, 0.0, 0.0], atol=1e-9)
+    labels = record.labels
+    assert set(labels["sensor"]) <= {"front", "rear", "top", "low"}
