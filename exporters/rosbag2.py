@@ -1,0 +1,125 @@
+"""rosbag2 export (rosbags writer, MCAP storage, CDR messages): ``DIR/metadata.yaml`` + ``DIR/<name>.mcap``.
+
+Topics per record (names and frame ids as in :mod:`exporters.scene`); stamps are simulation time:
+
+======================================  ======================================  =================================
+topic                                   type                                    content
+======================================  ======================================  =================================
+``/tf_static``                          tf2_msgs/msg/TFMessage                  ego -> sensors, once; QoS
+                                                                                transient-local (latched on play)
+``/tf``                                 tf2_msgs/msg/TFMessage                  world -> ego per frame
+``/ego/pose``                           geometry_msgs/msg/PoseStamped           ego pose in ``world``
+``/camera/<name>/image/compressed``     sensor_msgs/msg/CompressedImage         the record's PNG, byte for byte
+``/camera/<name>/camera_info``          sensor_msgs/msg/CameraInfo              K, P = [K|0], plumb_bob
+``/camera/<name>/detections``           vision_msgs/msg/Detection2DArray        2D boxes (``--box``), class id =
+                                                                                our class, id = track id
+``/lidar/<name>/points``                sensor_msgs/msg/PointCloud2             x, y, z, intensity, ring,
+                                                                                class, instance (24-byte points)
+``/lidar/<name>/detections``            vision_msgs/msg/Detection3DArray        3D boxes in the LiDAR frame
+``/scene/markers``                      visualization_msgs/msg/MarkerArray      a cube per object (``world``)
+======================================  ======================================  =================================
+
+Chunk compression zstd by default, or none (rosbags' MCAP storage has no lz4). ``custom_data`` in
+metadata.yaml holds the export description. vision_msgs come from :mod:`exporters.ros_types`.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from exporters.base import Compression, Exporter, ExportError, ExportOptions
+from exporters.io import dumps_json
+from exporters.ros_messages import RosMessages
+from exporters.scene import FrameRows, Naming, nanoseconds
+from exporters.source import ExportSource, FrameItem
+
+log = logging.getLogger(__name__)
+
+
+def _qos(transient_local: bool):
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    zero = QosTime(0, 0)
+    return Qos(QosHistory.KEEP_LAST, 1 if transient_local else 10, QosReliability.RELIABLE,
+               QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE, zero, zero,
+               QosLiveliness.AUTOMATIC, zero, False)
+
+
+class Rosbag2Exporter(Exporter):
+    name = "rosbag2"
+    creates_own_dir = True
+
+    def check(self, source: ExportSource, options: ExportOptions) -> None:
+        if options.compression is Compression.LZ4:
+            raise ExportError("rosbag2 (rosbags MCAP storage) compresses with zstd or none, not lz4")
+
+    def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
+              meta: dict[str, Any] | None) -> dict[str, Any]:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+
+        msgs = RosMessages()
+        counts: dict[str, int] = {}
+        writer = Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP)
+        if options.compression is Compression.ZSTD:
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        connections: dict[str, Any] = {}
+
+        def write(topic: str, msgtype: str, msg: Any, time_ns: int, latched: bool = False) -> None:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, msgtype, typestore=msgs.store,
+                                                           offered_qos_profiles=[_qos(latched)])
+                counts[topic] = 0
+            writer.write(connections[topic], time_ns, msgs.store.serialize_cdr(msg, msgtype))
+            counts[topic] += 1
+
+        writer.open()
+        try:
+            rows = {id(s): FrameRows(s, options, msgs.summary) for s in source.records}
+            for src in source.records:
+                names, first = Naming(src, source), src.frames["time_s"].iloc[0]
+                write(names.topic("/tf_static"), "tf2_msgs/msg/TFMessage", msgs.tf_static(src, names),
+                      nanoseconds(first), latched=True)
+            for item in tqdm(source.frames(), total=source.n_frames(), desc="rosbag2", unit="frame",
+                             disable=not options.progress):
+                for topic, msgtype, msg in self._frame(msgs, item, Naming(item.source, source),
+                                                       rows[id(item.source)]):
+                    write(topic, msgtype, msg, nanoseconds(item.time_s))
+            summary = {"frames": source.n_frames(), "messages": dict(sorted(counts.items())),
+                       "objects": msgs.summary.to_dict()}
+            writer.set_custom_data("roadsynth.export", dumps_json({**description, "counts": summary}, indent=None))
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+        return summary
+
+    @staticmethod
+    def _frame(msgs: RosMessages, item: FrameItem, names: Naming, rows: FrameRows):
+        t = nanoseconds(item.time_s)
+        info = item.source.info
+        yield names.topic("/tf"), "tf2_msgs/msg/TFMessage", msgs.tf(item, names, t)
+        yield names.topic("/ego/pose"), "geometry_msgs/msg/PoseStamped", msgs.ego_pose(item, names, t)
+        for cam in info.cameras:
+            data = item.source.record.image_path(cam.name, "rgb", item.frame).read_bytes()
+            yield (names.topic(f"/camera/{cam.name}/image/compressed"), "sensor_msgs/msg/CompressedImage",
+                   msgs.image(data, names.frame(cam.name), t))
+            yield (names.topic(f"/camera/{cam.name}/camera_info"), "sensor_msgs/msg/CameraInfo",
+                   msgs.camera_info(cam, names.frame(cam.name), t))
+            yield (names.topic(f"/camera/{cam.name}/detections"), "vision_msgs/msg/Detection2DArray",
+                   msgs.detections_2d(rows.sensor(item.frame, cam.name), names.frame(cam.name), t))
+        for lidar in info.lidars:
+            points = item.source.record.points(lidar.name, item.frame)
+            yield (names.topic(f"/lidar/{lidar.name}/points"), "sensor_msgs/msg/PointCloud2",
+                   msgs.point_cloud(points, names.frame(lidar.name), t))
+            yield (names.topic(f"/lidar/{lidar.name}/detections"), "vision_msgs/msg/Detection3DArray",
+                   msgs.detections_3d(rows.sensor(item.frame, lidar.name), names.frame(lidar.name), t))
+        yield (names.topic("/scene/markers"), "visualization_msgs/msg/MarkerArray",
+               msgs.markers(rows.objects(item.frame), names.frame("world"), t, info.frame_rate_hz))
+
+
+EXPORTER = Rosbag2Exporter()

@@ -1,0 +1,110 @@
+"""What the log formats (MCAP, rosbag2) share: time stamps, frame names, topics, quaternions, point layout.
+
+Frames (tf tree, one per record): ``world`` (SUMO coordinates) -> ``ego`` (ego box centre, x forward,
+y left, z up) -> each sensor by name (cameras: OpenCV optical frame; LiDARs: x forward, y left, z up).
+Topics are ``/camera/<name>/...``, ``/lidar/<name>/...``, ``/tf``, ``/scene/objects``, ``/ego/pose``.
+When one log holds several records (e.g. morning and night of one run, whose times coincide), every
+topic is prefixed with ``/<scenario>_s<seed>_<condition>`` and every frame id with ``<that>/`` so the
+records stay apart; a single record uses the plain names.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from exporters.source import ExportSource, RecordSource
+
+# RGBA in [0, 1] per object class (the ``cls`` column), shared by image boxes and 3D cubes.
+CLASS_COLORS: dict[str, tuple[float, float, float, float]] = {
+    "car": (0.12, 0.56, 1.0, 0.6), "van": (0.0, 0.8, 0.8, 0.6), "truck": (1.0, 0.55, 0.0, 0.6),
+    "bus": (0.9, 0.9, 0.0, 0.6), "motorcycle": (0.8, 0.2, 0.8, 0.6), "bicycle": (0.2, 0.8, 0.2, 0.6),
+    "pedestrian": (1.0, 0.2, 0.2, 0.6),
+}
+DEFAULT_COLOR = (0.7, 0.7, 0.7, 0.6)
+
+# Packed point layout (little endian, 24 bytes): name, byte offset, numpy dtype.
+POINT_FIELDS: tuple[tuple[str, int, str], ...] = (
+    ("x", 0, "<f4"), ("y", 4, "<f4"), ("z", 8, "<f4"), ("intensity", 12, "<f4"), ("ring", 16, "<u2"),
+    ("class", 18, "u1"), ("instance", 20, "<i4"),
+)
+POINT_STRIDE = 24
+_POINT_DTYPE = np.dtype({"names": [f[0] for f in POINT_FIELDS], "formats": [f[2] for f in POINT_FIELDS],
+                         "offsets": [f[1] for f in POINT_FIELDS], "itemsize": POINT_STRIDE})
+
+
+def pack_points(points: pd.DataFrame) -> bytes:
+    """(N * 24) bytes of one sweep in :data:`POINT_FIELDS` layout (padding zeroed, so output is deterministic)."""
+    packed = np.zeros(len(points), dtype=_POINT_DTYPE)
+    for name, column in (("x", "x_m"), ("y", "y_m"), ("z", "z_m"), ("intensity", "intensity"), ("ring", "ring"),
+                         ("class", "semantic"), ("instance", "instance_id")):
+        packed[name] = points[column].to_numpy()
+    return packed.tobytes()
+
+
+def nanoseconds(time_s: float) -> int:
+    """Simulation time in integer nanoseconds (log time of every message of the frame)."""
+    return round(float(time_s) * 1e9)
+
+
+def split_ns(time_ns: int) -> tuple[int, int]:
+    """(seconds, nanoseconds) of a time in nanoseconds."""
+    return time_ns // 1_000_000_000, time_ns % 1_000_000_000
+
+
+def quat_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) unit quaternion of a (3, 3) rotation, w >= 0."""
+    q = Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_quat()
+    q = -q if q[3] < 0 else q
+    return tuple(float(v) for v in q)
+
+
+def quat_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``yaw_rad`` about +z."""
+    return 0.0, 0.0, float(np.sin(yaw_rad / 2.0)), float(np.cos(yaw_rad / 2.0))
+
+
+class Naming:
+    """Topic and frame names of one record within a log."""
+
+    def __init__(self, source: RecordSource, export: ExportSource) -> None:
+        self._prefix = "" if len(export.records) == 1 else source.stem
+
+    def topic(self, name: str) -> str:
+        return f"/{self._prefix}{name}" if self._prefix else name
+
+    def frame(self, name: str) -> str:
+        return f"{self._prefix}/{name}" if self._prefix else name
+
+
+class FrameRows:
+    """A record's label rows as plain dicts by frame, classified and boxed once (vectorised), for log exports.
+
+    Each row dict has the label columns plus ``reason`` (:data:`exporters.filters.REASONS` for camera
+    rows, ``""`` for others) and ``box`` ((4,) float64 x1, y1, x2, y2 of the chosen 2D box, NaN if none).
+    """
+
+    def __init__(self, source: RecordSource, options, summary) -> None:
+        from exporters.base import boxes_2d
+
+        labels = source.labels
+        camera = (labels["sensor_type"] == "camera").to_numpy()
+        reasons = np.full(len(labels), "", dtype=object)
+        reasons[camera] = options.filter.classify(labels[camera])
+        summary.add(reasons[camera], labels["cls"].to_numpy()[camera])
+        boxes = boxes_2d(labels, options.box)
+        self._by_frame: dict[int, list[dict]] = {}
+        for row, reason, box in zip(labels.to_dict("records"), reasons, boxes, strict=True):
+            row["reason"], row["box"] = reason, box
+            self._by_frame.setdefault(int(row["frame"]), []).append(row)
+
+    def sensor(self, frame: int, sensor: str) -> list[dict]:
+        return [r for r in self._by_frame.get(frame, ()) if r["sensor"] == sensor]
+
+    def objects(self, frame: int) -> list[dict]:
+        """One row per track id (the first of its sensors), sorted by track id: the world boxes of the frame."""
+        seen: dict[int, dict] = {}
+        for row in self._by_frame.get(frame, ()):
+            seen.setdefault(int(row["track_id"]), row)
+        return [seen[k] for k in sorted(seen)]

@@ -1,0 +1,86 @@
+"""YOLO export in the Ultralytics layout: ``DIR/data.yaml``, ``DIR/images/<split>/``, ``DIR/labels/<split>/``.
+
+Every (record, camera, frame) is one image, named like the COCO export; its label file has one line
+per kept object, ``class cx cy w h`` normalised by the image size (6 decimals), and is empty for an
+image without objects (a background image). Class indices are 0..5 over COCO's categories in id order
+(person, bicycle, car, motorcycle, bus, truck), so ``names`` in data.yaml matches COCO-trained models'
+names. YOLO has no ignore regions: objects the filter marks tiny or occluded are dropped (counted).
+data.yaml has no ``path`` key, so Ultralytics resolves the split folders next to data.yaml; without a
+``val`` split, ``val`` points at the training images (Ultralytics requires one).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from exporters.base import Exporter, ExportOptions, boxes_2d
+from exporters.filters import KEPT, FilterSummary
+from exporters.io import link_or_copy
+from exporters.source import ExportSource, safe_name
+from pipeline.core.classes import COCO_CATEGORIES
+
+log = logging.getLogger(__name__)
+
+CLASS_INDEX = {cid: i for i, cid in enumerate(sorted(COCO_CATEGORIES))}
+"""COCO category id -> YOLO class index."""
+
+
+def label_text(boxes: np.ndarray, classes: np.ndarray, width: int, height: int) -> str:
+    """YOLO lines for (N, 4) x1, y1, x2, y2 pixel boxes and (N,) class indices."""
+    cx = (boxes[:, 0] + boxes[:, 2]) / 2.0 / width
+    cy = (boxes[:, 1] + boxes[:, 3]) / 2.0 / height
+    w = (boxes[:, 2] - boxes[:, 0]) / width
+    h = (boxes[:, 3] - boxes[:, 1]) / height
+    rows = zip(classes, cx, cy, w, h, strict=True)
+    return "".join(f"{c} {a:.6f} {b:.6f} {d:.6f} {e:.6f}\n" for c, a, b, d, e in rows)
+
+
+class YoloExporter(Exporter):
+    name = "yolo"
+
+    def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
+              meta: dict[str, Any] | None) -> dict[str, Any]:
+        summary = FilterSummary()
+        counts = {s: 0 for s in source.split_names}
+        linked = objects = 0
+        labels_of = {(id(s), c.name): s.sensor_labels(c.name) for s in source.records for c in s.info.cameras}
+        for split in source.split_names:
+            (tmp / "images" / safe_name(split)).mkdir(parents=True)
+            (tmp / "labels" / safe_name(split)).mkdir(parents=True)
+        for item in tqdm(source.frames(), total=source.n_frames(), desc="yolo", unit="frame",
+                         disable=not options.progress):
+            split = safe_name(item.source.split)
+            for cam in item.source.info.cameras:
+                stem = f"{item.source.stem}_{safe_name(cam.name)}_{item.frame:06d}"
+                src = item.source.record.image_path(cam.name, "rgb", item.frame)
+                linked += link_or_copy(src, tmp / "images" / split / f"{stem}.png", link=options.link_images)
+                text = ""
+                labels = labels_of[(id(item.source), cam.name)].get(item.frame)
+                if labels is not None and not labels.empty:
+                    reasons = options.filter.classify(labels)
+                    summary.add(reasons, labels["cls"].to_numpy())
+                    keep = (reasons == KEPT) & np.all(np.isfinite(boxes := boxes_2d(labels, options.box)), axis=1)
+                    classes = np.array([CLASS_INDEX[int(c)] for c in labels["category_id"].to_numpy()[keep]], int)
+                    text = label_text(boxes[keep], classes, cam.width_px, cam.height_px)
+                    objects += int(keep.sum())
+                (tmp / "labels" / split / f"{stem}.txt").write_text(text)
+                counts[item.source.split] += 1
+        data = {"train": f"images/{safe_name(source.split_names[0])}"}
+        for split in source.split_names:
+            data[split if split in ("train", "val", "test") else safe_name(split)] = f"images/{safe_name(split)}"
+        data.setdefault("val", data["train"])
+        data["nc"] = len(CLASS_INDEX)
+        data["names"] = {i: COCO_CATEGORIES[cid][0] for cid, i in CLASS_INDEX.items()}
+        (tmp / "data.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+        images = sum(counts.values())
+        return {"images": images, "images_by_split": counts, "images_linked": int(linked),
+                "images_copied": images - int(linked), "objects_written": objects, "objects": summary.to_dict()}
+
+
+EXPORTER = YoloExporter()

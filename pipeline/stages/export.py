@@ -1,0 +1,72 @@
+"""``roadsynth export``: canonical records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2.
+
+A thin adapter over :mod:`exporters`: options from the command line, the format from the registry.
+The exporter writes atomically itself (temporary sibling, then rename) and adds ``meta.json`` to
+folder outputs (MCAP: a metadata record); its ``command`` entry is informational, so only that differs
+between two exports of the same records with the same options.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from pipeline.stages.common import config_hash, software_versions
+
+HELP = "export dataset records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2"
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from exporters.base import BoxMode, Compression, formats
+    from exporters.filters import DEFAULT_MAX_OCCLUSION, DEFAULT_MIN_VISIBLE_PX
+
+    parser.add_argument("--dataset", type=Path, action="append", required=True, metavar="DIR",
+                        help="a dataset record (from `roadsynth render`); repeat to merge several")
+    parser.add_argument("--format", required=True, choices=formats(), help="output format")
+    parser.add_argument("--out", type=Path, required=True, metavar="PATH",
+                        help="output folder (a .mcap file for --format mcap); replaced atomically")
+    parser.add_argument("--box", choices=[m.value for m in BoxMode], default=BoxMode.TIGHT.value,
+                        help="2D box: visible pixels (tight) or full projection clipped to the image (amodal)")
+    parser.add_argument("--splits", metavar="SPEC",
+                        help="splits by whole runs: fractions 'train=0.8,val=0.2' or runs "
+                        "'val=highway:3+urban:1,train=*' (default: one split)")
+    parser.add_argument("--min-visible-px", type=int, default=DEFAULT_MIN_VISIBLE_PX, metavar="N",
+                        help="objects with fewer visible pixels become ignore regions (default: %(default)s)")
+    parser.add_argument("--max-occlusion", type=float, default=DEFAULT_MAX_OCCLUSION, metavar="F",
+                        help="objects more occluded than F become ignore regions (default: %(default)s)")
+    parser.add_argument("--compression", choices=[c.value for c in Compression], default=Compression.ZSTD.value,
+                        help="MCAP/rosbag2 chunk compression (default: %(default)s)")
+    parser.add_argument("--camera", help="KITTI: the camera exported as image_2 (default: the first)")
+    parser.add_argument("--lidar", help="KITTI: the LiDAR exported as velodyne (default: the first)")
+    parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def options_from_args(args: argparse.Namespace):
+    from exporters.base import BoxMode, Compression, ExportOptions
+    from exporters.filters import ObjectFilter
+    from exporters.splits import SplitSpec
+
+    return ExportOptions(
+        box=BoxMode(args.box), splits=SplitSpec.parse(args.splits) if args.splits else None,
+        filter=ObjectFilter(min_visible_px=args.min_visible_px, max_occlusion=args.max_occlusion),
+        compression=Compression(args.compression), camera=args.camera, lidar=args.lidar,
+        link_images=not args.copy_images, progress=not args.no_progress)
+
+
+def main(args: argparse.Namespace) -> int:
+    import sys
+
+    from exporters.base import get_exporter
+
+    options = options_from_args(args)
+    config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}
+    meta = {"stage": "export", "versions": software_versions(), "config": config, "config_hash": config_hash(config),
+            "seed": None, "command": list(sys.argv)}
+    description = get_exporter(args.format).export(args.dataset, args.out, options, meta=meta)
+    objects = description["counts"].get("objects", {}).get("total", {})
+    log.info("exported %d record(s) to %s (%s); objects %s", len(description["records"]), args.out, args.format,
+             ", ".join(f"{k} {v}" for k, v in objects.items()))
+    return 0

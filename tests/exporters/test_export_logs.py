@@ -1,0 +1,139 @@
+"""MCAP (Foxglove protobuf) and rosbag2 exports read back by independent readers.
+
+MCAP: the mcap reader with mcap-protobuf-support's decoder. rosbag2: rosbags' reader for every
+message, and the mcap-ros2-support decoder (which parses the message definitions stored in the bag,
+vision_msgs included) for their content.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+
+from exporters.base import Compression, ExportOptions, get_exporter
+from pipeline.core.record import DatasetRecord
+
+MCAP_TOPICS = {
+    "/tf": "foxglove.FrameTransforms", "/ego/pose": "foxglove.PoseInFrame",
+    "/camera/front/image": "foxglove.CompressedImage", "/camera/front/calibration": "foxglove.CameraCalibration",
+    "/camera/front/annotations": "foxglove.ImageAnnotations", "/lidar/top/points": "foxglove.PointCloud",
+    "/scene/objects": "foxglove.SceneUpdate",
+}
+
+
+def _read_mcap(path: Path):
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[ProtobufDecoderFactory()])
+        decoded = reader.iter_decoded_messages(log_time_order=True)
+        messages = [(s.name, c.topic, m.log_time, d) for s, c, m, d in decoded]
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+        chunks = {c.compression for c in reader.get_summary().chunk_indexes}
+    return messages, metadata, chunks
+
+
+@pytest.mark.parametrize("compression", [Compression.ZSTD, Compression.LZ4, Compression.NONE])
+def test_mcap_protobuf_round_trip(tmp_path, morning, compression):
+    out = tmp_path / "run.mcap"
+    get_exporter("mcap").export([morning], out, ExportOptions(compression=compression), meta={"stage": "export"})
+    messages, metadata, chunks = _read_mcap(out)
+    assert chunks == {{"zstd": "zstd", "lz4": "lz4", "none": ""}[compression.value]}
+    assert Counter(t for _, t, _, _ in messages) == dict.fromkeys(MCAP_TOPICS, 2)
+    assert all(MCAP_TOPICS[topic] == schema for schema, topic, _, _ in messages)
+    assert {t for _, _, t, _ in messages} == {1_000_000_000, 1_100_000_000}  # simulation time, ns
+    assert (morning / "meta.json").read_text() == metadata["roadsynth.record.highway_s1_morning"]["meta.json"]
+    assert json.loads(metadata["roadsynth.meta"]["meta.json"]) == {"stage": "export"}
+    assert json.loads(metadata["roadsynth.export"]["export.json"])["counts"]["frames"] == 2
+    if compression is not Compression.ZSTD:
+        return
+    record = DatasetRecord(morning)
+    first = {topic: msg for _, topic, t, msg in messages if t == 1_000_000_000}
+    assert first["/camera/front/image"].data == (morning / "cameras/front/rgb/000010.png").read_bytes()
+    cloud = first["/lidar/top/points"]
+    raw = np.frombuffer(cloud.data, dtype=np.uint8).reshape(-1, cloud.point_stride)
+    offsets = {f.name: f.offset for f in cloud.fields}
+    points = record.points("top", 10)
+    np.testing.assert_array_equal(raw[:, offsets["x"]:offsets["x"] + 4].copy().view("<f4")[:, 0], points["x_m"])
+    np.testing.assert_array_equal(raw[:, offsets["instance"]:offsets["instance"] + 4].copy().view("<i4")[:, 0],
+                                  points["instance_id"])
+    # 3 kept objects + 1 ignore region (the tiny pedestrian); the hidden car has no box.
+    assert len(first["/camera/front/annotations"].points) == 4
+    assert {e.id for e in first["/scene/objects"].entities} == {f"track-{i}" for i in (3, 4, 7, 9, 12)}
+    tf = first["/tf"].transforms
+    assert [(x.parent_frame_id, x.child_frame_id) for x in tf] == [("world", "ego"), ("ego", "front"), ("ego", "top")]
+    assert first["/camera/front/calibration"].K[0] == 400.0
+
+
+def test_mcap_merges_records_under_prefixes(tmp_path, morning, night):
+    out = tmp_path / "both.mcap"
+    get_exporter("mcap").export([night, morning], out)
+    messages, _, _ = _read_mcap(out)
+    topics = Counter(t for _, t, _, _ in messages)
+    assert topics == {f"/highway_s1_{c}{t}": 2 for c in ("morning", "night") for t in MCAP_TOPICS}
+
+
+def test_rosbag2_rosbags_reader_and_mcap_ros2_decoder(tmp_path, morning):
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+    from rosbags.interfaces import QosDurability
+    from rosbags.rosbag2 import Reader
+
+    out = tmp_path / "bag"
+    get_exporter("rosbag2").export([morning], out)
+    expected = {
+        "/tf_static": ("tf2_msgs/msg/TFMessage", 1), "/tf": ("tf2_msgs/msg/TFMessage", 2),
+        "/ego/pose": ("geometry_msgs/msg/PoseStamped", 2),
+        "/camera/front/image/compressed": ("sensor_msgs/msg/CompressedImage", 2),
+        "/camera/front/camera_info": ("sensor_msgs/msg/CameraInfo", 2),
+        "/camera/front/detections": ("vision_msgs/msg/Detection2DArray", 2),
+        "/lidar/top/points": ("sensor_msgs/msg/PointCloud2", 2),
+        "/lidar/top/detections": ("vision_msgs/msg/Detection3DArray", 2),
+        "/scene/markers": ("visualization_msgs/msg/MarkerArray", 2),
+    }
+    with Reader(out) as reader:
+        assert {c.topic: (c.msgtype, c.msgcount) for c in reader.connections} == expected
+        raw = Counter(c.topic for c, _, _ in reader.messages())
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    assert raw == {k: n for k, (_, n) in expected.items()}
+    assert qos["/tf_static"][0].durability == QosDurability.TRANSIENT_LOCAL
+    assert qos["/tf"][0].durability == QosDurability.VOLATILE
+    bag = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert bag["storage_identifier"] == "mcap" and bag["message_count"] == 17
+
+    decoded = {}
+    with (out / "bag.mcap").open("rb") as f:
+        reader = make_reader(f, decoder_factories=[Ros2DecoderFactory()])
+        for _, channel, message, msg in reader.iter_decoded_messages():
+            decoded.setdefault(channel.topic, []).append((message.log_time, msg))
+    assert {k: len(v) for k, v in decoded.items()} == {k: n for k, (_, n) in expected.items()}
+    (_, dets), = [d for d in decoded["/camera/front/detections"] if d[0] == 1_000_000_000]
+    labels = DatasetRecord(morning).labels
+    car = labels[(labels.frame == 10) & (labels.sensor == "front") & (labels.track_id == 3)].iloc[0]
+    by_id = {d.id: d for d in dets.detections}
+    assert sorted(by_id) == ["3", "4", "9"]  # kept objects only
+    assert by_id["3"].bbox.size_x == pytest.approx(car.x2 - car.x1)
+    assert by_id["3"].bbox.center.position.x == pytest.approx((car.x1 + car.x2) / 2)
+    assert by_id["3"].results[0].hypothesis.class_id == "car"
+    dets3d = decoded["/lidar/top/detections"][0][1]
+    assert len(dets3d.detections) == 5 and dets3d.header.frame_id == "top"
+    cloud = decoded["/lidar/top/points"][0][1]
+    assert [f.name for f in cloud.fields] == ["x", "y", "z", "intensity", "ring", "class", "instance"]
+    assert cloud.width == len(DatasetRecord(morning).points("top", 10))
+    static = decoded["/tf_static"][0][1]
+    assert [x.child_frame_id for x in static.transforms] == ["front", "top"]
+    assert static.transforms[1].transform.translation.z == pytest.approx(1.8)
+    image = decoded["/camera/front/image/compressed"][0][1]
+    assert bytes(image.data) == (morning / "cameras/front/rgb/000010.png").read_bytes()
+
+
+def test_rosbag2_refuses_lz4(tmp_path, morning):
+    from exporters.base import ExportError
+
+    with pytest.raises(ExportError, match="lz4"):
+        get_exporter("rosbag2").export([morning], tmp_path / "bag", ExportOptions(compression=Compression.LZ4))
+    assert not (tmp_path / "bag").exists()
