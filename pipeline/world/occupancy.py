@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
-from scipy import ndimage
 
 _MAX_EDGE_CELLS = 8.0  # triangles are split until every edge spans at most this many cells
 
@@ -86,10 +86,17 @@ class Grid:
         raster[r0 : r1 + 1, c0 : c1 + 1] |= inside
 
     def dilate(self, raster: np.ndarray, radius_m: float) -> np.ndarray:
-        """Cells within ``radius_m`` of a marked cell (Euclidean, exact on the cell centres)."""
+        """Cells within ``radius_m`` of a marked cell (Euclidean, exact on the cell centres).
+
+        A dilation by the disk of cell offsets (i, j) with (i^2 + j^2) * cell^2 <= radius^2 marks exactly
+        the cells a Euclidean distance transform would, at a fraction of its cost on large rasters.
+        """
         if radius_m <= 0:
             return raster.copy()
-        return ndimage.distance_transform_edt(~raster) * self.cell_m <= radius_m
+        r = int(np.floor(radius_m / self.cell_m + 1e-9))
+        offsets = np.arange(-r, r + 1)
+        disk = ((offsets[:, None] ** 2 + offsets[None, :] ** 2) * self.cell_m**2 <= radius_m**2 + 1e-9)
+        return cv2.dilate(raster.astype(np.uint8), disk.astype(np.uint8), borderValue=0).astype(bool)
 
 
 def _edge(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
