@@ -23,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from exporters.filters import DEFAULT_MAX_OCCLUSION, DEFAULT_MIN_VISIBLE_PX
 
     parser.add_argument("--dataset", type=Path, action="append", required=True, metavar="DIR",
-                        help="a dataset record (from `roadsynth render`); repeat to merge several")
+                        help="a dataset record (from `roadsynth render`), or a folder of records; repeat to "
+                        "merge several")
     parser.add_argument("--format", required=True, choices=formats(), help="output format")
     parser.add_argument("--out", type=Path, required=True, metavar="PATH",
                         help="output folder (a .mcap file for --format mcap); replaced atomically")
@@ -56,11 +57,28 @@ def options_from_args(args: argparse.Namespace):
         link_images=not args.copy_images, progress=not args.no_progress)
 
 
+def expand_datasets(paths: list[Path]) -> list[Path]:
+    """Each path is a record, or a folder whose sub-folders are records (taken in sorted order)."""
+    from pipeline.core.record import RECORD_FILE
+
+    out: list[Path] = []
+    for path in paths:
+        if (path / RECORD_FILE).is_file() or not path.is_dir():
+            out.append(path)  # a record, or something the exporter will reject with a clear message
+            continue
+        records = sorted(p for p in path.iterdir() if (p / RECORD_FILE).is_file())
+        if not records:
+            raise FileNotFoundError(f"{path}: neither a dataset record ({RECORD_FILE}) nor a folder of records")
+        out.extend(records)
+    return out
+
+
 def main(args: argparse.Namespace) -> int:
     import sys
 
     from exporters.base import get_exporter
 
+    args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)
     config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}
     meta = {"stage": "export", "versions": software_versions(), "config": config, "config_hash": config_hash(config),
