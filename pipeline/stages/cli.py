@@ -17,7 +17,10 @@ STAGE_MODULES: dict[str, str] = {
     "render": "pipeline.stages.render",
     "preview": "pipeline.stages.preview",
     "evaluate": "pipeline.stages.evaluate",
+    "report": "pipeline.stages.report",
     "export": "pipeline.stages.export",
+    "train": "pipeline.stages.train",
+    "detect": "pipeline.stages.detect",
 }
 
 

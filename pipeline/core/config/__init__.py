@@ -1,5 +1,12 @@
 """Validated configuration models. YAML under ``configs/`` only deserialises into these."""
 
+from pipeline.core.config.detector import (
+    AugmentConfig,
+    BackboneConfig,
+    DetectorConfig,
+    InferConfig,
+    TrainConfig,
+)
 from pipeline.core.config.distributions import Constant, Distribution, LogNormal, TruncNormal, Uniform
 from pipeline.core.config.experiment import ExperimentConfig
 from pipeline.core.config.loading import ConfigError, config_dir, load_config, resolve_config_path
@@ -16,16 +23,20 @@ from pipeline.core.config.scenario import (
 from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
 
 __all__ = [
+    "AugmentConfig",
+    "BackboneConfig",
     "CameraConfig",
     "ClassSpec",
     "ConditionConfig",
     "ConfigError",
     "Constant",
     "DemandConfig",
+    "DetectorConfig",
     "Distribution",
     "DriverModel",
     "EgoConfig",
     "ExperimentConfig",
+    "InferConfig",
     "LidarConfig",
     "LogNormal",
     "NetworkConfig",
@@ -33,6 +44,7 @@ __all__ = [
     "RigConfig",
     "ScenarioConfig",
     "SimulationConfig",
+    "TrainConfig",
     "TruncNormal",
     "Uniform",
     "config_dir",

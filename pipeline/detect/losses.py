@@ -1,0 +1,89 @@
+"""CenterNet targets and losses.
+
+Targets (:func:`build_targets`, numpy, one image; shapes at stride 4 with ``h, w`` cells):
+
+- ``heatmap`` ``(C, h, w) float32``: per class the max over its objects of an elliptical Gaussian
+  centred on the object's centre cell, sigma = ``GAUSSIAN_ALPHA`` * box size / 6 (TTFNet's shape:
+  elongated boxes get elongated peaks); exactly 1 at every centre cell.
+- ``ignore`` ``(h, w) bool``: cells whose centre lies in a crowd (ignore) region; their negative
+  heatmap loss is dropped (a detection there is neither right nor wrong).
+- ``size`` / ``offset`` ``(2, h, w) float32`` with ``reg_mask`` ``(h, w) bool``: log(w/4), log(h/4)
+  and the sub-cell centre offset at centre cells. Where two centres share a cell, the smaller box wins.
+
+Losses (:func:`detection_loss`): CenterNet's penalty-reduced focal loss (alpha 2, beta 4) plus L1 on
+log size and offset, each normalised by the number of objects in the batch.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch.nn import functional as F
+
+from pipeline.detect.model import STRIDE
+
+GAUSSIAN_ALPHA = 0.54
+MIN_SIGMA_CELLS = 0.3
+SIZE_WEIGHT = 1.0
+OFFSET_WEIGHT = 1.0
+
+
+def build_targets(boxes: np.ndarray, labels: np.ndarray, ignore: np.ndarray, num_classes: int,
+                  out_hw: tuple[int, int]) -> dict[str, np.ndarray]:
+    """Targets of one image from ``boxes`` (N, 4) x1 y1 x2 y2 input pixels, ``labels`` (N,), ``ignore`` (M, 4)."""
+    h, w = out_hw
+    gy, gx = np.arange(h, dtype=np.float32), np.arange(w, dtype=np.float32)
+    heat = np.zeros((num_classes, h, w), np.float32)
+    size = np.zeros((2, h, w), np.float32)
+    offset = np.zeros((2, h, w), np.float32)
+    reg_mask = np.zeros((h, w), bool)
+    if len(boxes):
+        order = np.argsort(-(boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]), kind="stable")
+        boxes, labels = boxes[order], labels[order]
+        bw = np.maximum(boxes[:, 2] - boxes[:, 0], 1e-3) / STRIDE
+        bh = np.maximum(boxes[:, 3] - boxes[:, 1], 1e-3) / STRIDE
+        cx = (boxes[:, 0] + boxes[:, 2]) / (2 * STRIDE)
+        cy = (boxes[:, 1] + boxes[:, 3]) / (2 * STRIDE)
+        col = np.clip(np.floor(cx), 0, w - 1).astype(np.int64)
+        row = np.clip(np.floor(cy), 0, h - 1).astype(np.int64)
+        sx = np.maximum(GAUSSIAN_ALPHA * bw / 6, MIN_SIGMA_CELLS)[:, None]
+        sy = np.maximum(GAUSSIAN_ALPHA * bh / 6, MIN_SIGMA_CELLS)[:, None]
+        ex = np.exp(-((gx[None] - col[:, None]) ** 2) / (2 * sx**2))  # (N, w)
+        ey = np.exp(-((gy[None] - row[:, None]) ** 2) / (2 * sy**2))  # (N, h)
+        np.maximum.at(heat, labels, ey[:, :, None] * ex[:, None, :])
+        heat[labels, row, col] = 1.0
+        size[:, row, col] = np.log(np.stack([bw, bh]))
+        offset[:, row, col] = np.stack([cx - col, cy - row]).clip(0.0, 1.0)
+        reg_mask[row, col] = True
+    ignore_mask = np.zeros((h, w), bool)
+    if len(ignore):
+        px, py = (gx + 0.5) * STRIDE, (gy + 0.5) * STRIDE
+        in_x = (px[None] >= ignore[:, 0:1]) & (px[None] < ignore[:, 2:3])  # (M, w)
+        in_y = (py[None] >= ignore[:, 1:2]) & (py[None] < ignore[:, 3:4])  # (M, h)
+        ignore_mask = (in_y[:, :, None] & in_x[:, None, :]).any(axis=0)
+    return {"heatmap": heat, "ignore": ignore_mask, "size": size, "offset": offset, "reg_mask": reg_mask}
+
+
+def collate_targets(targets: list[dict[str, np.ndarray]]) -> dict[str, torch.Tensor]:
+    return {k: torch.from_numpy(np.stack([t[k] for t in targets])) for k in targets[0]}
+
+
+def focal_loss(logits: torch.Tensor, target: torch.Tensor, ignore: torch.Tensor) -> torch.Tensor:
+    """Sum of CenterNet's focal loss over (B, C, h, w); negatives in ``ignore`` (B, h, w) are dropped."""
+    pos = target.eq(1.0)
+    p = torch.sigmoid(logits)
+    pos_term = F.logsigmoid(logits) * (1 - p) ** 2
+    neg_term = F.logsigmoid(-logits) * p**2 * (1 - target) ** 4
+    neg_term = neg_term * (~ignore).unsqueeze(1).to(neg_term.dtype)
+    return -(torch.where(pos, pos_term, neg_term)).sum()
+
+
+def detection_loss(outputs: dict[str, torch.Tensor], targets: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """``{"loss", "heatmap", "size", "offset"}``, each a scalar; ``loss`` is the weighted total."""
+    num = targets["reg_mask"].sum().clamp(min=1).to(outputs["heatmap"].dtype)
+    heat = focal_loss(outputs["heatmap"], targets["heatmap"], targets["ignore"]) / num
+    mask = targets["reg_mask"].unsqueeze(1).to(outputs["size"].dtype)
+    size = (F.l1_loss(outputs["size"], targets["size"], reduction="none") * mask).sum() / num
+    offset = (F.l1_loss(outputs["offset"], targets["offset"], reduction="none") * mask).sum() / num
+    total = heat + SIZE_WEIGHT * size + OFFSET_WEIGHT * offset
+    return {"loss": total, "heatmap": heat, "size": size, "offset": offset}

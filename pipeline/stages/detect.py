@@ -1,0 +1,118 @@
+"""``roadsynth detect``: run our detector (``--model DIR``) or any ONNX detector (``--onnx FILE``) over
+the images of a COCO export and write a COCO results file that ``roadsynth evaluate`` scores.
+
+Which annotations: ``--annotations FILE``, else ``--coco DIR`` with ``--split NAME``
+(``annotations_NAME.json``), else ``DIR/annotations.json``. Every image of the file is processed (all
+conditions). The results are validated against the annotations with the evaluation stage's own
+reader before they are written (atomically: temporary sibling, then rename).
+
+ONNX models: see :mod:`pipeline.detect.onnx` for the expected I/O; options stored in the model by
+``roadsynth train --export-onnx`` are the defaults, the command-line options below override them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+from pathlib import Path
+
+HELP = "detect objects in a COCO export's images with our model or an ONNX model; write COCO results"
+log = logging.getLogger(__name__)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--model", type=Path, metavar="DIR", help="a `roadsynth train` output (or its model.pt)")
+    src.add_argument("--onnx", type=Path, metavar="FILE", help="any ONNX detector (run with onnxruntime)")
+    parser.add_argument("--coco", type=Path, metavar="DIR", help="a `roadsynth export --format coco` folder")
+    parser.add_argument("--split", help="split file of --coco (annotations_SPLIT.json)")
+    parser.add_argument("--annotations", type=Path, metavar="FILE", help="COCO instances file (instead of --coco)")
+    parser.add_argument("--out", type=Path, required=True, metavar="FILE", help="COCO results JSON to write")
+    parser.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto", help="(--model) device")
+    parser.add_argument("--score-threshold", type=float, metavar="S",
+                        help="drop detections below S (default: the model's, 0.05)")
+    parser.add_argument("--batch-size", type=int, default=4, help="images per forward pass (--model)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    onnx = parser.add_argument_group("ONNX pre/post-processing (default: stored in the model, else as shown)")
+    onnx.add_argument("--input-size", type=int, nargs=2, metavar=("W", "H"),
+                      help="network input (default: static shape)")
+    onnx.add_argument("--resize", choices=("letterbox", "stretch"), help="letterbox (default) or stretch")
+    onnx.add_argument("--layout", choices=("nchw", "nhwc"), help="input layout (default: from the input shape)")
+    onnx.add_argument("--channels", choices=("rgb", "bgr"), help="channel order (default: rgb)")
+    onnx.add_argument("--scale", type=float, help="pixel multiplier before mean/std (default: 1/255)")
+    onnx.add_argument("--mean", type=float, nargs=3, metavar=("R", "G", "B"), help="subtracted (default: 0 0 0)")
+    onnx.add_argument("--std", type=float, nargs=3, metavar=("R", "G", "B"), help="divided by (default: 1 1 1)")
+    onnx.add_argument("--output-format", choices=("boxes-scores-classes", "detections"),
+                      help="three outputs (boxes, scores, classes) or one (N, 6) tensor")
+    onnx.add_argument("--output-names", nargs="+", metavar="NAME", help="outputs to read, in that order")
+    onnx.add_argument("--box-format", choices=("xyxy", "xywh", "cxcywh"), help="box encoding (default: xyxy)")
+    onnx.add_argument("--normalized", action="store_true", default=None, help="boxes are in [0, 1] of the input")
+    onnx.add_argument("--class-map", metavar="JSON|FILE|coco80",
+                      help='model class -> COCO category id, e.g. \'{"0": 3, "1": 8}\'; '
+                      "coco80: contiguous COCO indices")
+    onnx.add_argument("--nms-iou", type=float, help="class-wise NMS IoU (default: none, the model's own)")
+    onnx.add_argument("--max-detections", type=int, help="per image (default: 100)")
+
+
+def _annotations(args: argparse.Namespace) -> Path:
+    from pipeline.detect.data import annotation_file
+
+    if args.annotations is not None:
+        if not args.annotations.is_file():
+            raise FileNotFoundError(f"{args.annotations}: annotation file not found")
+        return args.annotations
+    if args.coco is None:
+        raise ValueError("pass --coco DIR or --annotations FILE")
+    return annotation_file(args.coco, args.split)
+
+
+def _onnx_detector(args: argparse.Namespace):
+    from pipeline.detect.onnx import OnnxDetector, parse_class_map
+
+    overrides = {
+        "input_size": tuple(args.input_size) if args.input_size else None, "resize": args.resize,
+        "layout": args.layout, "channels": args.channels, "scale": args.scale,
+        "mean": tuple(args.mean) if args.mean else None, "std": tuple(args.std) if args.std else None,
+        "output_format": args.output_format, "output_names": tuple(args.output_names) if args.output_names else None,
+        "box_format": args.box_format, "normalized": args.normalized,
+        "class_map": parse_class_map(args.class_map), "nms_iou": args.nms_iou,
+        "max_detections": args.max_detections, "score_threshold": args.score_threshold,
+    }
+    return OnnxDetector(args.onnx, **overrides)
+
+
+def write_results(path: Path, results: list[dict], gt_path: Path) -> None:
+    """Validate ``results`` with the evaluation stage's reader, then write them atomically."""
+    from evaluation.io_coco import detections_from_list, read_coco_gt
+
+    detections_from_list(results, read_coco_gt(gt_path), str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(results, separators=(",", ":")) + "\n")
+    tmp.replace(path)
+
+
+def main(args: argparse.Namespace) -> int:
+    from pipeline.core.config.detector import DETECTOR_CLASSES
+    from pipeline.detect.data import load_coco
+    from pipeline.detect.infer import Detector, detect_coco, resolve_device
+
+    ann = _annotations(args)
+    if args.model is not None:
+        detector = Detector.load(args.model, resolve_device(args.device))
+        data = load_coco(ann, detector.config.classes)
+
+        def predict(rgbs):
+            return detector.predict(rgbs, score_threshold=args.score_threshold)
+
+        batch = args.batch_size
+    else:
+        onnx_detector = _onnx_detector(args)
+        data = load_coco(ann, DETECTOR_CLASSES)  # only the image list is used
+        predict, batch = onnx_detector.predict, 1
+    results = detect_coco(predict, data, batch_size=batch, progress=not args.no_progress)
+    write_results(args.out, results, ann)
+    log.info("%d detections on %d images of %s -> %s", len(results), len(data.images), ann, args.out)
+    return 0
