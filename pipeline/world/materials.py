@@ -40,7 +40,7 @@ MATERIALS: dict[str, Material] = {
     "foliage": Material((0.07, 0.18, 0.05), reflectivity=0.40),
     "bark": Material((0.20, 0.13, 0.08), reflectivity=0.30),
     "metal": Material((0.40, 0.41, 0.43), specular=0.4, shininess=32.0, reflectivity=0.50),
-    "barrier": Material((0.60, 0.60, 0.58), specular=0.2, reflectivity=0.60),
+    "barrier": Material((0.40, 0.40, 0.38), specular=0.1, reflectivity=0.60),  # weathered concrete
     "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=48.0, reflectivity=0.45),
     "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05),
     "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
