@@ -1,7 +1,9 @@
 """Loading YAML configs into validated models, with errors that name the file, key and allowed values.
 
 A config argument is either a NAME (resolved to ``configs/<kind>/NAME.yaml``) or a PATH to any YAML
-file. The configs folder is the repository's ``configs/`` unless ``ROADSYNTH_CONFIGS`` points elsewhere.
+file. The configs folder is ``$ROADSYNTH_CONFIGS`` if set, else ``./configs`` when the current folder
+has one (a project checkout: DVC runs every stage from the repository root), else the configs shipped
+beside the installed package.
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ class ConfigError(ValueError):
 def config_dir() -> Path:
     """The folder holding ``scenarios/``, ``rigs/``, ``conditions/``, ``experiments/``."""
     env = os.environ.get("ROADSYNTH_CONFIGS")
-    return Path(env) if env else Path(__file__).resolve().parents[3] / "configs"
+    if env:
+        return Path(env)
+    local = Path.cwd() / "configs"
+    return local if local.is_dir() else Path(__file__).resolve().parents[3] / "configs"
 
 
 def available_names(kind: str) -> list[str]:
