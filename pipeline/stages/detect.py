@@ -18,6 +18,8 @@ import logging
 import os
 from pathlib import Path
 
+from pipeline.stages.train import annotations_path
+
 HELP = "detect objects in a COCO export's images with our model or an ONNX model; write COCO results"
 log = logging.getLogger(__name__)
 
@@ -56,18 +58,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     onnx.add_argument("--max-detections", type=int, help="per image (default: 100)")
 
 
-def _annotations(args: argparse.Namespace) -> Path:
-    from pipeline.detect.data import annotation_file
-
-    if args.annotations is not None:
-        if not args.annotations.is_file():
-            raise FileNotFoundError(f"{args.annotations}: annotation file not found")
-        return args.annotations
-    if args.coco is None:
-        raise ValueError("pass --coco DIR or --annotations FILE")
-    return annotation_file(args.coco, args.split)
-
-
 def _onnx_detector(args: argparse.Namespace):
     from pipeline.detect.onnx import OnnxDetector, parse_class_map
 
@@ -99,7 +89,7 @@ def main(args: argparse.Namespace) -> int:
     from pipeline.detect.data import load_coco
     from pipeline.detect.infer import Detector, detect_coco, resolve_device
 
-    ann = _annotations(args)
+    ann = annotations_path(args)
     if args.model is not None:
         detector = Detector.load(args.model, resolve_device(args.device))
         data = load_coco(ann, detector.config.classes)

@@ -24,6 +24,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
+from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
 from pipeline.core.tables import read_parquet, write_parquet
 from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
@@ -152,13 +153,8 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
               "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),
               "frames": frames["frame"].tolist()}
     write_meta(record, stage="render", config=config, seed=seed)
-    old = out.with_name(f".{out.name}.old-{os.getpid()}")
-    if out.exists():
-        out.rename(old)
-    record.rename(out)
+    replace_path(record, out)
     shutil.rmtree(work)
-    if old.exists():
-        shutil.rmtree(old)
     visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
     return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible)}
 

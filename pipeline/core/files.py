@@ -1,0 +1,86 @@
+"""Atomic outputs: write into a temporary sibling, rename into place only when complete.
+
+A failure leaves the destination as it was and removes the temporary, so nothing half-written is ever
+seen where DVC (or a user) looks. Used by every stage and exporter.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+
+def _tmp_sibling(path: Path, tag: str) -> Path:
+    return path.with_name(f".{path.name}.{tag}-{os.getpid()}")
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+@contextlib.contextmanager
+def atomic_dir(out: Path) -> Iterator[Path]:
+    """Yield an empty temporary sibling folder of ``out``; replace ``out`` by it when the block succeeds."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp_sibling(out, "tmp")
+    _remove(tmp)
+    tmp.mkdir()
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    replace_path(tmp, out)
+
+
+@contextlib.contextmanager
+def atomic_file(out: Path) -> Iterator[Path]:
+    """Yield a temporary sibling path of the file ``out``; move it onto ``out`` when the block succeeds."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp_sibling(out, "tmp")
+    _remove(tmp)
+    try:
+        yield tmp
+    except BaseException:
+        _remove(tmp)
+        raise
+    replace_path(tmp, out)
+
+
+@contextlib.contextmanager
+def atomic_named_dir(out: Path) -> Iterator[Path]:
+    """Like :func:`atomic_dir`, but yield a *not yet existing* path with ``out``'s own name (inside a
+    temporary sibling folder), for writers that create their folder and name files after it (rosbag2)."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    holder = _tmp_sibling(out, "tmp")
+    _remove(holder)
+    holder.mkdir()
+    try:
+        yield holder / out.name
+        replace_path(holder / out.name, out)
+    finally:
+        shutil.rmtree(holder, ignore_errors=True)
+
+
+def replace_path(tmp: Path, out: Path) -> None:
+    """Move ``tmp`` onto ``out``; an existing ``out`` (file or folder) is set aside first, then deleted."""
+    old = _tmp_sibling(out, "old")
+    if out.exists() or out.is_symlink():
+        _remove(old)
+        out.rename(old)
+    tmp.rename(out)
+    if old.exists():
+        _remove(old)
+    log.info("wrote %s", out)
