@@ -103,3 +103,15 @@ def test_cli_reports_bad_config_without_traceback(tmp_path, capsys):
     assert code == 2
     assert "bad.yaml" in err and "demand.vehicles: got 0" in err and "Traceback" not in err
     assert not (tmp_path / "o").exists()
+
+
+def test_names_resolve_in_the_project_configs_first_then_the_shipped_ones(tmp_path, monkeypatch):
+    (tmp_path / "configs" / "scenarios").mkdir(parents=True)
+    mine = _highway()
+    mine["name"] = "mine"
+    (tmp_path / "configs" / "scenarios" / "mine.yaml").write_text(yaml.safe_dump(mine))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("ROADSYNTH_CONFIGS", raising=False)
+    assert load_config(ScenarioConfig, "mine", "scenarios")[1] == tmp_path / "configs" / "scenarios" / "mine.yaml"
+    assert load_config(ScenarioConfig, "urban", "scenarios")[1] == REPO / "configs" / "scenarios" / "urban.yaml"
+    assert {"mine", "highway", "urban"} <= set(available_names("scenarios"))

@@ -1,9 +1,9 @@
 """Loading YAML configs into validated models, with errors that name the file, key and allowed values.
 
 A config argument is either a NAME (resolved to ``configs/<kind>/NAME.yaml``) or a PATH to any YAML
-file. The configs folder is ``$ROADSYNTH_CONFIGS`` if set, else ``./configs`` when the current folder
-has one (a project checkout: DVC runs every stage from the repository root), else the configs shipped
-beside the installed package.
+file. NAMEs are looked up in ``$ROADSYNTH_CONFIGS`` if set; otherwise first in ``./configs`` when the
+current folder has one (a project checkout: DVC runs every stage from the repository root), then in
+the configs shipped beside the installed package.
 """
 
 from __future__ import annotations
@@ -22,18 +22,23 @@ class ConfigError(ValueError):
     """A config file is missing, unreadable or invalid. The message names the file and the key path."""
 
 
-def config_dir() -> Path:
-    """The folder holding ``scenarios/``, ``rigs/``, ``conditions/``, ``experiments/``."""
+def config_dirs() -> list[Path]:
+    """Folders holding ``scenarios/``, ``rigs/``, ``conditions/``..., searched in order."""
     env = os.environ.get("ROADSYNTH_CONFIGS")
     if env:
-        return Path(env)
+        return [Path(env)]
+    shipped = Path(__file__).resolve().parents[3] / "configs"
     local = Path.cwd() / "configs"
-    return local if local.is_dir() else Path(__file__).resolve().parents[3] / "configs"
+    return [local, shipped] if local.is_dir() and local.resolve() != shipped else [shipped]
+
+
+def config_dir() -> Path:
+    """The first folder searched (see :func:`config_dirs`)."""
+    return config_dirs()[0]
 
 
 def available_names(kind: str) -> list[str]:
-    folder = config_dir() / kind
-    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+    return sorted({p.stem for folder in config_dirs() for p in (folder / kind).glob("*.yaml")})
 
 
 def resolve_config_path(name_or_path: str | Path, kind: str) -> Path:
@@ -43,11 +48,12 @@ def resolve_config_path(name_or_path: str | Path, kind: str) -> Path:
         if not candidate.is_file():
             raise ConfigError(f"{candidate}: config file not found")
         return candidate
-    path = config_dir() / kind / f"{name_or_path}.yaml"
-    if not path.is_file():
-        names = ", ".join(available_names(kind)) or "(none)"
-        raise ConfigError(f"unknown {kind[:-1] if kind.endswith('s') else kind} {name_or_path!r}; available: {names}")
-    return path
+    for folder in config_dirs():
+        path = folder / kind / f"{name_or_path}.yaml"
+        if path.is_file():
+            return path
+    names = ", ".join(available_names(kind)) or "(none)"
+    raise ConfigError(f"unknown {kind[:-1] if kind.endswith('s') else kind} {name_or_path!r}; available: {names}")
 
 
 def _format_loc(loc: tuple[Any, ...]) -> str:
