@@ -1,4 +1,4 @@
-"""CenterNet targets and losses.
+"""CenterNet targets and losses, with TTFNet-style dense box regression.
 
 Targets (:func:`build_targets`, numpy, one image; shapes at stride 4 with ``h, w`` cells):
 
@@ -7,11 +7,18 @@ Targets (:func:`build_targets`, numpy, one image; shapes at stride 4 with ``h, w
   elongated boxes get elongated peaks); exactly 1 at every centre cell.
 - ``ignore`` ``(h, w) bool``: cells whose centre lies in a crowd (ignore) region; their negative
   heatmap loss is dropped (a detection there is neither right nor wrong).
-- ``size`` / ``offset`` ``(2, h, w) float32`` with ``reg_mask`` ``(h, w) bool``: log(w/4), log(h/4)
-  and the sub-cell centre offset at centre cells. Where two centres share a cell, the smaller box wins.
+- ``size`` / ``offset`` ``(2, h, w) float32``: log(w/4), log(h/4) of a box and its centre relative to
+  the cell, ``(cx/4 - j, cy/4 - i)`` (in [0, 1) at the centre cell, beyond it elsewhere).
+- ``reg_weight`` ``(h, w) float32``: where the box is regressed. Every cell whose index lies within
+  ``REG_AREA`` / 2 of a box's size from its centre cell regresses that box, weighted by the heatmap
+  Gaussian and normalised so that each object's weights sum to 1. A peak found a cell or two off the
+  centre (common for large objects) then still carries a trained box; where regions overlap, the
+  smaller box wins.
+- ``reg_mask`` ``(h, w) bool``: the centre cells (one per object unless two share a cell).
 
-Losses (:func:`detection_loss`): CenterNet's penalty-reduced focal loss (alpha 2, beta 4) plus L1 on
-log size and offset, each normalised by the number of objects in the batch.
+Losses (:func:`detection_loss`): CenterNet's penalty-reduced focal loss (alpha 2, beta 4), L1 on log
+size and L1 on the centre offset relative to the box size (at least one cell), the last two weighted
+by ``reg_weight``; each normalised by the number of objects in the batch.
 """
 
 from __future__ import annotations
@@ -24,8 +31,29 @@ from pipeline.detect.model import STRIDE
 
 GAUSSIAN_ALPHA = 0.54
 MIN_SIGMA_CELLS = 0.3
+REG_AREA = 0.54
 SIZE_WEIGHT = 1.0
 OFFSET_WEIGHT = 1.0
+
+
+def _regression_weights(col: np.ndarray, row: np.ndarray, bw: np.ndarray, bh: np.ndarray,
+                        ex: np.ndarray, ey: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell the owning object (h, w) int64 (-1: none) and its weight (h, w) float32.
+
+    Objects come sorted by descending area, so the last object covering a cell is the smallest.
+    """
+    n, w = ex.shape
+    h = ey.shape[1]
+    in_x = np.abs(np.arange(w)[None] - col[:, None]) <= REG_AREA * bw[:, None] / 2  # (N, w)
+    in_y = np.abs(np.arange(h)[None] - row[:, None]) <= REG_AREA * bh[:, None] / 2  # (N, h)
+    gauss = (ey * in_y)[:, :, None] * (ex * in_x)[:, None, :]  # (N, h, w), 1 at each centre cell
+    covered = gauss > 0
+    owner = n - 1 - np.argmax(covered[::-1], axis=0)
+    owner = np.where(covered.any(axis=0), owner, -1)
+    total = gauss.reshape(n, -1).sum(axis=1)  # >= 1: the centre cell is always inside
+    safe = np.maximum(owner, 0)
+    weight = np.take_along_axis(gauss, safe[None], axis=0)[0] / total[safe]
+    return owner, np.where(owner >= 0, weight, 0.0).astype(np.float32)
 
 
 def build_targets(boxes: np.ndarray, labels: np.ndarray, ignore: np.ndarray, num_classes: int,
@@ -37,6 +65,7 @@ def build_targets(boxes: np.ndarray, labels: np.ndarray, ignore: np.ndarray, num
     size = np.zeros((2, h, w), np.float32)
     offset = np.zeros((2, h, w), np.float32)
     reg_mask = np.zeros((h, w), bool)
+    reg_weight = np.zeros((h, w), np.float32)
     if len(boxes):
         order = np.argsort(-(boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]), kind="stable")
         boxes, labels = boxes[order], labels[order]
@@ -52,8 +81,10 @@ def build_targets(boxes: np.ndarray, labels: np.ndarray, ignore: np.ndarray, num
         ey = np.exp(-((gy[None] - row[:, None]) ** 2) / (2 * sy**2))  # (N, h)
         np.maximum.at(heat, labels, ey[:, :, None] * ex[:, None, :])
         heat[labels, row, col] = 1.0
-        size[:, row, col] = np.log(np.stack([bw, bh]))
-        offset[:, row, col] = np.stack([cx - col, cy - row]).clip(0.0, 1.0)
+        owner, reg_weight = _regression_weights(col, row, bw, bh, ex, ey)
+        safe = np.maximum(owner, 0)
+        size = np.log(np.stack([bw[safe], bh[safe]])).astype(np.float32) * (owner >= 0)
+        offset = np.stack([cx[safe] - gx[None, :], cy[safe] - gy[:, None]]).astype(np.float32) * (owner >= 0)
         reg_mask[row, col] = True
     ignore_mask = np.zeros((h, w), bool)
     if len(ignore):
@@ -61,7 +92,8 @@ def build_targets(boxes: np.ndarray, labels: np.ndarray, ignore: np.ndarray, num
         in_x = (px[None] >= ignore[:, 0:1]) & (px[None] < ignore[:, 2:3])  # (M, w)
         in_y = (py[None] >= ignore[:, 1:2]) & (py[None] < ignore[:, 3:4])  # (M, h)
         ignore_mask = (in_y[:, :, None] & in_x[:, None, :]).any(axis=0)
-    return {"heatmap": heat, "ignore": ignore_mask, "size": size, "offset": offset, "reg_mask": reg_mask}
+    return {"heatmap": heat, "ignore": ignore_mask, "size": size, "offset": offset, "reg_mask": reg_mask,
+            "reg_weight": reg_weight}
 
 
 def collate_targets(targets: list[dict[str, np.ndarray]]) -> dict[str, torch.Tensor]:
@@ -82,8 +114,11 @@ def detection_loss(outputs: dict[str, torch.Tensor], targets: dict[str, torch.Te
     """``{"loss", "heatmap", "size", "offset"}``, each a scalar; ``loss`` is the weighted total."""
     num = targets["reg_mask"].sum().clamp(min=1).to(outputs["heatmap"].dtype)
     heat = focal_loss(outputs["heatmap"], targets["heatmap"], targets["ignore"]) / num
-    mask = targets["reg_mask"].unsqueeze(1).to(outputs["size"].dtype)
-    size = (F.l1_loss(outputs["size"], targets["size"], reduction="none") * mask).sum() / num
-    offset = (F.l1_loss(outputs["offset"], targets["offset"], reduction="none") * mask).sum() / num
+    weight = targets["reg_weight"].unsqueeze(1).to(outputs["size"].dtype)
+    size = (F.l1_loss(outputs["size"], targets["size"], reduction="none") * weight).sum() / num
+    # Centre error relative to the box (at least a cell): equally strict for small and large objects.
+    scale = torch.exp(targets["size"]).clamp(min=1.0)
+    offset_error = F.l1_loss(outputs["offset"], targets["offset"], reduction="none") / scale
+    offset = (offset_error * weight).sum() / num
     total = heat + SIZE_WEIGHT * size + OFFSET_WEIGHT * offset
     return {"loss": total, "heatmap": heat, "size": size, "offset": offset}

@@ -6,12 +6,16 @@ Conventions:
   export and every caller feed plain scaled pixels), H and W multiples of 32.
 - Outputs at stride :data:`STRIDE` = 4, ``h = H/4``, ``w = W/4``: ``heatmap`` ``(B, C, h, w)``
   logits (one channel per class), ``size`` ``(B, 2, h, w)`` = log(box width / 4), log(box height / 4),
-  ``offset`` ``(B, 2, h, w)`` = sub-cell position of the box centre in [0, 1) cells.
+  ``offset`` ``(B, 2, h, w)`` = position of the box centre relative to the cell, in cells (in [0, 1)
+  at the centre cell; other cells near the centre predict the same box, see
+  :mod:`pipeline.detect.losses`).
 - A cell (i, j) covers input pixels [4j, 4j+4) x [4i, 4i+4); a box centre (cx, cy) lies in the
   cell (floor(cy/4), floor(cx/4)) with offset (cx/4 - j, cy/4 - i).
 - :func:`decode` turns outputs into ``candidates`` boxes per image ``(B, K, 4)`` x1, y1, x2, y2 in
-  input pixels, scores ``(B, K)`` (sigmoid of the peak) and class indices ``(B, K) int64``; a peak is a
-  cell that equals the 3x3 max of its channel. It is traced into the ONNX export; NMS is not.
+  input pixels, scores ``(B, K)`` (sigmoid of the peak) and class indices ``(B, K) int64``. Each cell
+  keeps only its most likely class, and a peak is a cell whose score equals the 3x3 max of these
+  per-cell scores, so one object yields one peak whatever the classes disagree on. It is traced into
+  the ONNX export; NMS is not.
 """
 
 from __future__ import annotations
@@ -97,23 +101,23 @@ class CenterNet(nn.Module):
         nn.init.normal_(self.size.weight, std=0.01)
         nn.init.constant_(self.size.bias, 1.0)  # exp(1) * 4 = an 11 px box to start from
         nn.init.normal_(self.offset.weight, std=0.01)
-        nn.init.constant_(self.offset.bias, 0.0)
+        nn.init.constant_(self.offset.bias, 0.5)  # the middle of the centre cell
 
     def forward(self, images: torch.Tensor) -> dict[str, torch.Tensor]:
         x = (images - self.mean) / self.std
         x = self.shared(self.neck(self.backbone(x)))
-        return {"heatmap": self.heatmap(x), "size": self.size(x), "offset": torch.sigmoid(self.offset(x))}
+        return {"heatmap": self.heatmap(x), "size": self.size(x), "offset": self.offset(x)}
 
 
 def decode(outputs: dict[str, torch.Tensor], candidates: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Top ``candidates`` heatmap peaks per image as boxes (B, K, 4), scores (B, K), classes (B, K)."""
-    heat = torch.sigmoid(outputs["heatmap"])
-    b, c, h, w = heat.shape
+    # One class per cell, the most likely: car and truck peaks at the same place are one object.
+    heat, best = torch.sigmoid(outputs["heatmap"]).max(dim=1, keepdim=True)  # (B, 1, h, w): 4-D for MaxPool
+    b, _, h, w = heat.shape
     peaks = heat * (F.max_pool2d(heat, 3, stride=1, padding=1) == heat).to(heat.dtype)
-    k = min(candidates, c * h * w)
-    scores, index = torch.topk(peaks.reshape(b, -1), k)
-    classes = torch.div(index, h * w, rounding_mode="floor")
-    cell = index - classes * (h * w)
+    k = min(candidates, h * w)
+    scores, cell = torch.topk(peaks.reshape(b, -1), k)
+    classes = torch.gather(best.reshape(b, -1), 1, cell)
     row = torch.div(cell, w, rounding_mode="floor")
     col = cell - row * w
     size = outputs["size"].reshape(b, 2, h * w)

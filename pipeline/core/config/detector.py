@@ -52,9 +52,9 @@ class AugmentConfig(_Frozen):
 
 
 class TrainConfig(_Frozen):
-    steps: int = Field(400, ge=1)
-    batch_size: int = Field(8, ge=1)
-    lr: float = Field(2e-3, gt=0.0, le=1.0)
+    steps: int = Field(800, ge=1)
+    batch_size: int = Field(4, ge=1)
+    lr: float = Field(4e-3, gt=0.0, le=1.0)
     weight_decay: float = Field(1e-4, ge=0.0)
     warmup_steps: int = Field(30, ge=0)
     threads: int = Field(2, ge=1, description="torch CPU threads; fixed so that CPU results are reproducible")
