@@ -20,23 +20,23 @@ def tree_hashes(root: Path, *, skip: tuple[str, ...] = ()) -> dict[str, str]:
     }
 
 
+def simulated_highway(tmp_path_factory, seed: int, **overrides) -> Path:
+    """Run the simulate stage on the highway scenario with command-line-style overrides."""
+    from pipeline.stages.simulate import resolve_scenario, simulate
+
+    config, _ = resolve_scenario("highway", **overrides)
+    out = tmp_path_factory.mktemp("sim") / f"highway-{seed}"
+    simulate(config, seed, out, progress=False)
+    return out
+
+
 @pytest.fixture(scope="session")
 def small_highway_run(tmp_path_factory) -> Path:
     """A small highway simulation: 40 vehicles, 20 s warm-up, 3 s recorded at 10 Hz."""
-    from pipeline.stages.simulate import resolve_scenario, simulate
-
-    config, _ = resolve_scenario("highway", vehicles=40, duration_s=3.0, warmup_s=20.0)
-    out = tmp_path_factory.mktemp("sim") / "highway-7"
-    simulate(config, 7, out, progress=False)
-    return out
+    return simulated_highway(tmp_path_factory, 7, vehicles=40, duration_s=3.0, warmup_s=20.0)
 
 
 @pytest.fixture(scope="session")
 def dense_highway_run(tmp_path_factory) -> Path:
     """A highway run with traffic around the ego: 200 vehicles, 90 s warm-up, 1 s recorded."""
-    from pipeline.stages.simulate import resolve_scenario, simulate
-
-    config, _ = resolve_scenario("highway", vehicles=200, duration_s=1.0, warmup_s=90.0)
-    out = tmp_path_factory.mktemp("sim") / "highway-3"
-    simulate(config, 3, out, progress=False)
-    return out
+    return simulated_highway(tmp_path_factory, 3, vehicles=200, duration_s=1.0, warmup_s=90.0)
