@@ -27,13 +27,19 @@ def _remove(path: Path) -> None:
         path.unlink()
 
 
+def _fresh_sibling(out: Path) -> Path:
+    """The temporary sibling of ``out`` (parent folders created), cleared of any leftover."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp_sibling(out, "tmp")
+    _remove(tmp)
+    return tmp
+
+
 @contextlib.contextmanager
 def atomic_dir(out: Path) -> Iterator[Path]:
     """Yield an empty temporary sibling folder of ``out``; replace ``out`` by it when the block succeeds."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _tmp_sibling(out, "tmp")
-    _remove(tmp)
+    tmp = _fresh_sibling(out)
     tmp.mkdir()
     try:
         yield tmp
@@ -47,9 +53,7 @@ def atomic_dir(out: Path) -> Iterator[Path]:
 def atomic_file(out: Path) -> Iterator[Path]:
     """Yield a temporary sibling path of the file ``out``; move it onto ``out`` when the block succeeds."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _tmp_sibling(out, "tmp")
-    _remove(tmp)
+    tmp = _fresh_sibling(out)
     try:
         yield tmp
     except BaseException:
@@ -63,9 +67,7 @@ def atomic_named_dir(out: Path) -> Iterator[Path]:
     """Like :func:`atomic_dir`, but yield a *not yet existing* path with ``out``'s own name (inside a
     temporary sibling folder), for writers that create their folder and name files after it (rosbag2)."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    holder = _tmp_sibling(out, "tmp")
-    _remove(holder)
+    holder = _fresh_sibling(out)
     holder.mkdir()
     try:
         yield holder / out.name
