@@ -88,7 +88,8 @@ class TrainImages:
             rng = np.random.default_rng([self.seed, step, i])
             img, boxes, labels, ignore = augment(rgb, self.data.images[index], (w, h), self.config.augment, rng, pre)
             images.append(torch.from_numpy(img).permute(2, 0, 1))
-            targets.append(build_targets(boxes, labels, ignore, len(self.config.classes), (h // STRIDE, w // STRIDE)))
+            targets.append(build_targets(boxes, labels, ignore, len(self.config.classes), (h // STRIDE, w // STRIDE),
+                                         self.config.train.gaussian_alpha, self.config.train.min_sigma_cells))
         return torch.stack(images), collate_targets(targets)
 
 

@@ -36,7 +36,7 @@ class AugmentConfig(_Frozen):
     """Training-time augmentation; every draw comes from the run seed."""
 
     hflip: float = Field(0.5, ge=0.0, le=1.0, description="probability of a horizontal flip")
-    scale: tuple[float, float] = Field((0.8, 1.4), description="zoom range (random crop around the zoom)")
+    scale: tuple[float, float] = Field((0.8, 2.0), description="zoom range (random crop around the zoom)")
     brightness: float = Field(0.3, ge=0.0, le=1.0, description="gain drawn from 1 +- brightness")
     contrast: float = Field(0.3, ge=0.0, le=1.0)
     saturation: float = Field(0.3, ge=0.0, le=1.0)
@@ -52,15 +52,17 @@ class AugmentConfig(_Frozen):
 
 
 class TrainConfig(_Frozen):
-    steps: int = Field(800, ge=1)
+    steps: int = Field(1000, ge=1)
     batch_size: int = Field(4, ge=1)
-    lr: float = Field(4e-3, gt=0.0, le=1.0)
+    lr: float = Field(6e-3, gt=0.0, le=1.0)
     weight_decay: float = Field(1e-4, ge=0.0)
     warmup_steps: int = Field(30, ge=0)
     threads: int = Field(2, ge=1, description="torch CPU threads; fixed so that CPU results are reproducible")
     conditions: tuple[str, ...] | None = Field(
         ("morning", "noon"), description="train only on images with these conditions (None: all)")
     cache_images: bool = Field(True, description="keep decoded, resized training images in memory")
+    gaussian_alpha: float = Field(2.0, gt=0.0, le=10.0, description="heatmap sigma = alpha * box size / 6")
+    min_sigma_cells: float = Field(1.0, gt=0.0, le=10.0, description="smallest heatmap sigma, in output cells")
 
     @model_validator(mode="after")
     def _warmup(self) -> TrainConfig:
