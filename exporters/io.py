@@ -1,24 +1,31 @@
-"""Atomic output writing and image placement shared by the exporters.
+"""Atomic output writing, image placement and background writing shared by the exporters.
 
 An export is written into a temporary sibling of its destination (``.<name>.tmp-<pid>``) and renamed
 into place only when complete, so a failure leaves the destination as it was and nothing half-written.
 Images are hard-linked from the record when the file system allows it (same device, links permitted),
-copied otherwise; either way the bytes are the record's.
+copied otherwise; either way the bytes are the record's. Log writers hand their messages to
+:class:`OrderedCalls`, which runs them on one worker thread in order, so output bytes never depend on
+timing.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
 import shutil
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 from pipeline.core.files import atomic_dir, atomic_file, atomic_named_dir
 
 log = logging.getLogger(__name__)
-__all__ = ["atomic_dir", "atomic_file", "atomic_named_dir", "dumps_json", "link_or_copy", "write_json"]
+__all__ = ["OrderedCalls", "atomic_dir", "atomic_file", "atomic_named_dir", "dumps_json", "link_or_copy",
+           "ordered_calls", "write_json"]
 
 
 def link_or_copy(src: Path, dst: Path, *, link: bool = True) -> bool:
@@ -47,3 +54,51 @@ def dumps_json(data: Any, *, indent: int | None = 2) -> str:
 def write_json(path: Path, data: Any, *, indent: int | None = 2) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(dumps_json(data, indent=indent))
+
+
+class OrderedCalls:
+    """Runs calls one at a time, in the order submitted, on one worker thread.
+
+    For log writers whose calls mostly compress and write chunks (zstd, lz4, CRCs and file writes release
+    the GIL): that work then overlaps the caller's building of the next messages. Since the calls keep
+    their order and never run concurrently, the output is the same bytes as calling directly. At most
+    ``max_pending_bytes`` of submitted payload waits at a time; :meth:`submit` blocks beyond that. A
+    call's error is raised by a later :meth:`submit` or :meth:`drain`.
+    """
+
+    def __init__(self, pool: ThreadPoolExecutor, max_pending_bytes: int) -> None:
+        self._pool = pool
+        self._max_pending_bytes = max_pending_bytes
+        self._pending: deque[tuple[Future, int]] = deque()
+        self._pending_bytes = 0
+
+    def submit(self, size_bytes: int, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        """Queue ``fn(*args, **kwargs)``, whose payload is ``size_bytes`` long."""
+        self._pending.append((self._pool.submit(fn, *args, **kwargs), size_bytes))
+        self._pending_bytes += size_bytes
+        while self._pending_bytes > self._max_pending_bytes:
+            self._wait_oldest()
+
+    def drain(self) -> None:
+        """Wait for every queued call; afterwards the caller may use the writer directly."""
+        while self._pending:
+            self._wait_oldest()
+
+    def _wait_oldest(self) -> None:
+        future, size = self._pending.popleft()
+        self._pending_bytes -= size
+        future.result()
+
+
+@contextlib.contextmanager
+def ordered_calls(max_pending_bytes: int, name: str) -> Iterator[OrderedCalls]:
+    """An :class:`OrderedCalls` on a thread named ``name``; leaving the block waits for the queued calls.
+    When the block or a call fails, the calls not yet started are dropped."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix=name) as pool:
+        calls = OrderedCalls(pool, max_pending_bytes)
+        try:
+            yield calls
+            calls.drain()
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise

@@ -1,7 +1,9 @@
 """MCAP export with Foxglove protobuf schemas: one file that opens in Foxglove with everything visible.
 
-Chunked, zstd by default (``--compression lz4|none``); every message's log and publish time is the
-simulation time of its frame (nanoseconds). Channels per record (names: :mod:`exporters.scene`):
+Chunked, zstd (level 1) by default (``--compression lz4|none``); every message's log and publish time is
+the simulation time of its frame (nanoseconds). Frames are read one or two ahead on a loader thread and
+chunks are compressed and written on a writer thread, in order, so the file's bytes do not depend on
+timing. Channels per record (names: :mod:`exporters.scene`):
 
 =================================  ==========================  ==========================================
 topic                              schema                      content
@@ -61,14 +63,16 @@ from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
-from exporters.io import dumps_json
+from exporters.io import OrderedCalls, dumps_json, ordered_calls
 from exporters.scene import (
     CLASS_COLORS,
     DEFAULT_COLOR,
     POINT_FIELDS,
     POINT_STRIDE,
+    FrameData,
     FrameRows,
     Naming,
+    frames_with_data,
     nanoseconds,
     pack_points,
     quat_from_matrix,
@@ -80,6 +84,7 @@ from exporters.source import ExportSource, FrameItem
 log = logging.getLogger(__name__)
 
 CHUNK_SIZE = 4 << 20  # bytes; a few camera frames per chunk
+QUEUE_BYTES = 2 * CHUNK_SIZE  # messages waiting for the writer thread, at most
 _COMPRESSION = {Compression.ZSTD: CompressionType.ZSTD, Compression.LZ4: CompressionType.LZ4,
                 Compression.NONE: CompressionType.NONE}
 _NUMERIC = {"<f4": PackedElementField.FLOAT32, "<u2": PackedElementField.UINT16, "u1": PackedElementField.UINT8,
@@ -109,23 +114,30 @@ def _yaw_pose(x: float, y: float, z: float, yaw: float) -> Pose:
 
 
 class _Log:
-    """Registers one schema per message type and one channel per topic on first use."""
+    """Registers one schema per message type and one channel per topic on first use.
 
-    def __init__(self, writer: Writer) -> None:
+    Messages are written through ``calls`` (the writer's thread); a registration waits for it to catch up,
+    as the Writer is never used from two threads at once.
+    """
+
+    def __init__(self, writer: Writer, calls: OrderedCalls) -> None:
         self.writer = writer
+        self.calls = calls
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
 
     def write(self, topic: str, message: Any, time_ns: int) -> None:
         if topic not in self.channels:
+            self.calls.drain()
             name = type(message).DESCRIPTOR.full_name
             if name not in self.schemas:
                 self.schemas[name] = register_schema(self.writer, type(message))
             self.channels[topic] = self.writer.register_channel(topic, "protobuf", self.schemas[name])
             self.counts[topic] = 0
-        self.writer.add_message(self.channels[topic], log_time=time_ns, publish_time=time_ns,
-                                data=message.SerializeToString(deterministic=True), sequence=self.counts[topic])
+        data = message.SerializeToString(deterministic=True)
+        self.calls.submit(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
+                          publish_time=time_ns, data=data, sequence=self.counts[topic])
         self.counts[topic] += 1
 
 
@@ -136,16 +148,17 @@ ZSTD_LEVEL = 1
 def _zstd_level(level: int) -> Iterator[None]:
     """Make mcap's Writer compress chunks at ``level``.
 
-    The mcap library calls ``zstandard.compress`` (level 3, one thread) and offers no option. Level 1 on
-    two zstd workers compresses ~2.5x faster for a file ~5% larger (bench/bench_export.py: 53 -> 69 MB/s
-    end to end). zstd's output for a fixed level and a fixed worker count >= 1 does not depend on timing,
-    so exports stay byte-identical. The swap is scoped to one export.
+    The mcap library calls ``zstandard.compress`` (level 3) and offers no option. On the benchmark record
+    level 1 takes half the CPU time of level 3 (8 vs 16 ms per frame) for a file of the same size (within
+    2%). It runs single-threaded: chunks are compressed on the writer thread (:class:`_Log`), which already
+    overlaps the message building, and zstd's own workers only added CPU time on two cores. The output
+    for a fixed level is deterministic. The swap is scoped to one export.
     """
     import mcap.writer as mcap_writer
     import zstandard
 
     original = mcap_writer.zstandard
-    compressor = zstandard.ZstdCompressor(level=level, threads=2)
+    compressor = zstandard.ZstdCompressor(level=level)
     mcap_writer.zstandard = types.SimpleNamespace(compress=compressor.compress)
     try:
         yield
@@ -163,25 +176,26 @@ class McapExporter(Exporter):
         with tmp.open("wb") as stream, _zstd_level(ZSTD_LEVEL):
             writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=_COMPRESSION[options.compression])
             writer.start(profile="", library=f"roadsynth exporters; mcap {mcap.__version__}")
-            out = _Log(writer)
             rows = {id(s): FrameRows(s, options, summary) for s in source.records}
-            for item in tqdm(source.frames(), total=source.n_frames(), desc="mcap", unit="frame",
-                             disable=not options.progress):
-                self._frame(out, item, Naming(item.source, source), rows[id(item.source)])
+            with ordered_calls(QUEUE_BYTES, "mcap-writer") as calls:
+                out = _Log(writer, calls)
+                for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap",
+                                       unit="frame", disable=not options.progress):
+                    self._frame(out, item, data, Naming(item.source, source), rows[id(item.source)])
             counts = {"frames": source.n_frames(), "messages": dict(sorted(out.counts.items())),
                       "objects": summary.to_dict()}
             for src in source.records:
-                data = {"record.json": src.info.to_json()}
+                files = {"record.json": src.info.to_json()}
                 if src.meta_text is not None:
-                    data["meta.json"] = src.meta_text
-                writer.add_metadata(f"roadsynth.record.{src.stem}", data)
+                    files["meta.json"] = src.meta_text
+                writer.add_metadata(f"roadsynth.record.{src.stem}", files)
             writer.add_metadata("roadsynth.export", {"export.json": dumps_json({**description, "counts": counts})})
             if meta is not None:
                 writer.add_metadata("roadsynth.meta", {"meta.json": dumps_json(meta)})
             writer.finish()
         return counts
 
-    def _frame(self, out: _Log, item: FrameItem, names: Naming, rows: FrameRows) -> None:
+    def _frame(self, out: _Log, item: FrameItem, data: FrameData, names: Naming, rows: FrameRows) -> None:
         t = nanoseconds(item.time_s)
         stamp = _stamp(t)
         info, row = item.source.info, item.row
@@ -199,9 +213,8 @@ class McapExporter(Exporter):
                   PoseInFrame(timestamp=stamp, frame_id=names.frame("world"), pose=world_ego), t)
         for cam in info.cameras:
             frame_id = names.frame(cam.name)
-            data = item.source.record.image_path(cam.name, "rgb", item.frame).read_bytes()
             out.write(names.topic(f"/camera/{cam.name}/image"),
-                      CompressedImage(timestamp=stamp, frame_id=frame_id, data=data, format="png"), t)
+                      CompressedImage(timestamp=stamp, frame_id=frame_id, data=data.images[cam.name], format="png"), t)
             k = cam.K_array
             p = np.hstack([k, np.zeros((3, 1))])
             out.write(names.topic(f"/camera/{cam.name}/calibration"), CameraCalibration(
@@ -211,10 +224,9 @@ class McapExporter(Exporter):
             out.write(names.topic(f"/camera/{cam.name}/annotations"),
                       self._annotations(rows.sensor(item.frame, cam.name), stamp), t)
         for lidar in info.lidars:
-            points = item.source.record.points(lidar.name, item.frame)
             out.write(names.topic(f"/lidar/{lidar.name}/points"), PointCloud(
                 timestamp=stamp, frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
-                point_stride=POINT_STRIDE, fields=_FIELDS, data=pack_points(points)), t)
+                point_stride=POINT_STRIDE, fields=_FIELDS, data=pack_points(data.points[lidar.name])), t)
         out.write(names.topic("/scene/objects"), self._scene(rows.objects(item.frame), stamp, names,
                                                              info.frame_rate_hz), t)
 

@@ -19,8 +19,10 @@ topic                                   type                                    
 ``/scene/markers``                      visualization_msgs/msg/MarkerArray      a cube per object (``world``)
 ======================================  ======================================  =================================
 
-Chunk compression zstd by default, or none (rosbags' MCAP storage has no lz4). ``custom_data`` in
-metadata.yaml holds the export description. vision_msgs come from :mod:`exporters.ros_types`.
+Chunk compression zstd (level 1) by default, or none (rosbags' MCAP storage has no lz4); chunks are
+compressed and written on a worker thread while the next messages are built, in order, so the bag's
+bytes do not depend on timing. ``custom_data`` in metadata.yaml holds the export description.
+vision_msgs come from :mod:`exporters.ros_types`.
 """
 
 from __future__ import annotations
@@ -29,15 +31,19 @@ import logging
 from pathlib import Path
 from typing import Any
 
+import zstandard
 from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportError, ExportOptions
-from exporters.io import dumps_json
+from exporters.io import OrderedCalls, dumps_json, ordered_calls
 from exporters.ros_messages import RosMessages
-from exporters.scene import FrameRows, Naming, nanoseconds
+from exporters.scene import FrameData, FrameRows, Naming, frames_with_data, nanoseconds
 from exporters.source import ExportSource, FrameItem
 
 log = logging.getLogger(__name__)
+
+ZSTD_LEVEL = 1  # as for MCAP (exporters/mcap.py): half the CPU time of zstd's default 3, same size
+QUEUE_BYTES = 2 << 20  # messages waiting for the writer thread, at most (rosbags' chunks are 1 MiB)
 
 
 def _qos(transient_local: bool):
@@ -47,6 +53,29 @@ def _qos(transient_local: bool):
     return Qos(QosHistory.KEEP_LAST, 1 if transient_local else 10, QosReliability.RELIABLE,
                QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE, zero, zero,
                QosLiveliness.AUTOMATIC, zero, False)
+
+
+class _Bag:
+    """Adds one connection per topic on first use; messages are serialised here and written through
+    ``calls`` (the writer's thread). Adding a connection waits for that thread to catch up, as the rosbags
+    Writer is never used from two threads at once."""
+
+    def __init__(self, writer: Any, calls: OrderedCalls, msgs: RosMessages) -> None:
+        self.writer = writer
+        self.calls = calls
+        self.store = msgs.store
+        self.connections: dict[str, Any] = {}
+        self.counts: dict[str, int] = {}
+
+    def write(self, topic: str, msgtype: str, msg: Any, time_ns: int, latched: bool = False) -> None:
+        if topic not in self.connections:
+            self.calls.drain()
+            self.connections[topic] = self.writer.add_connection(topic, msgtype, typestore=self.store,
+                                                                 offered_qos_profiles=[_qos(latched)])
+            self.counts[topic] = 0
+        data = self.store.serialize_cdr(msg, msgtype)
+        self.calls.submit(len(data), self.writer.write, self.connections[topic], time_ns, data)
+        self.counts[topic] += 1
 
 
 class Rosbag2Exporter(Exporter):
@@ -63,33 +92,27 @@ class Rosbag2Exporter(Exporter):
         from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
         msgs = RosMessages()
-        counts: dict[str, int] = {}
         writer = Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP)
         if options.compression is Compression.ZSTD:
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-        connections: dict[str, Any] = {}
-
-        def write(topic: str, msgtype: str, msg: Any, time_ns: int, latched: bool = False) -> None:
-            if topic not in connections:
-                connections[topic] = writer.add_connection(topic, msgtype, typestore=msgs.store,
-                                                           offered_qos_profiles=[_qos(latched)])
-                counts[topic] = 0
-            writer.write(connections[topic], time_ns, msgs.store.serialize_cdr(msg, msgtype))
-            counts[topic] += 1
-
         writer.open()
+        if options.compression is Compression.ZSTD:
+            # rosbags' MCAP storage compresses each chunk with this callable (zstd level 3) and has no option.
+            writer.storage.compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
         try:
             rows = {id(s): FrameRows(s, options, msgs.summary) for s in source.records}
-            for src in source.records:
-                names, first = Naming(src, source), src.frames["time_s"].iloc[0]
-                write(names.topic("/tf_static"), "tf2_msgs/msg/TFMessage", msgs.tf_static(src, names),
-                      nanoseconds(first), latched=True)
-            for item in tqdm(source.frames(), total=source.n_frames(), desc="rosbag2", unit="frame",
-                             disable=not options.progress):
-                for topic, msgtype, msg in self._frame(msgs, item, Naming(item.source, source),
-                                                       rows[id(item.source)]):
-                    write(topic, msgtype, msg, nanoseconds(item.time_s))
-            summary = {"frames": source.n_frames(), "messages": dict(sorted(counts.items())),
+            with ordered_calls(QUEUE_BYTES, "rosbag2-writer") as calls:
+                bag = _Bag(writer, calls, msgs)
+                for src in source.records:
+                    names, first = Naming(src, source), src.frames["time_s"].iloc[0]
+                    bag.write(names.topic("/tf_static"), "tf2_msgs/msg/TFMessage", msgs.tf_static(src, names),
+                              nanoseconds(first), latched=True)
+                for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="rosbag2",
+                                       unit="frame", disable=not options.progress):
+                    for topic, msgtype, msg in self._frame(msgs, item, data, Naming(item.source, source),
+                                                           rows[id(item.source)]):
+                        bag.write(topic, msgtype, msg, nanoseconds(item.time_s))
+            summary = {"frames": source.n_frames(), "messages": dict(sorted(bag.counts.items())),
                        "objects": msgs.summary.to_dict()}
             writer.set_custom_data("roadsynth.export", dumps_json({**description, "counts": summary}, indent=None))
             writer.close()
@@ -99,23 +122,21 @@ class Rosbag2Exporter(Exporter):
         return summary
 
     @staticmethod
-    def _frame(msgs: RosMessages, item: FrameItem, names: Naming, rows: FrameRows):
+    def _frame(msgs: RosMessages, item: FrameItem, data: FrameData, names: Naming, rows: FrameRows):
         t = nanoseconds(item.time_s)
         info = item.source.info
         yield names.topic("/tf"), "tf2_msgs/msg/TFMessage", msgs.tf(item, names, t)
         yield names.topic("/ego/pose"), "geometry_msgs/msg/PoseStamped", msgs.ego_pose(item, names, t)
         for cam in info.cameras:
-            data = item.source.record.image_path(cam.name, "rgb", item.frame).read_bytes()
             yield (names.topic(f"/camera/{cam.name}/image/compressed"), "sensor_msgs/msg/CompressedImage",
-                   msgs.image(data, names.frame(cam.name), t))
+                   msgs.image(data.images[cam.name], names.frame(cam.name), t))
             yield (names.topic(f"/camera/{cam.name}/camera_info"), "sensor_msgs/msg/CameraInfo",
                    msgs.camera_info(cam, names.frame(cam.name), t))
             yield (names.topic(f"/camera/{cam.name}/detections"), "vision_msgs/msg/Detection2DArray",
                    msgs.detections_2d(rows.sensor(item.frame, cam.name), names.frame(cam.name), t))
         for lidar in info.lidars:
-            points = item.source.record.points(lidar.name, item.frame)
             yield (names.topic(f"/lidar/{lidar.name}/points"), "sensor_msgs/msg/PointCloud2",
-                   msgs.point_cloud(points, names.frame(lidar.name), t))
+                   msgs.point_cloud(data.points[lidar.name], names.frame(lidar.name), t))
             yield (names.topic(f"/lidar/{lidar.name}/detections"), "vision_msgs/msg/Detection3DArray",
                    msgs.detections_3d(rows.sensor(item.frame, lidar.name), names.frame(lidar.name), t))
         yield (names.topic("/scene/markers"), "visualization_msgs/msg/MarkerArray",

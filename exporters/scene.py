@@ -10,11 +10,16 @@ records stay apart; a single record uses the plain names.
 
 from __future__ import annotations
 
+from collections import deque
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from exporters.source import ExportSource, RecordSource
+from exporters.source import ExportSource, FrameItem, RecordSource
 
 # RGBA in [0, 1] per object class (the ``cls`` column), shared by image boxes and 3D cubes.
 CLASS_COLORS: dict[str, tuple[float, float, float, float]] = {
@@ -30,6 +35,7 @@ POINT_FIELDS: tuple[tuple[str, int, str], ...] = (
     ("class", 18, "u1"), ("instance", 20, "<i4"),
 )
 POINT_STRIDE = 24
+PREFETCH = 2  # frames loaded ahead of the one being written
 _POINT_DTYPE = np.dtype({"names": [f[0] for f in POINT_FIELDS], "formats": [f[2] for f in POINT_FIELDS],
                          "offsets": [f[1] for f in POINT_FIELDS], "itemsize": POINT_STRIDE})
 
@@ -63,6 +69,43 @@ def quat_from_matrix(rotation: np.ndarray) -> tuple[float, float, float, float]:
 def quat_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by ``yaw_rad`` about +z."""
     return 0.0, 0.0, float(np.sin(yaw_rad / 2.0)), float(np.cos(yaw_rad / 2.0))
+
+
+@dataclass(frozen=True)
+class FrameData:
+    """The record files of one frame that a log carries: RGB PNG bytes by camera, the sweep by LiDAR."""
+
+    images: dict[str, bytes]
+    points: dict[str, pd.DataFrame]
+
+
+def load_frame(item: FrameItem) -> FrameData:
+    """Read the :class:`FrameData` of one frame from its record."""
+    record, info = item.source.record, item.source.info
+    return FrameData(images={c.name: record.image_path(c.name, "rgb", item.frame).read_bytes() for c in info.cameras},
+                     points={lidar.name: record.points(lidar.name, item.frame) for lidar in info.lidars})
+
+
+def frames_with_data(source: ExportSource, ahead: int = PREFETCH) -> Iterator[tuple[FrameItem, FrameData]]:
+    """Every frame of ``source`` in export order with its :class:`FrameData`, loaded up to ``ahead`` frames
+    early on a worker thread (Parquet decoding and file reads release the GIL, so they overlap the
+    caller's message building). A load error is raised when its frame is reached."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-loader") as pool:
+        loading: deque[tuple[FrameItem, Future[FrameData]]] = deque()
+        try:
+            for item in source.frames():
+                loading.append((item, pool.submit(load_frame, item)))
+                if len(loading) > ahead:
+                    yield _loaded(loading)
+            while loading:
+                yield _loaded(loading)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _loaded(loading: deque[tuple[FrameItem, Future[FrameData]]]) -> tuple[FrameItem, FrameData]:
+    item, future = loading.popleft()
+    return item, future.result()
 
 
 class Naming:

@@ -137,3 +137,35 @@ def test_rosbag2_refuses_lz4(tmp_path, morning):
     with pytest.raises(ExportError, match="lz4"):
         get_exporter("rosbag2").export([morning], tmp_path / "bag", ExportOptions(compression=Compression.LZ4))
     assert not (tmp_path / "bag").exists()
+
+
+def _panels(node) -> list[str]:
+    return [node] if isinstance(node, str) else _panels(node["first"]) + _panels(node["second"])
+
+
+def test_foxglove_layout_shows_what_a_single_record_mcap_holds(tmp_path, morning):
+    """docs/foxglove_layout.json names only topics and frames of an export, with what Foxglove needs to draw them."""
+    layout = json.loads((Path(__file__).resolve().parents[2] / "docs" / "foxglove_layout.json").read_text())
+    out = tmp_path / "run.mcap"
+    get_exporter("mcap").export([morning], out)
+    messages, _, _ = _read_mcap(out)
+    topics = {t for _, t, _, _ in messages}
+    frames = {"world"} | {x.child_frame_id for _, t, _, m in messages if t == "/tf" for x in m.transforms}
+
+    assert sorted(_panels(layout["layout"])) == sorted(layout["configById"])
+    config = {panel.split("!")[0]: c for panel, c in layout["configById"].items()}
+    image = config["Image"]["imageMode"]
+    assert (image["imageTopic"], image["calibrationTopic"]) == ("/camera/front/image", "/camera/front/calibration")
+    assert image["annotations"] == {"/camera/front/annotations": {"visible": True}}
+    scene = config["3D"]
+    # the 3D panel subscribes only to topics marked visible; transforms (/tf) are always read
+    assert {t for t, s in scene["topics"].items() if s["visible"]} == {"/lidar/top/points", "/scene/objects"}
+    assert scene["topics"]["/lidar/top/points"]["colorField"] in {f.name for f in _first_cloud(messages).fields}
+    assert set(scene["topics"]) | {config["RawMessages"]["topicPath"]} <= topics
+    assert scene["followTf"] in frames and {k.removeprefix("frame:") for k in scene["transforms"]} <= frames
+    assert all(key == layer["instanceId"] and layer["frameId"] in frames for key, layer in scene["layers"].items())
+    assert config["RawMessages"]["expansion"] in ("all", "none")  # Foxglove's NodeExpansion (or a per-key dict)
+
+
+def _first_cloud(messages):
+    return next(m for _, t, _, m in messages if t == "/lidar/top/points")

@@ -1,0 +1,91 @@
+"""Background writing (:class:`exporters.io.OrderedCalls`) and frame prefetching (``frames_with_data``)."""
+
+from __future__ import annotations
+
+import random
+import threading
+import time
+
+import pytest
+
+from exporters.base import get_exporter
+from exporters.io import ordered_calls
+from exporters.scene import frames_with_data
+from exporters.source import ExportSource
+
+
+def test_ordered_calls_run_in_order_one_at_a_time_on_the_worker():
+    delays = [random.Random(0).uniform(0.0, 0.002) for _ in range(100)]
+    done, running, most = [], [], [0]
+
+    def call(i: int, delay: float) -> None:
+        running.append(i)
+        most[0] = max(most[0], len(running))
+        time.sleep(delay)
+        running.remove(i)
+        done.append((i, threading.current_thread().name))
+
+    with ordered_calls(4, "test-writer") as calls:
+        for i, delay in enumerate(delays):
+            calls.submit(1, call, i, delay)
+    assert [i for i, _ in done] == list(range(100))
+    assert most[0] == 1 and all(name.startswith("test-writer") for _, name in done)
+
+
+def test_ordered_calls_block_beyond_the_pending_bytes():
+    gate, finished = threading.Event(), []
+    with ordered_calls(5, "test-writer") as calls:
+        calls.submit(3, lambda: (gate.wait(), finished.append(0)))
+        threading.Timer(0.05, gate.set).start()
+        start = time.perf_counter()
+        calls.submit(3, finished.append, 1)  # 6 bytes > 5: waits until the first call is done
+        assert time.perf_counter() - start >= 0.04 and finished[:1] == [0]
+    assert finished == [0, 1]
+
+
+def test_ordered_calls_raise_a_failed_call_later():
+    def fail() -> None:
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"), ordered_calls(100, "test-writer") as calls:
+        calls.submit(1, fail)
+        calls.submit(1, time.sleep, 0.01)
+
+
+def test_ordered_calls_drop_queued_calls_when_the_block_fails():
+    gate, started = threading.Event(), []
+    with pytest.raises(KeyError), ordered_calls(100, "test-writer") as calls:
+        calls.submit(1, gate.wait)
+        calls.submit(1, started.append, 1)
+        threading.Timer(0.05, gate.set).start()
+        raise KeyError("caller failed")
+    assert started == []
+
+
+def test_frames_with_data_keeps_export_order(morning, night):
+    source = ExportSource([night, morning])
+    loaded = list(frames_with_data(source, ahead=1))
+    assert [(i.source.stem, i.frame) for i, _ in loaded] == [(i.source.stem, i.frame) for i in source.frames()]
+    for item, data in loaded:
+        assert data.images["front"] == item.source.record.image_path("front", "rgb", item.frame).read_bytes()
+        assert data.points["top"].equals(item.source.record.points("top", item.frame))
+
+
+@pytest.mark.parametrize(("fmt", "writer_method"), [("mcap", "mcap.writer.Writer.add_message"),
+                                                   ("rosbag2", "rosbags.rosbag2.Writer.write")])
+def test_writer_thread_error_fails_the_export_atomically(tmp_path, morning, monkeypatch, fmt, writer_method):
+    module, cls, method = writer_method.rsplit(".", 2)
+    writer_cls = getattr(__import__(module, fromlist=[cls]), cls)
+    original, threads = getattr(writer_cls, method), []
+
+    def failing(self, *args, **kwargs):
+        threads.append(threading.current_thread().name)
+        if len(threads) == 5:
+            raise OSError("disk full")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(writer_cls, method, failing)
+    with pytest.raises(OSError, match="disk full"):
+        get_exporter(fmt).export([morning], tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+    assert all(name.startswith(f"{fmt}-writer") for name in threads)
