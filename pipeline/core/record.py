@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 
 from pipeline.core.tables import read_parquet
 
@@ -219,4 +220,10 @@ class DatasetRecord:
         path = lidar_path(self.root, lidar, frame)
         if not path.is_file():
             raise RecordError(f"{path}: missing from the record")
-        return conform(read_parquet(path), POINT_COLUMNS, str(path))
+        # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs.
+        table = pq.read_table(path)
+        missing = [c for c in POINT_COLUMNS if c not in table.column_names]
+        if missing:
+            raise RecordError(f"{path}: missing columns {', '.join(missing)}")
+        return pd.DataFrame({c: np.asarray(table.column(c).to_numpy(), dtype=dtype)
+                             for c, dtype in POINT_COLUMNS.items()})

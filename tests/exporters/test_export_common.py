@@ -130,3 +130,26 @@ def test_split_spec_parsing_and_assignment():
         SplitSpec.parse("val=highway:3").assign(runs)
     with pytest.raises(SplitError, match="not among"):
         SplitSpec.parse("val=urban:3,train=*").assign(runs)
+
+
+def test_points_are_typed_writeable_and_checked(tmp_path, morning):
+    """``DatasetRecord.points`` (read straight from Arrow): schema dtypes, a frame callers may modify,
+    and a missing column named with its file."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from pipeline.core.record import POINT_COLUMNS, DatasetRecord, lidar_path
+
+    record = DatasetRecord(morning)
+    frame = int(record.frames["frame"].iloc[0])
+    points = record.points("top", frame)
+    assert dict(points.dtypes.astype(str)) == POINT_COLUMNS
+    table = pq.read_table(lidar_path(morning, "top", frame))
+    assert np.array_equal(points["x_m"].to_numpy(), table.column("x_m").to_numpy())
+    points.loc[0, "x_m"] = 1.5  # not a read-only view of the Arrow buffers
+    copy = tmp_path / "rec"
+    shutil.copytree(morning, copy)
+    path = lidar_path(copy, "top", frame)
+    pq.write_table(pq.read_table(path).drop_columns(["ring"]), path)
+    with pytest.raises(RecordError, match=r"000\d+\.parquet: missing columns ring"):
+        DatasetRecord(copy).points("top", frame)
