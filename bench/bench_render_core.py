@@ -94,6 +94,7 @@ class BareCasts:
     def __init__(self, static_meshes: list[Mesh]) -> None:
         merged = Mesh.concatenate([m for m in static_meshes if len(m)])
         self.static = self._scene(merged.vertices, merged.triangles)
+        self.cpu_s = 0.0  # CPU seconds of all the casts timed so far (every Embree thread)
 
     @staticmethod
     def _scene(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
@@ -107,6 +108,7 @@ class BareCasts:
         actors = self._scene(scene.geometry.vertices, scene.geometry.triangles)
         t = {k: o3d.core.Tensor.from_numpy(np.ascontiguousarray(v)) for k, v in rays.items()}
         out = {}
+        cpu = time.process_time()
         for name in ("camera", "lidar"):
             start = time.perf_counter()
             self.static.cast_rays(t[name])
@@ -116,6 +118,7 @@ class BareCasts:
         self.static.test_occlusions(t["shadow"])
         actors.test_occlusions(t["shadow"])
         out["shadow"] = time.perf_counter() - start
+        self.cpu_s += time.process_time() - cpu
         return out
 
 

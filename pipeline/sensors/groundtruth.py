@@ -25,7 +25,7 @@ import numpy as np
 
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
-from pipeline.world.scene import FrameScene, make_rays
+from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 VIRTUAL_SAMPLES_PER_IMAGE = 0.25
 """Off-image parts of the virtual plane are sampled with at most this many images' worth of rays per object."""
@@ -50,14 +50,9 @@ class AmodalBoxes:
     def pixel_mask(self, width: int, height: int, margin_px: int = 1) -> np.ndarray:
         """(H*W,) bool row-major union of the boxes' pixels (grown by ``margin_px``): rays that may hit actors."""
         box = self.clipped(width, height)[self.valid]
-        x0 = np.clip(np.floor(box[:, 0]).astype(np.int64) - margin_px, 0, width)
-        y0 = np.clip(np.floor(box[:, 1]).astype(np.int64) - margin_px, 0, height)
-        x1 = np.clip(np.ceil(box[:, 2]).astype(np.int64) + margin_px, 0, width)
-        y1 = np.clip(np.ceil(box[:, 3]).astype(np.int64) + margin_px, 0, height)
-        diff = np.zeros((height + 1, width + 1), np.int32)
-        for ys, xs, sign in ((y0, x0, 1), (y0, x1, -1), (y1, x0, -1), (y1, x1, 1)):
-            np.add.at(diff, (ys, xs), sign)
-        return (diff.cumsum(0).cumsum(1)[:height, :width] > 0).reshape(-1)
+        lo = np.column_stack([np.floor(box[:, 1]), np.floor(box[:, 0])]).astype(np.int64) - margin_px
+        hi = np.column_stack([np.ceil(box[:, 3]), np.ceil(box[:, 2])]).astype(np.int64) + margin_px
+        return rectangles_mask(height, width, lo, hi).reshape(-1)
 
 
 def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -> AmodalBoxes:

@@ -28,7 +28,7 @@ import numpy as np
 from pipeline.core.config.sensors import LidarConditionConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.materials import material_arrays
-from pipeline.world.scene import FrameScene, make_rays, rowdot
+from pipeline.world.scene import FrameScene, make_rays, rectangles_mask, rowdot
 
 
 @dataclass(frozen=True)
@@ -123,7 +123,8 @@ class Lidar:
         return ego_pose @ self.config.mount
 
     def actor_ray_mask(self, scene: FrameScene, lidar_to_world: Transform) -> np.ndarray:
-        """(columns * channels,) bool superset of the beams that can reach an actor (bounding-sphere cones)."""
+        """(columns * channels,) bool superset of the beams that can reach an actor: per actor, the window of
+        columns x rings that its bounding sphere's cone covers, widened by one step each side against rounding."""
         boxes = scene.actors.boxes
         cols, chans = self.config.columns, self.config.channels
         if not len(boxes):
@@ -135,15 +136,32 @@ class Lidar:
         c, radius, dist = c[near], radius[near], dist[near]
         if not len(c):
             return np.zeros(cols * chans, bool)
-        inside = dist <= radius
         alpha = np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0))
         el_c = np.arcsin(np.clip(c[:, 2] / np.maximum(dist, 1e-9), -1.0, 1.0))
         pole = np.abs(el_c) + alpha >= 0.5 * np.pi
-        half_az = np.where(pole, np.pi, np.arcsin(np.clip(np.sin(alpha) / np.cos(el_c), 0.0, 1.0)))
-        ring_ok = (np.abs(self.elevation_rad[None, :] - el_c[:, None]) <= alpha[:, None]) | inside[:, None]
-        daz = (self.azimuth_rad[None, :] - np.arctan2(c[:, 1], c[:, 0])[:, None] + np.pi) % (2 * np.pi) - np.pi
-        col_ok = (np.abs(daz) <= half_az[:, None]) | inside[:, None] | pole[:, None]
-        return ((col_ok.T.astype(np.float32) @ ring_ok.astype(np.float32)) > 0).reshape(-1)
+        everywhere = (dist <= radius) | pole
+        # Columns: azimuth pi - j * res, so the cone's azimuth window |daz| <= half is a window of j (cyclic).
+        res = np.radians(self.config.horizontal_resolution_deg)
+        half = np.arcsin(np.clip(np.sin(alpha) / np.cos(np.where(pole, 0.0, el_c)), 0.0, 1.0)) / res
+        centre = (np.pi - np.arctan2(c[:, 1], c[:, 0])) / res
+        first = np.floor(centre - half).astype(np.int64) - 1
+        count = np.ceil(centre + half).astype(np.int64) + 2 - first
+        whole = everywhere | (count >= cols)
+        first, count = np.where(whole, 0, first % cols), np.where(whole, cols, count)
+        # Rings: elevations evenly spaced from the top beam down, so |el - el_c| <= alpha is a window of rings.
+        step = (self.elevation_rad[-1] - self.elevation_rad[0]) / max(chans - 1, 1)
+        if step < 0:
+            ring_lo = np.floor((el_c + alpha - self.elevation_rad[0]) / step).astype(np.int64) - 1
+            ring_hi = np.ceil((el_c - alpha - self.elevation_rad[0]) / step).astype(np.int64) + 2
+        else:  # one beam (or a flat fan): every ring
+            ring_lo, ring_hi = np.zeros(len(c), np.int64), np.full(len(c), chans)
+        ring_lo, ring_hi = np.where(everywhere, 0, ring_lo), np.where(everywhere, chans, ring_hi)
+        # A window past the last column wraps to column 0: two rectangles.
+        end = first + count
+        lo = np.concatenate([np.column_stack([first, ring_lo]), np.column_stack([np.zeros_like(first), ring_lo])])
+        hi = np.concatenate([np.column_stack([np.minimum(end, cols), ring_hi]),
+                             np.column_stack([np.maximum(end - cols, 0), ring_hi])])
+        return rectangles_mask(cols, chans, lo, hi).reshape(-1)
 
 
 def render_lidar(

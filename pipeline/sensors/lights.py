@@ -24,13 +24,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config.sensors import HeadlightConfig, StreetLampConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.actors import Actors, unit_to_world
-from pipeline.world.scene import FrameScene, Hits
+from pipeline.world.scene import FrameScene, Hits, take_columns
 
 # A vehicle's pair of low beams is modelled as ONE light of twice the intensity at the middle of the front
 # (unit box frame: x forward, y left, z up; lamps of the procedural car at 41 % of the height): from a few
@@ -236,12 +237,11 @@ def light_radiance(
     each light's grid candidates, the cone and shading terms on the survivors only.
     """
     n = len(rays)
-    out = np.zeros((n, 3), np.float32)
     hit_idx = np.flatnonzero(hits.hit)
     if not len(lights) or not len(hit_idx):
-        return out
+        return np.zeros((n, 3), np.float32)
     t = hits.t_m[hit_idx]
-    ray = [np.take(rays[:, k], hit_idx) for k in range(6)]
+    ray = take_columns(rays, hit_idx)
     px, py = ray[0] + ray[3] * t, ray[1] + ray[4] * t
     grid = PointGrid(px, py)
     src_all = hit_idx[grid.order]
@@ -296,6 +296,5 @@ def light_radiance(
         for c in range(3):  # ``src`` is unique within one light, so fancy-index accumulation is exact
             diffuse[c][src] += w * np.float32(lights.rgb[k, c])
             shine[c][src] += s * np.float32(lights.rgb[k, c])
-    for c in range(3):
-        out[:, c] = albedo[:, c] * diffuse[c] + shine[c]
-    return out
+    albedo = cv2.split(np.ascontiguousarray(albedo, np.float32).reshape(-1, 1, 3))
+    return cv2.merge([albedo[c].reshape(-1) * diffuse[c] + shine[c] for c in range(3)]).reshape(-1, 3)

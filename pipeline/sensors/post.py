@@ -2,8 +2,9 @@
 
 Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
 lens), lens effects (bloom, flare ghosts, vignetting), then the sensor's noise. Images are (H, W, 3) float32
-linear RGB; every random draw comes from the caller's generator, in a fixed order, so the same generator
-state gives the same image. Effects that need randomness are skipped when no generator is given.
+linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized Gaussian fields
+from OpenCV's generator seeded by one draw of it: :func:`standard_normal`), so the same generator state gives
+the same image. Effects that need randomness are skipped when no generator is given.
 
 - Vignetting: gain(r) = 1 - v * (r / r_corner)^2 with r the distance from the image centre; the corners
   keep exactly 1 - v.
@@ -47,12 +48,28 @@ def vignette(image: np.ndarray, strength: float) -> np.ndarray:
     return image * vignette_gain(image.shape[0], image.shape[1], float(strength))
 
 
+def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """``shape`` float32 standard normal draws, from OpenCV's generator seeded by one draw of ``rng``.
+
+    About 3x faster than numpy's for image-sized arrays and as reproducible (a fixed algorithm, one thread); it
+    reseeds the calling thread's OpenCV generator.
+    """
+    out = np.empty(shape, np.float32)
+    cv2.setRNGSeed(int(rng.integers(1 << 31)))
+    cv2.randn(out.reshape(-1, 1), 0.0, 1.0)  # one channel: a scalar std on 3 channels would fill only the first
+    return out
+
+
 def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np.random.Generator) -> np.ndarray:
     """Shot + read noise and grain at exposure gain ``gain`` (see the module docstring)."""
-    sigma = cv2.sqrt(np.maximum(image, 0.0) * np.float32(gain * cfg.shot) + np.float32((gain * cfg.read_std) ** 2))
-    out = image + sigma * rng.standard_normal(image.shape, dtype=np.float32)
+    variance = np.maximum(image, 0.0)  # in place from here: each full-image temporary costs a pass over memory
+    variance *= np.float32(gain * cfg.shot)
+    variance += np.float32((gain * cfg.read_std) ** 2)
+    out = standard_normal(image.shape, rng)
+    out *= cv2.sqrt(variance)
+    out += image
     if cfg.grain_std > 0:
-        grain = cv2.GaussianBlur(rng.standard_normal(image.shape[:2], dtype=np.float32), (0, 0), cfg.grain_size_px)
+        grain = cv2.GaussianBlur(standard_normal(image.shape[:2], rng), (0, 0), cfg.grain_size_px)
         grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
         out += grain[:, :, None]
     return out

@@ -1,14 +1,16 @@
 """``roadsynth render``: one simulated run under one condition -> one canonical dataset record.
 
-Frames are split into shards rendered by a local process pool. Finished shards live in a hidden work
-folder next to OUT (``.OUT.partial``) keyed by the hash of everything that determines the output, so
-an interrupted render resumes with the shards already done; OUT itself appears only when the whole
-record is complete (renamed into place). Layout of the record: pipeline/core/record.py and docs/dataset.md.
+Frames are split into shards rendered by this process and a local process pool (see :func:`_run`). Finished
+shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the hash of everything that
+determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
+when the whole record is complete (renamed into place). Layout of the record: pipeline/core/record.py and
+docs/dataset.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import concurrent.futures as cf
 import hashlib
 import json
@@ -34,6 +36,7 @@ from pipeline.stages.rig import build_sensors, camera_info, lidar_info
 log = logging.getLogger(__name__)
 
 HELP = "render a simulated run's camera and LiDAR under one condition, with exact ground truth"
+WORKER_MODULES = ("pipeline.stages.render_frames", "pipeline.sensors.conditions")  # what a render worker imports
 SIM_FILES = ("trajectories.parquet", "tls_states.parquet", "meta.json", "roads/lanes.parquet")
 
 
@@ -106,32 +109,62 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
     _prepare_work(work, key)
-    _static_world(sim_dir, seed, work / "static.pkl")
     shards = [tuple(selection[i: i + shard_size]) for i in range(0, len(selection), max(shard_size, 1))]
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=1 if workers > 1 else 0)
             for i, s in enumerate(shards) if not (work / "shards" / f"done-{i:05d}").is_file()]
+    context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # starts now: overlaps the world build
+    _static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
     if resumed:
         log.info("resuming: %d of %d shards already rendered", resumed, len(shards))
     with tqdm(total=len(selection), unit="frame", desc=f"render {condition.name}", disable=not progress) as bar:
         bar.update(len(selection) - sum(len(j.frames) for j in jobs))
-        _run(jobs, workers, bar)
+        _run(jobs, workers, bar, context)
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, len(shards))
     summary["shards_resumed"] = resumed
     return summary
 
 
-def _run(jobs: list[ShardJob], workers: int, bar: tqdm) -> None:
-    if workers <= 1 or len(jobs) <= 1:
+def _pool_context() -> multiprocessing.context.BaseContext:
+    """The process pool's start method.
+
+    Never plain fork: Embree's thread pool does not survive a fork of a process that has cast rays. Where the
+    platform has it, workers fork from a server process that has imported the renderer once and never casts
+    (forkserver; started here, so that its imports run while this process builds the static world): that saves
+    each worker the ~3 s of CPU of importing open3d, pandas and the pipeline. Elsewhere workers spawn.
+    """
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    from multiprocessing import forkserver
+
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(WORKER_MODULES))
+    forkserver.ensure_running()
+    return context
+
+
+def _run(jobs: list[ShardJob], workers: int, bar: tqdm, context: multiprocessing.context.BaseContext | None) -> None:
+    """Render the shards: here, or with ``context`` in a pool of ``workers - 1`` processes plus this process, which
+    has everything imported and so renders while the pool starts up (in a thread; the main thread only hands out
+    shards). Each worker holds one shard at a time, so all finish within about one shard of each other."""
+    if context is None:
         for job in jobs:
             bar.update(render_shard(job))
         return
-    # spawn, not fork: Embree's thread pool does not survive a fork.
-    ctx = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx) as pool:
-        for future in cf.as_completed([pool.submit(render_shard, job) for job in jobs]):
-            bar.update(future.result())
+    queue = collections.deque(jobs)
+    children = min(workers, len(jobs)) - 1
+    with cf.ThreadPoolExecutor(1) as here, cf.ProcessPoolExecutor(children, mp_context=context) as pool:
+        idle: list[cf.Executor] = [pool] * children + [here]
+        busy: dict[cf.Future, cf.Executor] = {}
+        while queue or busy:
+            while queue and idle:
+                executor = idle.pop()
+                busy[executor.submit(render_shard, queue.popleft())] = executor
+            done, _ = cf.wait(busy, return_when=cf.FIRST_COMPLETED)
+            for future in done:
+                idle.append(busy.pop(future))
+                bar.update(future.result())
 
 
 def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConfig, condition: ConditionConfig,

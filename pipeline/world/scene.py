@@ -96,16 +96,45 @@ def rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
 
+def take_columns(a: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """The C columns of ``a[rows]`` ((N, C) float32, M rows) as contiguous (M,) arrays: one gather of whole rows
+    and one OpenCV split, several times faster than C strided gathers."""
+    if not len(rows):
+        return [np.zeros(0, a.dtype) for _ in range(a.shape[1])]
+    return [c.reshape(-1) for c in cv2.split(np.take(a, rows, axis=0).reshape(-1, 1, a.shape[1]))]
+
+
 def make_rays(origin: np.ndarray, directions: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """(N, 6) float32 world rays [origin | rotation @ d] from one origin (3,) and (N, 3) float32 unit
-    directions in a sensor frame rotated by ``rotation`` (3, 3) into the world (one OpenCV call: fast)."""
-    directions = np.ascontiguousarray(directions, dtype=np.float32)
-    rays = np.empty((len(directions), 6), np.float32)
-    if not len(rays):
-        return rays
-    rays[:, :3] = np.asarray(origin, np.float32)
-    rays[:, 3:] = cv2.transform(directions.reshape(-1, 1, 3), np.asarray(rotation, np.float32)).reshape(-1, 3)
-    return rays
+    directions in a sensor frame rotated by ``rotation`` (3, 3) into the world.
+
+    OpenCV writes both halves (the origin as an affine map with zero linear part) and interleaves them: numpy's
+    assignment into the strided halves of an (N, 6) array is several times slower.
+    """
+    directions = np.ascontiguousarray(directions, dtype=np.float32).reshape(-1, 1, 3)
+    if not len(directions):
+        return np.empty((0, 6), np.float32)
+    to_origin = np.zeros((3, 4), np.float32)
+    to_origin[:, 3] = np.asarray(origin, np.float32)
+    rotated = cv2.transform(directions, np.asarray(rotation, np.float32))
+    return cv2.merge([cv2.transform(directions, to_origin), rotated]).reshape(-1, 6)
+
+
+def rectangles_mask(rows: int, cols: int, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(rows, cols) bool union of K index rectangles [lo[k, 0], hi[k, 0]) x [lo[k, 1], hi[k, 1]) (each (K, 2)
+    int, clipped to the grid; empty ones add nothing): e.g. the rays that may reach an actor, from its window.
+
+    Vectorised over rectangles: +-1 at their corners, then OpenCV's 2D prefix sum (~30x faster than numpy's
+    cumsums) counts the rectangles over each cell.
+    """
+    lo = np.clip(np.asarray(lo, np.int64).reshape(-1, 2), 0, [rows, cols])
+    hi = np.clip(np.asarray(hi, np.int64).reshape(-1, 2), 0, [rows, cols])
+    hi = np.maximum(hi, lo)
+    corners = np.zeros((rows + 1, cols + 1), np.float32)  # small integers: exact in float32
+    for r, c, sign in ((lo[:, 0], lo[:, 1], 1), (lo[:, 0], hi[:, 1], -1),
+                       (hi[:, 0], lo[:, 1], -1), (hi[:, 0], hi[:, 1], 1)):
+        np.add.at(corners, (r, c), sign)
+    return cv2.integral(corners, sdepth=cv2.CV_32F)[1:rows + 1, 1:cols + 1] > 0
 
 
 def _canonical_scene(meshes: ActorMeshes, object_class: ObjectClass) -> o3d.t.geometry.RaycastingScene:

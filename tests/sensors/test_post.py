@@ -82,3 +82,18 @@ def test_bloom_adds_light_only_around_bright_sources():
     assert out[60, 86, 0] > 0.1 + 1e-3  # glow a few pixels away
     np.testing.assert_allclose(out[5, 5], image[5, 5], atol=1e-4)  # far away: (nearly) untouched
     np.testing.assert_array_equal(bloom(image, 1.0, 0.0, 6.0), image)
+
+
+def test_standard_normal_is_seeded_and_standard_in_every_channel():
+    from pipeline.sensors.post import standard_normal
+
+    a = standard_normal((300, 400, 3), np.random.default_rng(7))
+    np.testing.assert_array_equal(a, standard_normal((300, 400, 3), np.random.default_rng(7)))
+    assert not np.array_equal(a, standard_normal((300, 400, 3), np.random.default_rng(8)))
+    n = a[..., 0].size
+    for channel in np.moveaxis(a, -1, 0):  # a scalar std on a 3-channel array would leave channels 1 and 2 at 0
+        assert abs(channel.mean()) < 5 / np.sqrt(n)
+        assert channel.std() == pytest.approx(1.0, abs=5 * np.sqrt(0.5 / n))
+    x = a.reshape(-1).astype(np.float64)
+    assert np.mean(x**4) == pytest.approx(3.0, abs=5 * np.sqrt(96 / x.size))  # Gaussian tails
+    assert abs(np.corrcoef(x[:-1], x[1:])[0, 1]) < 5 / np.sqrt(x.size)  # no correlation between neighbours

@@ -102,3 +102,27 @@ def test_static_materials_can_change_per_frame():
     assert scene.cast(*ray).material[0] == material_index("lamp")
     with pytest.raises(ValueError, match="out of range"):
         static.set_triangle_materials(1, [2], 0)
+
+
+def test_rectangles_mask_is_the_union_of_clipped_rectangles():
+    from pipeline.world.scene import rectangles_mask
+
+    lo = np.array([[1, 2], [3, 0], [-4, 8], [5, 5], [6, 1]])
+    hi = np.array([[4, 6], [9, 3], [2, 20], [5, 9], [2, 4]])  # the last two are empty
+    expected = np.zeros((7, 10), bool)
+    expected[1:4, 2:6] = expected[3:7, 0:3] = expected[0:2, 8:10] = True
+    np.testing.assert_array_equal(rectangles_mask(7, 10, lo, hi), expected)
+    assert not rectangles_mask(7, 10, np.zeros((0, 2)), np.zeros((0, 2))).any()
+
+
+def test_make_rays_rotates_directions_and_repeats_the_origin():
+    from pipeline.world.scene import make_rays
+
+    c, s = np.cos(0.3), np.sin(0.3)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    dirs = np.array([[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]], np.float32)
+    rays = make_rays([1.0, -2.0, 3.5], dirs, rotation)
+    assert rays.shape == (2, 6) and rays.dtype == np.float32
+    np.testing.assert_array_equal(rays[:, :3], [[1.0, -2.0, 3.5]] * 2)
+    np.testing.assert_allclose(rays[:, 3:], dirs @ rotation.T, atol=1e-7)
+    assert make_rays([0.0, 0.0, 0.0], np.zeros((0, 3), np.float32), rotation).shape == (0, 6)
