@@ -14,9 +14,14 @@ import pyarrow.parquet as pq
 
 
 def write_parquet(frame: pd.DataFrame, path: Path) -> None:
-    table = pa.Table.from_pandas(frame, preserve_index=False)
+    # nthreads=1: the conversion is per column and cheap; a thread pool per call costs more than it saves.
+    table = pa.Table.from_pandas(frame, preserve_index=False, nthreads=1)
     # pandas metadata embeds library versions and index details; the schema itself is what readers need.
-    table = table.replace_schema_metadata(None)
+    write_arrow(table.replace_schema_metadata(None), path)
+
+
+def write_arrow(table: pa.Table, path: Path) -> None:
+    """Write an Arrow table with the fixed settings (a DataFrame of the same columns gives the same bytes)."""
     pq.write_table(table, path, compression="zstd", compression_level=3, row_group_size=1 << 20,
                    use_dictionary=False, write_statistics=True, version="2.6")
 
