@@ -11,7 +11,14 @@ from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from scipy import stats
+
+
+def _stats():
+    """scipy.stats, imported on first use: it costs ~1 s of start-up in every CLI call and render worker,
+    and only the simulate stage samples from these distributions."""
+    from scipy import stats
+
+    return stats
 
 
 class _Dist(BaseModel):
@@ -55,7 +62,7 @@ class Uniform(_Dist):
         return rng.uniform(self.low, self.high, size=n)
 
     def cdf(self, x: np.ndarray) -> np.ndarray:
-        return stats.uniform(self.low, self.high - self.low).cdf(x)
+        return _stats().uniform(self.low, self.high - self.low).cdf(x)
 
 
 class TruncNormal(_Dist):
@@ -75,7 +82,7 @@ class TruncNormal(_Dist):
 
     def _frozen(self):
         a, b = (self.low - self.mean) / self.std, (self.high - self.mean) / self.std
-        return stats.truncnorm(a, b, loc=self.mean, scale=self.std)
+        return _stats().truncnorm(a, b, loc=self.mean, scale=self.std)
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         return self._frozen().ppf(rng.uniform(size=n))
@@ -100,7 +107,7 @@ class LogNormal(_Dist):
         return self
 
     def _base(self):
-        return stats.lognorm(s=self.sigma, scale=self.median)
+        return _stats().lognorm(s=self.sigma, scale=self.median)
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         base = self._base()
