@@ -33,8 +33,8 @@ from torch.nn import functional as F
 
 from pipeline.detect.model import STRIDE
 
-GAUSSIAN_ALPHA = 0.54
-MIN_SIGMA_CELLS = 0.3
+GAUSSIAN_ALPHA = 2.0  # the detector config's default (train.gaussian_alpha)
+MIN_SIGMA_CELLS = 1.0  # train.min_sigma_cells
 REG_AREA = 0.54
 SIZE_WEIGHT = 1.0
 OFFSET_WEIGHT = 1.0

@@ -48,3 +48,10 @@ def test_command_line_overrides_are_validated():
     assert config.train.steps == 5 and config.train.warmup_steps == 4 and config.train.conditions is None
     with pytest.raises(ConfigError, match="train.steps"):
         resolve_config("default", steps=0)
+
+
+def test_target_defaults_match_the_config():
+    from pipeline.detect.losses import GAUSSIAN_ALPHA, MIN_SIGMA_CELLS
+
+    train = DetectorConfig().train
+    assert (train.gaussian_alpha, train.min_sigma_cells) == (GAUSSIAN_ALPHA, MIN_SIGMA_CELLS)
