@@ -63,7 +63,7 @@ from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
-from exporters.io import OrderedCalls, dumps_json, ordered_calls
+from exporters.io import ZSTD_LEVEL, OrderedCalls, dumps_json, ordered_calls
 from exporters.scene import (
     CLASS_COLORS,
     DEFAULT_COLOR,
@@ -139,9 +139,6 @@ class _Log:
         self.calls.submit(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
                           publish_time=time_ns, data=data, sequence=self.counts[topic])
         self.counts[topic] += 1
-
-
-ZSTD_LEVEL = 1
 
 
 @contextlib.contextmanager

@@ -35,14 +35,13 @@ import zstandard
 from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportError, ExportOptions
-from exporters.io import OrderedCalls, dumps_json, ordered_calls
+from exporters.io import ZSTD_LEVEL, OrderedCalls, dumps_json, ordered_calls
 from exporters.ros_messages import RosMessages
 from exporters.scene import FrameData, FrameRows, Naming, frames_with_data, nanoseconds
 from exporters.source import ExportSource, FrameItem
 
 log = logging.getLogger(__name__)
 
-ZSTD_LEVEL = 1  # as for MCAP (exporters/mcap.py): half the CPU time of zstd's default 3, same size
 QUEUE_BYTES = 2 << 20  # messages waiting for the writer thread, at most (rosbags' chunks are 1 MiB)
 
 

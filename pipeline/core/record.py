@@ -146,11 +146,16 @@ def lidar_path(root: Path, lidar: str, frame: int) -> Path:
     return root / "lidars" / lidar / f"{frame_stem(frame)}.parquet"
 
 
-def conform(frame: pd.DataFrame, columns: dict[str, str], what: str) -> pd.DataFrame:
-    """Select and type ``columns`` (in order); fail naming any that are missing."""
-    missing = [c for c in columns if c not in frame.columns]
+def require_columns(present, columns: dict[str, str], what: str) -> None:
+    """Fail naming every one of ``columns`` that is not in ``present``."""
+    missing = [c for c in columns if c not in present]
     if missing:
         raise RecordError(f"{what}: missing columns {', '.join(missing)}")
+
+
+def conform(frame: pd.DataFrame, columns: dict[str, str], what: str) -> pd.DataFrame:
+    """Select and type ``columns`` (in order); fail naming any that are missing."""
+    require_columns(frame.columns, columns, what)
     return frame[list(columns)].astype(columns)
 
 
@@ -222,8 +227,6 @@ class DatasetRecord:
             raise RecordError(f"{path}: missing from the record")
         # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs.
         table = pq.read_table(path)
-        missing = [c for c in POINT_COLUMNS if c not in table.column_names]
-        if missing:
-            raise RecordError(f"{path}: missing columns {', '.join(missing)}")
+        require_columns(table.column_names, POINT_COLUMNS, str(path))
         return pd.DataFrame({c: np.asarray(table.column(c).to_numpy(), dtype=dtype)
                              for c, dtype in POINT_COLUMNS.items()})
