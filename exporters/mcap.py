@@ -74,7 +74,6 @@ from exporters.scene import (
     Naming,
     frames_with_data,
     nanoseconds,
-    pack_points,
     quat_from_matrix,
     quat_from_yaw,
     split_ns,
@@ -116,8 +115,11 @@ def _yaw_pose(x: float, y: float, z: float, yaw: float) -> Pose:
 class _Log:
     """Registers one schema per message type and one channel per topic on first use.
 
-    Messages are written through ``calls`` (the writer's thread); a registration waits for it to catch up,
-    as the Writer is never used from two threads at once.
+    Messages are serialised here and collected until :meth:`flush`, which hands them to ``calls`` (the
+    writer's thread) as one call: a call per frame rather than per message, so the writer thread waits for
+    the interpreter lock once per frame, not after every small message. A registration flushes and waits for
+    that thread to catch up, as the Writer is never used from two threads at once; the writer's calls are
+    the same, in the same order, as writing each message directly.
     """
 
     def __init__(self, writer: Writer, calls: OrderedCalls) -> None:
@@ -126,9 +128,12 @@ class _Log:
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
+        self._batch: list[tuple[int, int, bytes, int]] = []
+        self._batch_bytes = 0
 
     def write(self, topic: str, message: Any, time_ns: int) -> None:
         if topic not in self.channels:
+            self.flush()
             self.calls.drain()
             name = type(message).DESCRIPTOR.full_name
             if name not in self.schemas:
@@ -136,9 +141,19 @@ class _Log:
             self.channels[topic] = self.writer.register_channel(topic, "protobuf", self.schemas[name])
             self.counts[topic] = 0
         data = message.SerializeToString(deterministic=True)
-        self.calls.submit(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
-                          publish_time=time_ns, data=data, sequence=self.counts[topic])
+        self._batch.append((self.channels[topic], time_ns, data, self.counts[topic]))
+        self._batch_bytes += len(data)
         self.counts[topic] += 1
+
+    def flush(self) -> None:
+        """Queue the messages written since the last flush on the writer thread."""
+        if self._batch:
+            self.calls.submit(self._batch_bytes, self._add_messages, self._batch)
+            self._batch, self._batch_bytes = [], 0
+
+    def _add_messages(self, batch: list[tuple[int, int, bytes, int]]) -> None:
+        for channel, time_ns, data, sequence in batch:
+            self.writer.add_message(channel, log_time=time_ns, publish_time=time_ns, data=data, sequence=sequence)
 
 
 @contextlib.contextmanager
@@ -179,6 +194,7 @@ class McapExporter(Exporter):
                 for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap",
                                        unit="frame", disable=not options.progress):
                     self._frame(out, item, data, Naming(item.source, source), rows[id(item.source)])
+                    out.flush()
             counts = {"frames": source.n_frames(), "messages": dict(sorted(out.counts.items())),
                       "objects": summary.to_dict()}
             for src in source.records:
@@ -223,7 +239,7 @@ class McapExporter(Exporter):
         for lidar in info.lidars:
             out.write(names.topic(f"/lidar/{lidar.name}/points"), PointCloud(
                 timestamp=stamp, frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
-                point_stride=POINT_STRIDE, fields=_FIELDS, data=pack_points(data.points[lidar.name])), t)
+                point_stride=POINT_STRIDE, fields=_FIELDS, data=data.points[lidar.name]), t)
         out.write(names.topic("/scene/objects"), self._scene(rows.objects(item.frame), stamp, names,
                                                              info.frame_rate_hz), t)
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from exporters.filters import KEPT, FilterSummary
 from exporters.ros_types import typestore
@@ -19,7 +18,6 @@ from exporters.scene import (
     POINT_FIELDS,
     POINT_STRIDE,
     Naming,
-    pack_points,
     quat_from_matrix,
     quat_from_yaw,
     split_ns,
@@ -92,13 +90,15 @@ class RosMessages:
             roi=self.t["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
                                                            do_rectify=False))
 
-    def point_cloud(self, points: pd.DataFrame, frame_id: str, time_ns: int):
+    def point_cloud(self, packed: bytes, frame_id: str, time_ns: int):
+        """PointCloud2 of one sweep packed by :func:`exporters.scene.pack_points`."""
         fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
                   for n, o, d in POINT_FIELDS]
-        data = np.frombuffer(pack_points(points), dtype=np.uint8)
+        width = len(packed) // POINT_STRIDE
         return self.t["sensor_msgs/msg/PointCloud2"](
-            header=self.header(frame_id, time_ns), height=1, width=len(points), fields=fields, is_bigendian=False,
-            point_step=POINT_STRIDE, row_step=POINT_STRIDE * len(points), data=data, is_dense=True)
+            header=self.header(frame_id, time_ns), height=1, width=width, fields=fields, is_bigendian=False,
+            point_step=POINT_STRIDE, row_step=POINT_STRIDE * width, data=np.frombuffer(packed, dtype=np.uint8),
+            is_dense=True)
 
     def _hypothesis(self, cls: str, pose=None):
         pose = pose or self.pose((0, 0, 0), (0.0, 0.0, 0.0, 1.0))

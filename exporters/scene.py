@@ -11,7 +11,7 @@ records stay apart; a single record uses the plain names.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -40,12 +40,14 @@ _POINT_DTYPE = np.dtype({"names": [f[0] for f in POINT_FIELDS], "formats": [f[2]
                          "offsets": [f[1] for f in POINT_FIELDS], "itemsize": POINT_STRIDE})
 
 
-def pack_points(points: pd.DataFrame) -> bytes:
-    """(N * 24) bytes of one sweep in :data:`POINT_FIELDS` layout (padding zeroed, so output is deterministic)."""
-    packed = np.zeros(len(points), dtype=_POINT_DTYPE)
+def pack_points(points: Mapping[str, np.ndarray] | pd.DataFrame) -> bytes:
+    """(N * 24) bytes of one sweep (record columns: a DataFrame or one array per column, as
+    ``DatasetRecord.point_columns``) in :data:`POINT_FIELDS` layout; padding zeroed, so output is deterministic."""
+    n = len(points["x_m"])
+    packed = np.zeros(n, dtype=_POINT_DTYPE)
     for name, column in (("x", "x_m"), ("y", "y_m"), ("z", "z_m"), ("intensity", "intensity"), ("ring", "ring"),
                          ("class", "semantic"), ("instance", "instance_id")):
-        packed[name] = points[column].to_numpy()
+        packed[name] = np.asarray(points[column])
     return packed.tobytes()
 
 
@@ -73,23 +75,25 @@ def quat_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
 
 @dataclass(frozen=True)
 class FrameData:
-    """The record files of one frame that a log carries: RGB PNG bytes by camera, the sweep by LiDAR."""
+    """The record files of one frame that a log carries: RGB PNG bytes by camera; by LiDAR, the sweep packed
+    in :data:`POINT_FIELDS` layout (:func:`pack_points`; ``len // POINT_STRIDE`` points)."""
 
     images: dict[str, bytes]
-    points: dict[str, pd.DataFrame]
+    points: dict[str, bytes]
 
 
 def load_frame(item: FrameItem) -> FrameData:
-    """Read the :class:`FrameData` of one frame from its record."""
+    """Read the :class:`FrameData` of one frame from its record (sweeps packed straight from their columns)."""
     record, info = item.source.record, item.source.info
     return FrameData(images={c.name: record.image_path(c.name, "rgb", item.frame).read_bytes() for c in info.cameras},
-                     points={lidar.name: record.points(lidar.name, item.frame) for lidar in info.lidars})
+                     points={lidar.name: pack_points(record.point_columns(lidar.name, item.frame))
+                             for lidar in info.lidars})
 
 
 def frames_with_data(source: ExportSource, ahead: int = PREFETCH) -> Iterator[tuple[FrameItem, FrameData]]:
     """Every frame of ``source`` in export order with its :class:`FrameData`, loaded up to ``ahead`` frames
-    early on a worker thread (Parquet decoding and file reads release the GIL, so they overlap the
-    caller's message building). A load error is raised when its frame is reached."""
+    early on a worker thread (Parquet decoding, packing and file reads mostly release the GIL, so they overlap
+    the caller's message building). A load error is raised when its frame is reached."""
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="frame-loader") as pool:
         loading: deque[tuple[FrameItem, Future[FrameData]]] = deque()
         try:

@@ -146,10 +146,16 @@ def test_points_are_typed_writeable_and_checked(tmp_path, morning):
     assert dict(points.dtypes.astype(str)) == POINT_COLUMNS
     table = pq.read_table(lidar_path(morning, "top", frame))
     assert np.array_equal(points["x_m"].to_numpy(), table.column("x_m").to_numpy())
+    columns = record.point_columns("top", frame)
+    assert {c: str(a.dtype) for c, a in columns.items()} == POINT_COLUMNS
+    assert all(np.array_equal(columns[c], points[c].to_numpy()) for c in POINT_COLUMNS)
     points.loc[0, "x_m"] = 1.5  # not a read-only view of the Arrow buffers
+    assert columns["x_m"][0] != 1.5
     copy = tmp_path / "rec"
     shutil.copytree(morning, copy)
     path = lidar_path(copy, "top", frame)
     pq.write_table(pq.read_table(path).drop_columns(["ring"]), path)
     with pytest.raises(RecordError, match=r"000\d+\.parquet: missing columns ring"):
         DatasetRecord(copy).points("top", frame)
+    with pytest.raises(RecordError, match=r"000\d+\.parquet: missing columns ring"):
+        DatasetRecord(copy).point_columns("top", frame)
