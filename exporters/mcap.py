@@ -112,6 +112,31 @@ def _yaw_pose(x: float, y: float, z: float, yaw: float) -> Pose:
     return Pose(position=Vector3(x=float(x), y=float(y), z=float(z)), orientation=Quaternion(x=qx, y=qy, z=qz, w=qw))
 
 
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while value > 0x7F:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _append_bytes_field(serialized: bytes, message: Any, name: str, payload: bytes) -> bytes:
+    """``serialized`` (``message`` without field ``name``) followed by that bytes field holding ``payload``.
+
+    When ``name`` is the message's highest-numbered field this is byte for byte what
+    ``SerializeToString(deterministic=True)`` gives with the field set (fields go out in number order; an
+    empty proto3 bytes field is not written), without the two copies protobuf makes of the payload
+    (setting, then serialising): ~6 ms of a 2.4 MB LiDAR sweep's ~6.5 ms.
+    """
+    field = message.DESCRIPTOR.fields_by_name[name]
+    if field.type != field.TYPE_BYTES or field.number != max(f.number for f in message.DESCRIPTOR.fields):
+        raise ValueError(f"{message.DESCRIPTOR.full_name}.{name} is not the message's last field of type bytes")
+    if not payload:
+        return serialized
+    return b"".join((serialized, _varint(field.number << 3 | 2), _varint(len(payload)), payload))
+
+
 class _Log:
     """Registers one schema per message type and one channel per topic on first use.
 
@@ -131,7 +156,9 @@ class _Log:
         self._batch: list[tuple[int, int, bytes, int]] = []
         self._batch_bytes = 0
 
-    def write(self, topic: str, message: Any, time_ns: int) -> None:
+    def write(self, topic: str, message: Any, time_ns: int, last_bytes: tuple[str, bytes] | None = None) -> None:
+        """Log ``message`` on ``topic``; ``last_bytes`` = (field, payload) sets a large bytes field on the wire
+        instead (see :func:`_append_bytes_field`)."""
         if topic not in self.channels:
             self.flush()
             self.calls.drain()
@@ -141,6 +168,8 @@ class _Log:
             self.channels[topic] = self.writer.register_channel(topic, "protobuf", self.schemas[name])
             self.counts[topic] = 0
         data = message.SerializeToString(deterministic=True)
+        if last_bytes is not None:
+            data = _append_bytes_field(data, message, *last_bytes)
         self._batch.append((self.channels[topic], time_ns, data, self.counts[topic]))
         self._batch_bytes += len(data)
         self.counts[topic] += 1
@@ -239,7 +268,7 @@ class McapExporter(Exporter):
         for lidar in info.lidars:
             out.write(names.topic(f"/lidar/{lidar.name}/points"), PointCloud(
                 timestamp=stamp, frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
-                point_stride=POINT_STRIDE, fields=_FIELDS, data=data.points[lidar.name]), t)
+                point_stride=POINT_STRIDE, fields=_FIELDS), t, last_bytes=("data", data.points[lidar.name]))
         out.write(names.topic("/scene/objects"), self._scene(rows.objects(item.frame), stamp, names,
                                                              info.frame_rate_hz), t)
 

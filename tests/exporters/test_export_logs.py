@@ -169,3 +169,20 @@ def test_foxglove_layout_shows_what_a_single_record_mcap_holds(tmp_path, morning
 
 def _first_cloud(messages):
     return next(m for _, t, _, m in messages if t == "/lidar/top/points")
+
+
+@pytest.mark.parametrize("size", [0, 1, 127, 128, 300_000])
+def test_bytes_field_on_the_wire_equals_protobuf_serialisation(size):
+    """The LiDAR sweep goes on the wire after the rest of the PointCloud (no protobuf copies): the same bytes."""
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from exporters.mcap import _FIELDS, _append_bytes_field
+
+    payload = np.random.default_rng(size).bytes(size)
+    head = PointCloud(frame_id="top", point_stride=24, fields=_FIELDS)
+    whole = PointCloud(frame_id="top", point_stride=24, fields=_FIELDS, data=payload)
+    assert (_append_bytes_field(head.SerializeToString(deterministic=True), head, "data", payload)
+            == whole.SerializeToString(deterministic=True))
+    with pytest.raises(ValueError, match="CompressedImage.data is not the message's last field"):
+        _append_bytes_field(b"", CompressedImage(), "data", payload)
