@@ -9,6 +9,7 @@ the same description themselves.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import importlib
 import logging
@@ -99,6 +100,11 @@ class Exporter(ABC):
     def check(self, source: ExportSource, options: ExportOptions) -> None:  # noqa: B027 - optional hook
         """Raise :class:`ExportError` before writing when the records do not suit the format."""
 
+    def companions(self, source: ExportSource, out: Path) -> dict[Path, str]:
+        """Small text files that go next to a file export (``writes_file``), written and moved into place
+        with it (e.g. an MCAP's Foxglove layout): path -> content. None by default."""
+        return {}
+
     @abstractmethod
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
@@ -112,13 +118,17 @@ class Exporter(ABC):
         self.check(source, options)
         description = {"format": self.name, "options": options.to_dict(), **source.describe()}
         atomic = atomic_file if self.writes_file else atomic_named_dir if self.creates_own_dir else atomic_dir
-        with atomic(Path(out)) as tmp:
-            counts = self.write(source, tmp, options, description, meta)
-            description = {**description, "counts": counts}
-            if not self.writes_file:
-                write_json(tmp / "export.json", description)
-                if meta is not None:
-                    write_json(tmp / "meta.json", meta)
+        with contextlib.ExitStack() as companions:
+            # Entered first, so they move into place after ``out`` and are removed if anything fails.
+            for path, text in (self.companions(source, Path(out)) if self.writes_file else {}).items():
+                companions.enter_context(atomic_file(path)).write_text(text)
+            with atomic(Path(out)) as tmp:
+                counts = self.write(source, tmp, options, description, meta)
+                description = {**description, "counts": counts}
+                if not self.writes_file:
+                    write_json(tmp / "export.json", description)
+                    if meta is not None:
+                        write_json(tmp / "meta.json", meta)
         return description
 
 

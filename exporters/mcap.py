@@ -63,6 +63,7 @@ from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
+from exporters.foxglove_layout import RecordView, layout, layout_path
 from exporters.io import ZSTD_LEVEL, OrderedCalls, dumps_json, ordered_calls
 from exporters.scene import (
     CLASS_COLORS,
@@ -210,6 +211,15 @@ def _zstd_level(level: int) -> Iterator[None]:
 class McapExporter(Exporter):
     name = "mcap"
     writes_file = True
+
+    def companions(self, source: ExportSource, out: Path) -> dict[Path, str]:
+        """The Foxglove layout of this file (:mod:`exporters.foxglove_layout`), beside it."""
+        views = []
+        for src in source.records:
+            names, info = Naming(src, source), src.info
+            views.append(RecordView(src.stem, names.prefix, info.cameras[0].name if info.cameras else None,
+                                    tuple(lidar.name for lidar in info.lidars)))
+        return {layout_path(out): dumps_json(layout(views))}
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:

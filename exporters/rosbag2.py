@@ -42,6 +42,7 @@ from exporters.source import ExportSource, FrameItem
 
 log = logging.getLogger(__name__)
 
+BAG_VERSION = 8
 QUEUE_BYTES = 2 << 20  # messages waiting for the writer thread, at most (rosbags' chunks are 1 MiB)
 
 
@@ -106,7 +107,9 @@ class Rosbag2Exporter(Exporter):
         from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
         msgs = RosMessages()
-        writer = Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP)
+        # Bag format 8, which every ROS 2 distribution from Humble on reads: format 9 (Jazzy) stores QoS profiles
+        # in a form Humble's rosbag2 fails to parse (ros2/rosbag2#1476), and later ones still read 8.
+        writer = Writer(tmp, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         if options.compression is Compression.ZSTD:
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         writer.open()

@@ -116,13 +116,13 @@ class Naming:
     """Topic and frame names of one record within a log."""
 
     def __init__(self, source: RecordSource, export: ExportSource) -> None:
-        self._prefix = "" if len(export.records) == 1 else source.stem
+        self.prefix = "" if len(export.records) == 1 else source.stem
 
     def topic(self, name: str) -> str:
-        return f"/{self._prefix}{name}" if self._prefix else name
+        return f"/{self.prefix}{name}" if self.prefix else name
 
     def frame(self, name: str) -> str:
-        return f"{self._prefix}/{name}" if self._prefix else name
+        return f"{self.prefix}/{name}" if self.prefix else name
 
 
 class FrameRows:

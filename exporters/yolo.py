@@ -2,15 +2,20 @@
 
 Every (record, camera, frame) is one image, named like the COCO export; its label file has one line
 per kept object, ``class cx cy w h`` normalised by the image size (6 decimals), and is empty for an
-image without objects (a background image). Class indices are 0..5 over COCO's categories in id order
-(person, bicycle, car, motorcycle, bus, truck), so ``names`` in data.yaml matches COCO-trained models'
-names. YOLO has no ignore regions: objects the filter marks tiny or occluded are dropped (counted).
+image without objects (a background image). Class indices are those of COCO-trained YOLO models (the
+80-class list, 0-based: person 0, bicycle 1, car 2, motorcycle 3, bus 5, truck 7), so such a model is
+scored on the export without remapping; ``names`` lists the first 8 (airplane 4 and train 6 stay empty).
+YOLO has no ignore regions: objects the filter marks tiny or occluded are dropped (counted).
 data.yaml has no ``path`` key, so Ultralytics resolves the split folders next to data.yaml; without a
-``val`` split, ``val`` points at the training images (Ultralytics requires one).
+``val`` split, ``val`` points at the training images (Ultralytics requires one; logged). YOLO files carry
+no metadata, so ``DIR/images.csv`` gives each image's split, scenario, seed, condition, camera, frame and
+timestamp.
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import logging
 from pathlib import Path
 from typing import Any
@@ -19,7 +24,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from exporters.base import Exporter, ExportOptions, boxes_2d
+from exporters.base import Exporter, ExportError, ExportOptions, boxes_2d
 from exporters.filters import KEPT, FilterSummary
 from exporters.io import link_or_copy
 from exporters.source import ExportSource, safe_name
@@ -27,8 +32,12 @@ from pipeline.core.classes import COCO_CATEGORIES
 
 log = logging.getLogger(__name__)
 
-CLASS_INDEX = {cid: i for i, cid in enumerate(sorted(COCO_CATEGORIES))}
+# The first 8 names of COCO-trained models' 80 classes; COCO ids 1-8 are contiguous, so index = id - 1.
+COCO80_NAMES = ("person", "bicycle", "car", "motorcycle", "airplane", "bus", "train", "truck")
+CLASS_INDEX = {cid: cid - 1 for cid in sorted(COCO_CATEGORIES)}
 """COCO category id -> YOLO class index."""
+assert all(COCO80_NAMES[i] == COCO_CATEGORIES[cid][0] for cid, i in CLASS_INDEX.items())
+IMAGES_CSV_COLUMNS = ("image", "split", "scenario", "seed", "condition", "camera", "frame", "timestamp_s")
 
 
 def label_text(boxes: np.ndarray, classes: np.ndarray, width: int, height: int) -> str:
@@ -49,6 +58,9 @@ class YoloExporter(Exporter):
         summary = FilterSummary()
         counts = {s: 0 for s in source.split_names}
         linked = objects = 0
+        rows = io.StringIO()
+        table = csv.writer(rows, lineterminator="\n")
+        table.writerow(IMAGES_CSV_COLUMNS)
         labels_of = {(id(s), c.name): s.sensor_labels(c.name) for s in source.records for c in s.info.cameras}
         for split in source.split_names:
             (tmp / "images" / safe_name(split)).mkdir(parents=True)
@@ -61,11 +73,21 @@ class YoloExporter(Exporter):
                 src = item.source.record.image_path(cam.name, "rgb", item.frame)
                 linked += link_or_copy(src, tmp / "images" / split / f"{stem}.png", link=options.link_images)
                 text = ""
+                image = f"images/{split}/{stem}.png"
+                info = item.source.info
+                table.writerow([image, split, info.scenario, int(info.seed), info.condition, cam.name, item.frame,
+                                repr(float(item.time_s))])
                 labels = labels_of[(id(item.source), cam.name)].get(item.frame)
                 if labels is not None and not labels.empty:
                     reasons = options.filter.classify(labels)
                     summary.add(reasons, labels["cls"].to_numpy())
-                    keep = (reasons == KEPT) & np.all(np.isfinite(boxes := boxes_2d(labels, options.box)), axis=1)
+                    boxes = boxes_2d(labels, options.box)
+                    keep = reasons == KEPT
+                    boxless = keep & ~np.all(np.isfinite(boxes), axis=1)
+                    if boxless.any():
+                        track = int(labels["track_id"].to_numpy()[boxless][0])
+                        raise ExportError(f"{item.source.record.root}: frame {item.frame}, camera {cam.name}, track "
+                                          f"{track}: visible object without a {options.box.value} 2D box")
                     classes = np.array([CLASS_INDEX[int(c)] for c in labels["category_id"].to_numpy()[keep]], int)
                     text = label_text(boxes[keep], classes, cam.width_px, cam.height_px)
                     objects += int(keep.sum())
@@ -74,10 +96,13 @@ class YoloExporter(Exporter):
         data = {"train": f"images/{safe_name(source.split_names[0])}"}
         for split in source.split_names:
             data[split if split in ("train", "val", "test") else safe_name(split)] = f"images/{safe_name(split)}"
-        data.setdefault("val", data["train"])
-        data["nc"] = len(CLASS_INDEX)
-        data["names"] = {i: COCO_CATEGORIES[cid][0] for cid, i in CLASS_INDEX.items()}
+        if "val" not in data:
+            log.info("no val split: data.yaml's val points at the training images (%s)", data["train"])
+            data["val"] = data["train"]
+        data["nc"] = len(COCO80_NAMES)
+        data["names"] = dict(enumerate(COCO80_NAMES))
         (tmp / "data.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+        (tmp / "images.csv").write_text(rows.getvalue())
         images = sum(counts.values())
         return {"images": images, "images_by_split": counts, "images_linked": int(linked),
                 "images_copied": images - int(linked), "objects_written": objects, "objects": summary.to_dict()}

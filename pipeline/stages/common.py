@@ -60,8 +60,8 @@ def write_meta(
 ) -> dict[str, Any]:
     """Write ``meta.json``: versions, the resolved config, its hash, the seed and the command line.
 
-    The command line is recorded relative to nothing machine-specific; it is informational and
-    excluded from the config hash so that the same config and seed give the same hash anywhere.
+    The command line (:func:`command_line`) is informational and excluded from the config hash so that the same
+    config and seed give the same hash anywhere.
     """
     meta = {
         "stage": stage,
@@ -69,10 +69,17 @@ def write_meta(
         "config": config,
         "config_hash": config_hash(config),
         "seed": seed,
-        "command": list(sys.argv if argv is None else argv),
+        "command": command_line(argv),
     }
     write_json(out_dir / "meta.json", meta)
     return meta
+
+
+def command_line(argv: list[str] | None = None) -> list[str]:
+    """``argv`` (default ``sys.argv``) with the program as its bare name: the absolute path of the venv's
+    ``roadsynth`` script would make outputs differ between two checkouts of the same pipeline."""
+    argv = list(sys.argv if argv is None else argv)
+    return [Path(argv[0]).name, *argv[1:]] if argv else []
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.stages.common import config_hash, software_versions
+from pipeline.stages.common import command_line, config_hash, software_versions
 
 HELP = "export dataset records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2"
 log = logging.getLogger(__name__)
@@ -74,15 +74,13 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 
 def main(args: argparse.Namespace) -> int:
-    import sys
-
     from exporters.base import get_exporter
 
     args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)
     config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}
     meta = {"stage": "export", "versions": software_versions(), "config": config, "config_hash": config_hash(config),
-            "seed": None, "command": list(sys.argv)}
+            "seed": None, "command": command_line()}
     description = get_exporter(args.format).export(args.dataset, args.out, options, meta=meta)
     objects = description["counts"].get("objects", {}).get("total", {})
     log.info("exported %d record(s) to %s (%s); objects %s", len(description["records"]), args.out, args.format,

@@ -7,9 +7,10 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from exporters.base import ExportOptions, formats, get_exporter
+from exporters.base import ExportError, ExportOptions, formats, get_exporter
 from exporters.splits import SplitError, SplitSpec
 from pipeline.core.record import RecordError
 from tests.conftest import tree_hashes
@@ -159,3 +160,22 @@ def test_points_are_typed_writeable_and_checked(tmp_path, morning):
         DatasetRecord(copy).points("top", frame)
     with pytest.raises(RecordError, match=r"000\d+\.parquet: missing columns ring"):
         DatasetRecord(copy).point_columns("top", frame)
+
+
+@pytest.mark.parametrize("fmt", ["coco", "kitti", "yolo"])
+def test_a_visible_object_without_a_box_fails_naming_it(tmp_path, morning, fmt):
+    """A record whose labels say an object is visible but give it no 2D box is refused, not silently dropped."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    copy = tmp_path / "rec"
+    shutil.copytree(morning, copy)
+    table = pq.read_table(copy / "labels.parquet")
+    labels = table.to_pandas()
+    row = labels.index[(labels.sensor == "front") & (labels.frame == 10) & (labels.visible_px >= 20)][0]
+    labels.loc[row, ["x1", "x2"]] = np.nan
+    pq.write_table(pa.Table.from_pandas(labels, schema=table.schema, preserve_index=False), copy / "labels.parquet")
+    with pytest.raises(ExportError, match=rf"track {labels.track_id[row]}.* without a tight 2D box|"
+                                          rf"track {labels.track_id[row]} is visible but has no tight 2D box"):
+        get_exporter(fmt).export([copy], tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -87,5 +87,5 @@ def test_writer_thread_error_fails_the_export_atomically(tmp_path, morning, monk
     monkeypatch.setattr(writer_cls, method, failing)
     with pytest.raises(OSError, match="disk full"):
         get_exporter(fmt).export([morning], tmp_path / "out")
-    assert list(tmp_path.iterdir()) == []
+    assert list(tmp_path.iterdir()) == []  # nor the MCAP's layout beside it
     assert all(name.startswith(f"{fmt}-writer") for name in threads)

@@ -104,6 +104,11 @@ def test_rosbag2_rosbags_reader_and_mcap_ros2_decoder(tmp_path, morning):
     assert qos["/tf"][0].durability == QosDurability.VOLATILE
     bag = yaml.safe_load((out / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert bag["storage_identifier"] == "mcap" and bag["message_count"] == 17
+    # Format 8: QoS as a YAML string with rmw's integer enums, which Humble's rosbag2 parses (format 9's names not)
+    assert bag["version"] == 8
+    topics = {t["topic_metadata"]["name"]: t["topic_metadata"] for t in bag["topics_with_message_count"]}
+    (latched,) = yaml.safe_load(topics["/tf_static"]["offered_qos_profiles"])
+    assert (latched["durability"], latched["history"], latched["depth"]) == (1, 1, 1)  # TRANSIENT_LOCAL, KEEP_LAST
 
     decoded = {}
     with (out / "bag.mcap").open("rb") as f:
@@ -143,32 +148,69 @@ def _panels(node) -> list[str]:
     return [node] if isinstance(node, str) else _panels(node["first"]) + _panels(node["second"])
 
 
+def _check_layout(layout: dict, messages: list) -> list[dict]:
+    """Every panel of ``layout`` names only topics and frames of the MCAP ``messages``, with what Foxglove needs to
+    draw them; returns one {kind: config} per record view (a tab each, or the whole layout)."""
+    configs = layout["configById"]
+    topics = {t for _, t, _, _ in messages}
+    frames = {x.parent_frame_id for _, _, _, m in messages if hasattr(m, "transforms") for x in m.transforms} | {
+        x.child_frame_id for _, _, _, m in messages if hasattr(m, "transforms") for x in m.transforms}
+    root = layout["layout"]
+    if isinstance(root, str) and root.startswith("Tab!"):
+        views = [tab["layout"] for tab in configs[root]["tabs"]]
+        assert sorted(p for v in views for p in _panels(v)) == sorted(set(configs) - {root})
+    else:
+        views = [root]
+        assert sorted(_panels(root)) == sorted(configs)
+    result = []
+    for view in views:
+        config = {panel.split("!")[0]: configs[panel] for panel in _panels(view)}
+        image = config["Image"]["imageMode"]
+        assert image["imageTopic"].endswith("/camera/front/image")
+        assert {image["imageTopic"], image["calibrationTopic"], *image["annotations"]} <= topics
+        assert all(a["visible"] for a in image["annotations"].values())
+        scene = config["3D"]
+        # the 3D panel subscribes only to topics marked visible; transforms (/tf) are always read
+        visible = {t for t, s in scene["topics"].items() if s["visible"]}
+        (points,) = [t for t in visible if t.endswith("/lidar/top/points")]
+        assert len(visible) == 2 and any(t.endswith("/scene/objects") for t in visible)
+        cloud = next(m for _, t, _, m in messages if t == points)
+        assert all(s["colorField"] in {f.name for f in cloud.fields} for t, s in scene["topics"].items()
+                   if t.endswith("/points"))
+        assert set(scene["topics"]) | {config["RawMessages"]["topicPath"]} <= topics
+        assert scene["followTf"] in frames and {k.removeprefix("frame:") for k in scene["transforms"]} <= frames
+        assert all(key == layer["instanceId"] and layer["frameId"] in frames for key, layer in scene["layers"].items())
+        assert config["RawMessages"]["expansion"] in ("all", "none")  # Foxglove's NodeExpansion (or a per-key dict)
+        result.append(config)
+    return result
+
+
 def test_foxglove_layout_shows_what_a_single_record_mcap_holds(tmp_path, morning):
-    """docs/foxglove_layout.json names only topics and frames of an export, with what Foxglove needs to draw them."""
-    layout = json.loads((Path(__file__).resolve().parents[2] / "docs" / "foxglove_layout.json").read_text())
+    """docs/foxglove_layout.json is the layout the exporter writes beside a single-record MCAP, and names only its
+    topics and frames."""
+    shipped = json.loads((Path(__file__).resolve().parents[2] / "docs" / "foxglove_layout.json").read_text())
     out = tmp_path / "run.mcap"
     get_exporter("mcap").export([morning], out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.layout.json", "run.mcap"]
+    assert json.loads((tmp_path / "run.layout.json").read_text()) == shipped
     messages, _, _ = _read_mcap(out)
-    topics = {t for _, t, _, _ in messages}
-    frames = {"world"} | {x.child_frame_id for _, t, _, m in messages if t == "/tf" for x in m.transforms}
-
-    assert sorted(_panels(layout["layout"])) == sorted(layout["configById"])
-    config = {panel.split("!")[0]: c for panel, c in layout["configById"].items()}
+    (config,) = _check_layout(shipped, messages)
     image = config["Image"]["imageMode"]
     assert (image["imageTopic"], image["calibrationTopic"]) == ("/camera/front/image", "/camera/front/calibration")
-    assert image["annotations"] == {"/camera/front/annotations": {"visible": True}}
-    scene = config["3D"]
-    # the 3D panel subscribes only to topics marked visible; transforms (/tf) are always read
-    assert {t for t, s in scene["topics"].items() if s["visible"]} == {"/lidar/top/points", "/scene/objects"}
-    assert scene["topics"]["/lidar/top/points"]["colorField"] in {f.name for f in _first_cloud(messages).fields}
-    assert set(scene["topics"]) | {config["RawMessages"]["topicPath"]} <= topics
-    assert scene["followTf"] in frames and {k.removeprefix("frame:") for k in scene["transforms"]} <= frames
-    assert all(key == layer["instanceId"] and layer["frameId"] in frames for key, layer in scene["layers"].items())
-    assert config["RawMessages"]["expansion"] in ("all", "none")  # Foxglove's NodeExpansion (or a per-key dict)
+    assert config["3D"]["followTf"] == "ego"
 
 
-def _first_cloud(messages):
-    return next(m for _, t, _, m in messages if t == "/lidar/top/points")
+def test_foxglove_layout_of_a_merged_mcap_has_a_tab_per_record(tmp_path, morning, night):
+    out = tmp_path / "both.mcap"
+    get_exporter("mcap").export([night, morning], out)
+    layout = json.loads((tmp_path / "both.layout.json").read_text())
+    messages, _, _ = _read_mcap(out)
+    configs = _check_layout(layout, messages)
+    assert [t["title"] for t in layout["configById"][layout["layout"]]["tabs"]] == [
+        "highway_s1_morning", "highway_s1_night"]
+    assert [c["3D"]["followTf"] for c in configs] == ["highway_s1_morning/ego", "highway_s1_night/ego"]
+    assert [c["Image"]["imageMode"]["imageTopic"] for c in configs] == [
+        "/highway_s1_morning/camera/front/image", "/highway_s1_night/camera/front/image"]
 
 
 @pytest.mark.parametrize("size", [0, 1, 127, 128, 300_000])

@@ -93,3 +93,12 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")
     assert tls["tls_id"].nunique() == stats["network"]["traffic_lights"]
     assert set("".join(tls["state"])) <= set("rRyYgGuoOs")
+
+
+def test_recorded_command_line_names_the_program_not_its_path():
+    """meta.json's command (also embedded in MCAP exports) must not depend on where the checkout lives."""
+    from pipeline.stages.common import command_line
+
+    argv = ["/home/a/clone/.venv/bin/roadsynth", "export", "--out", "data/exports/runs.mcap"]
+    assert command_line(argv) == ["roadsynth", "export", "--out", "data/exports/runs.mcap"]
+    assert command_line([]) == []
