@@ -20,8 +20,8 @@ topic                              schema                      content
 Metadata records: ``roadsynth.export`` (options, records, split assignment, counts), one
 ``roadsynth.record.<stem>`` per record (its ``record.json`` and ``meta.json`` verbatim) and, when the
 stage passes one, ``roadsynth.meta``. Image boxes follow ``--box`` and the object filter (ignore
-regions are drawn translucent). docs/foxglove_layout.json shows a camera ``front`` with its boxes and a
-3D view with points and cubes.
+regions are drawn translucent). Beside ``FILE.mcap`` goes ``FILE.layout.json``, the Foxglove layout of this
+file (:mod:`exporters.foxglove_layout`): the camera with its boxes, a 3D view with points and cubes.
 """
 
 from __future__ import annotations
