@@ -199,7 +199,11 @@ def _zstd_level(level: int) -> Iterator[None]:
     import mcap.writer as mcap_writer
     import zstandard
 
-    original = mcap_writer.zstandard
+    original = getattr(mcap_writer, "zstandard", None)
+    if getattr(original, "compress", None) is None:  # an mcap release that compresses otherwise: its own level
+        log.warning("mcap %s: cannot set the zstd level; chunks use the library's default", mcap.__version__)
+        yield
+        return
     compressor = zstandard.ZstdCompressor(level=level)
     mcap_writer.zstandard = types.SimpleNamespace(compress=compressor.compress)
     try:

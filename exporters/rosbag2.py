@@ -115,7 +115,10 @@ class Rosbag2Exporter(Exporter):
         writer.open()
         if options.compression is Compression.ZSTD:
             # rosbags' MCAP storage compresses each chunk with this callable (zstd level 3) and has no option.
-            writer.storage.compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+            if hasattr(writer.storage, "compressor"):
+                writer.storage.compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+            else:  # a rosbags release that compresses otherwise: its own level
+                log.warning("rosbags: cannot set the zstd level; chunks use the library's default")
         try:
             rows = {id(s): FrameRows(s, options, msgs.summary) for s in source.records}
             with ordered_calls(QUEUE_BYTES, "rosbag2-writer") as calls:
