@@ -35,6 +35,8 @@ class CameraConfig:
     mount: pose of the camera body frame (x fwd, y left, z up) in the ego frame.
     samples_per_pixel: anti-aliasing samples for the colour image (labels use the pixel centre).
     jitter_seed: seed of the fixed stratified sample pattern.
+    samples_everywhere: with several samples, take them at every pixel (else only at edge pixels; see
+        :func:`pipeline.sensors.render.edge_pixels`).
     near_m: near plane for projection, metres.
     """
 
@@ -47,6 +49,7 @@ class CameraConfig:
     mount: Transform = field(default_factory=Transform.identity)
     samples_per_pixel: int = 1
     jitter_seed: int = 0
+    samples_everywhere: bool = False
     near_m: float = 0.05
 
     def __post_init__(self) -> None:
