@@ -21,14 +21,21 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
 
 from pipeline.core.config.sensors import LidarConditionConfig
+from pipeline.core.config.sensors import LidarConfig as LidarSpec
 from pipeline.core.geometry import Transform
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask, rowdot
+
+
+def _spec_default(name: str) -> Any:
+    """The default of a field of the rig config's LiDAR (pipeline.core.config): one source for both."""
+    return LidarSpec.model_fields[name].default
 
 
 @dataclass(frozen=True)
@@ -45,16 +52,16 @@ class LidarConfig:
     """
 
     name: str = "top"
-    channels: int = 64
-    fov_upper_deg: float = 2.0
-    fov_lower_deg: float = -24.9
-    horizontal_resolution_deg: float = 0.2
+    channels: int = _spec_default("channels")
+    fov_upper_deg: float = _spec_default("upper_fov_deg")
+    fov_lower_deg: float = _spec_default("lower_fov_deg")
+    horizontal_resolution_deg: float = _spec_default("horizontal_resolution_deg")
     range_min_m: float = 0.5
-    range_max_m: float = 120.0
-    rotation_hz: float = 10.0
-    attenuation_per_m: float = 0.004
-    range_noise_std_m: float = 0.02
-    dropout_prob: float = 0.02
+    range_max_m: float = _spec_default("range_m")
+    rotation_hz: float = _spec_default("rotation_hz")
+    attenuation_per_m: float = _spec_default("attenuation_per_m")
+    range_noise_std_m: float = _spec_default("range_noise_std_m")
+    dropout_prob: float = _spec_default("dropout")
     mount: Transform = field(default_factory=Transform.identity)
 
     def __post_init__(self) -> None:
@@ -88,6 +95,7 @@ class LidarSweep:
         time_offset_s: (M,) float32 firing time after the sweep start.
         instance_id: (M,) int32 actor track id, 0 = static. semantic: (M,) uint8 SemanticClass value.
         points_per_actor: (K,) int64 points kept per actor of the frame (dense actor order).
+        range_max_m: the maximum range the sweep was rendered with (the condition's, when one was given).
     """
 
     points_m: np.ndarray
@@ -98,6 +106,7 @@ class LidarSweep:
     instance_id: np.ndarray
     semantic: np.ndarray
     points_per_actor: np.ndarray
+    range_max_m: float
 
     def __len__(self) -> int:
         return len(self.points_m)
@@ -204,4 +213,5 @@ def render_lidar(
         instance_id=instance,
         semantic=hits.semantic[keep],
         points_per_actor=np.bincount(hits.actor_index[keep][on_actor], minlength=len(scene.actors)),
+        range_max_m=float(cfg.range_max_m),
     )

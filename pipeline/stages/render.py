@@ -3,8 +3,9 @@
 Frames are split into shards rendered by this process and a local process pool (see :func:`_run`). Finished
 shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the hash of everything that
 determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
-when the whole record is complete (renamed into place). Layout of the record: pipeline/core/record.py and
-docs/dataset.md.
+when the whole record is complete (renamed into place). A shard counts as done only when its done file lists
+exactly the shard's frames: ``--shard-size`` is not part of the key, and a resume with another shard size gives
+the same shard index other frames. Layout of the record: pipeline/core/record.py and docs/dataset.md.
 """
 
 from __future__ import annotations
@@ -61,6 +62,16 @@ def select_frames(available: np.ndarray, count: int | None) -> list[int]:
     return available[np.round(np.linspace(0, len(available) - 1, count)).astype(int)].tolist()
 
 
+def record_rate_hz(frames: list[int], sim_rate_hz: float) -> float:
+    """The record's frame rate: frames per second of simulation time between its first and last frame,
+    (n - 1) / (t_last - t_first), i.e. 1 / the mean interval between consecutive record frames (``--frames``
+    may space them unevenly by one simulation frame). ``frames`` are sorted simulation frame numbers, recorded
+    at ``sim_rate_hz``; a record of one frame has no interval and takes the simulation's rate."""
+    if len(frames) < 2:
+        return float(sim_rate_hz)
+    return float(sim_rate_hz) * (len(frames) - 1) / (frames[-1] - frames[0])
+
+
 def _check_sim(sim_dir: Path) -> dict:
     for name in SIM_FILES:
         if not (sim_dir / name).is_file():
@@ -87,6 +98,12 @@ def _prepare_work(work: Path, key: str) -> None:
         write_json(manifest, {"key": key})
 
 
+def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
+    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last)."""
+    done = shard_dir / f"done-{index:05d}"
+    return done.is_file() and done.read_text().split() == [str(f) for f in frames]
+
+
 def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
     if path.is_file():
         return
@@ -102,6 +119,8 @@ def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
+    if shard_size < 1:
+        raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
     sim_meta = _check_sim(sim_dir)
     seed = int(sim_meta["seed"])
     selection = select_frames(read_parquet(sim_dir / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
@@ -109,10 +128,10 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
     _prepare_work(work, key)
-    shards = [tuple(selection[i: i + shard_size]) for i in range(0, len(selection), max(shard_size, 1))]
+    shards = [tuple(selection[i: i + shard_size]) for i in range(0, len(selection), shard_size)]
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=1 if workers > 1 else 0)
-            for i, s in enumerate(shards) if not (work / "shards" / f"done-{i:05d}").is_file()]
+            for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
     context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # starts now: overlaps the world build
     _static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
@@ -121,7 +140,7 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
     with tqdm(total=len(selection), unit="frame", desc=f"render {condition.name}", disable=not progress) as bar:
         bar.update(len(selection) - sum(len(j.frames) for j in jobs))
         _run(jobs, workers, bar, context)
-    summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, len(shards))
+    summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed
     return summary
 
@@ -168,18 +187,21 @@ def _run(jobs: list[ShardJob], workers: int, bar: tqdm, context: multiprocessing
 
 
 def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConfig, condition: ConditionConfig,
-              seed: int, num_shards: int) -> dict[str, object]:
+              seed: int, selection: list[int], num_shards: int) -> dict[str, object]:
     record = work / "record"
     shards = work / "shards"
     frames = pd.concat([read_parquet(shards / f"frames-{i:05d}.parquet") for i in range(num_shards)])
     labels = pd.concat([read_parquet(shards / f"labels-{i:05d}.parquet") for i in range(num_shards)])
     frames = frames.sort_values("frame").reset_index(drop=True).astype(FRAME_COLUMNS)
+    if frames["frame"].tolist() != selection:
+        raise RuntimeError(f"{work}: the shards hold frames {frames['frame'].tolist()}, not the {len(selection)} "
+                           "selected; delete the folder and render again")
     labels = labels.sort_values(["frame", "sensor", "track_id"], kind="stable").reset_index(drop=True)
     write_parquet(frames, record / "frames.parquet")
     write_parquet(labels[list(LABEL_COLUMNS)].astype(LABEL_COLUMNS), record / "labels.parquet")
     cameras, lidars = build_sensors(rig)
     info = RecordInfo(scenario=sim_meta["config"]["name"], seed=seed, condition=condition.name, rig=rig.name,
-                      frame_rate_hz=float(sim_meta["config"]["simulation"]["record_hz"]),
+                      frame_rate_hz=record_rate_hz(selection, sim_meta["config"]["simulation"]["record_hz"]),
                       cameras=[camera_info(c) for c in cameras], lidars=[lidar_info(lidar) for lidar in lidars])
     (record / RECORD_FILE).write_text(info.to_json())
     config = {"sim": {"config_hash": sim_meta["config_hash"], "scenario": info.scenario, "seed": seed},

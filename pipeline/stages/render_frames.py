@@ -164,14 +164,15 @@ def _camera_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray],
 
 def _lidar_rows(frame: int, name: str, lidar, sweep, cols: dict[str, np.ndarray],
                 ego_pose: Transform) -> dict[str, np.ndarray]:
-    """Label columns of one LiDAR sweep: the actors whose box centre is within range; no 2D fields (null)."""
-    cfg = lidar.config
-    world_to_lidar = (ego_pose @ cfg.mount).inverse()
+    """Label columns of one LiDAR sweep; no 2D fields (null). An actor has a row when its box centre is within the
+    range the sweep was rendered with (``sweep.range_max_m``: the rig's range times the condition's factor), or
+    when it owns at least one point of the sweep (its centre may lie beyond the range)."""
+    world_to_lidar = (ego_pose @ lidar.config.mount).inverse()
     boxes = _boxes(cols)
     local = boxes.transformed(world_to_lidar) if abs(world_to_lidar.rotation[2, 2] - 1) < 1e-9 else None
     centre = world_to_lidar.apply(boxes.center)
     dist = np.linalg.norm(centre, axis=1)
-    keep = np.flatnonzero(dist <= cfg.range_max_m)
+    keep = np.flatnonzero((dist <= sweep.range_max_m) | (sweep.points_per_actor > 0))
     heading = world_to_lidar.apply_vectors(np.column_stack([np.cos(boxes.yaw_rad), np.sin(boxes.yaw_rad),
                                                             np.zeros(len(boxes))]))
     yaw = local.yaw_rad if local is not None else np.arctan2(heading[:, 1], heading[:, 0])

@@ -51,7 +51,7 @@ class LidarConfig(_Model):
     rotation_hz: float = Field(10.0, gt=0.0)
     attenuation_per_m: float = Field(0.004, ge=0.0)
     range_noise_std_m: float = Field(0.02, ge=0.0)
-    dropout: float = Field(0.0, ge=0.0, lt=1.0)
+    dropout: float = Field(0.02, ge=0.0, lt=1.0, description="chance that a return is lost")
     mount: MountPose
 
     @model_validator(mode="after")
@@ -94,9 +94,14 @@ class _ConditionPart(_Model):
 
 
 class SunConfig(_ConditionPart):
-    """The sun: direction (azimuth CCW from east = world +x, elevation above the horizon), colour, strength."""
+    """The sun: direction (azimuth CCW from east = world +x, elevation above the horizon), colour, strength.
 
-    azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0, description="CCW from east (world +x), degrees")
+    The azimuth follows the world frame (x east, y north), not a compass: 0 = east, 90 = north, 180 = west,
+    270 = south; a compass bearing b (clockwise from north) is azimuth 90 - b.
+    """
+
+    azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0,
+                               description="CCW from east (world +x; 90 = north), degrees; not a compass bearing")
     elevation_deg: float = Field(45.0, ge=-90.0, le=90.0, description="above the horizon, degrees; <= 0: no sun")
     color_rgb: RGB = _rgb("colour of the sunlight (scaled by intensity)", (1.0, 0.94, 0.85))
     intensity: float = Field(2.6, ge=0.0, description="irradiance scale; 1 lights white paper to ~1 at exposure 1")

@@ -1,0 +1,104 @@
+"""The render stage: resuming with another shard size, the record's frame rate, and which objects get LiDAR
+label rows when a condition shortens the LiDAR's range."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.core.config import ConditionConfig, load_config
+from pipeline.core.geometry import Transform
+from pipeline.core.record import DatasetRecord
+from pipeline.stages import render as render_module
+from pipeline.stages.render import record_rate_hz, render
+from tests.conftest import tree_hashes
+from tests.stages.conftest import EVERY_10TH
+
+
+@pytest.mark.parametrize(("first_size", "shards_before_kill", "second_size"), [(1, 2, 2), (2, 1, 1)])
+def test_a_resume_with_another_shard_size_renders_every_frame(run_21_frames, small_rig, noon_condition, small_record,
+                                                              tmp_path, monkeypatch, first_size, shards_before_kill,
+                                                              second_size):
+    real, done = render_module.render_shard, []
+
+    def killed(job):
+        if len(done) == shards_before_kill:
+            raise KeyboardInterrupt("killed")
+        done.append(job.frames)
+        return real(job)
+
+    out = tmp_path / "resumed"
+    monkeypatch.setattr(render_module, "render_shard", killed)
+    with pytest.raises(KeyboardInterrupt):
+        render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=first_size,
+               progress=False)
+    monkeypatch.undo()
+    render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=second_size,
+           progress=False)
+    assert DatasetRecord(out).frames["frame"].tolist() == [0, 10, 20]
+    # the same bytes as a render that was never interrupted
+    assert tree_hashes(out, skip=("meta.json",)) == tree_hashes(small_record, skip=("meta.json",))
+
+
+def test_the_frame_rate_is_the_records_own(small_record):
+    record = DatasetRecord(small_record)
+    assert np.diff(record.frames["frame"]).tolist() == [10, 10]  # every 10th frame of a 10 Hz run
+    assert np.diff(record.frames["time_s"]) == pytest.approx([1.0, 1.0])
+    assert record.info.frame_rate_hz == pytest.approx(1.0, rel=1e-12)
+
+
+def test_record_rate_of_uneven_and_single_frames():
+    # 3 intervals over 29 simulation frames at 10 Hz: one frame per 2.9 s on average
+    assert record_rate_hz([0, 10, 19, 29], 10.0) == pytest.approx(3 / 2.9)
+    assert record_rate_hz(list(range(5)), 10.0) == pytest.approx(10.0)
+    assert record_rate_hz([7], 10.0) == 10.0
+
+
+def test_lidar_rows_in_fog_follow_the_shortened_range(dense_highway_run, small_rig, tmp_path):
+    fog = load_config(ConditionConfig, "fog", "conditions")[0]
+    rig_range, fog_range = small_rig.lidars[0].range_m, small_rig.lidars[0].range_m * fog.lidar.range_factor
+    assert fog_range < rig_range
+    out = tmp_path / "fog"
+    render(dense_highway_run, fog, small_rig, out, frames=2, workers=1, progress=False)
+    record = DatasetRecord(out)
+    lidar = record.info.lidars[0]
+    trajectories = pd.read_parquet(dense_highway_run / "trajectories.parquet")
+    between = 0
+    for f in record.frames.itertuples(index=False):
+        ego = Transform.from_xyz_rpy((f.ego_x_m, f.ego_y_m, f.ego_z_m), (0.0, 0.0, f.ego_yaw_rad))
+        world_to_lidar = (ego @ Transform.from_matrix(lidar.T_array)).inverse()
+        actors = trajectories[(trajectories["frame"] == f.frame) & ~trajectories["is_ego"]]
+        dist = np.linalg.norm(world_to_lidar.apply(actors[["x_m", "y_m", "z_m"]].to_numpy()), axis=1)
+        ids = record.points(lidar.name, f.frame)["instance_id"]
+        owners = ids[ids > 0].value_counts()
+        assert owners.index.isin(actors["track_id"]).all()
+        expected = set(actors["track_id"][dist <= fog_range]) | set(owners.index)
+        labels = record.labels
+        rows = labels[(labels["frame"] == f.frame) & (labels["sensor"] == lidar.name)]
+        assert set(rows["track_id"]) == expected
+        counts = rows.set_index("track_id")["lidar_points"]
+        assert all(counts[t] == owners.get(t, 0) for t in counts.index)
+        between += int(((dist > fog_range) & (dist <= rig_range)).sum())
+    assert between > 0  # objects the rig's range would have labelled: fog's shorter range leaves them out
+
+
+def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
+    from pipeline.sensors.lidar import LidarSweep
+    from pipeline.stages.render_frames import _lidar_rows
+    from pipeline.stages.rig import build_sensors
+
+    lidar = build_sensors(small_rig)[1][0]
+    n = 3  # on the LiDAR's x axis at 30, 70 and 70 m (ego at the origin); only the second owns points
+    z_m = lidar.config.mount.translation[2]
+    cols = {"track_id": np.array([1, 2, 3], np.int32), "cls": np.array(["car", "truck", "car"], object),
+            "x_m": np.array([30.0, 70.0, 70.0]), "y_m": np.zeros(n), "z_m": np.full(n, z_m),
+            "length_m": np.full(n, 4.0), "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5),
+            "yaw_rad": np.zeros(n)}
+    empty = np.zeros(0)
+    sweep = LidarSweep(np.zeros((0, 3), np.float32), empty, empty, empty, empty, empty, empty,
+                       points_per_actor=np.array([0, 5, 0]), range_max_m=60.0)
+    rows = _lidar_rows(4, "top", lidar, sweep, cols, Transform.identity())
+    assert rows["track_id"].tolist() == [1, 2]
+    assert rows["lidar_points"].tolist() == [0, 5]
+    assert rows["distance_m"] == pytest.approx([30.0, 70.0])
