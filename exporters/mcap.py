@@ -284,7 +284,7 @@ class McapExporter(Exporter):
                 timestamp=stamp, frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
                 point_stride=POINT_STRIDE, fields=_FIELDS), t, last_bytes=("data", data.points[lidar.name]))
         out.write(names.topic("/scene/objects"), self._scene(rows.objects(item.frame), stamp, names,
-                                                             info.frame_rate_hz), t)
+                                                             item.source.hold_ns(item.frame)), t)
 
     @staticmethod
     def _annotations(rows: list[dict], stamp: Timestamp) -> ImageAnnotations:
@@ -305,8 +305,7 @@ class McapExporter(Exporter):
         return msg
 
     @staticmethod
-    def _scene(objects: list[dict], stamp: Timestamp, names: Naming, rate_hz: float) -> SceneUpdate:
-        lifetime_ns = round(1e9 / rate_hz) if rate_hz > 0 else 0
+    def _scene(objects: list[dict], stamp: Timestamp, names: Naming, lifetime_ns: int) -> SceneUpdate:
         update = SceneUpdate()
         for o in objects:
             track, cls = int(o["track_id"]), o["cls"]

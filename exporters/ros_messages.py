@@ -134,10 +134,9 @@ class RosMessages:
                 id=str(row["track_id"])))
         return self.t["vision_msgs/msg/Detection3DArray"](header=self.header(frame_id, time_ns), detections=detections)
 
-    def markers(self, objects: list[dict], frame_id: str, time_ns: int, rate_hz: float):
+    def markers(self, objects: list[dict], frame_id: str, time_ns: int, lifetime_ns: int):
         marker_t = self.t["visualization_msgs/msg/Marker"]
-        life_ns = round(1e9 / rate_hz) if rate_hz > 0 else 0
-        sec, nsec = split_ns(life_ns)
+        sec, nsec = split_ns(lifetime_ns)
         lifetime = self.t["builtin_interfaces/msg/Duration"](sec=sec, nanosec=nsec)
         empty_image = self.t["sensor_msgs/msg/CompressedImage"](header=self.header("", 0), format="",
                                                                 data=np.zeros(0, np.uint8))

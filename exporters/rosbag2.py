@@ -161,7 +161,7 @@ class Rosbag2Exporter(Exporter):
             yield (names.topic(f"/lidar/{lidar.name}/detections"), "vision_msgs/msg/Detection3DArray",
                    msgs.detections_3d(rows.sensor(item.frame, lidar.name), names.frame(lidar.name), t))
         yield (names.topic("/scene/markers"), "visualization_msgs/msg/MarkerArray",
-               msgs.markers(rows.objects(item.frame), names.frame("world"), t, info.frame_rate_hz))
+               msgs.markers(rows.objects(item.frame), names.frame("world"), t, item.source.hold_ns(item.frame)))
 
 
 EXPORTER = Rosbag2Exporter()

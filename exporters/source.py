@@ -12,6 +12,7 @@ import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from itertools import pairwise
 from pathlib import Path
 
 import pandas as pd
@@ -51,6 +52,22 @@ class RecordSource:
     @cached_property
     def frames(self) -> pd.DataFrame:
         return self.record.frames.sort_values("frame", kind="stable").reset_index(drop=True)
+
+    @cached_property
+    def _hold_ns(self) -> dict[int, int]:
+        times = [round(float(t) * 1e9) for t in self.frames["time_s"]]
+        frames = [int(f) for f in self.frames["frame"]]
+        if len(times) < 2:
+            rate = float(self.info.frame_rate_hz)
+            return dict.fromkeys(frames, round(1e9 / rate) if rate > 0 else 0)
+        gaps = [b - a for a, b in pairwise(times)]
+        return dict(zip(frames, [*gaps, gaps[-1]], strict=True))
+
+    def hold_ns(self, frame: int) -> int:
+        """How long ``frame``'s world state holds, in simulation nanoseconds: until the record's next frame (the
+        last frame as long as the one before it; a lone frame 1 / ``frame_rate_hz``). The lifetime of the 3D
+        boxes logged with it, so they neither vanish between frames nor linger past the next ones."""
+        return self._hold_ns[int(frame)]
 
     @cached_property
     def labels(self) -> pd.DataFrame:

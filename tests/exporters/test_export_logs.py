@@ -228,3 +228,32 @@ def test_bytes_field_on_the_wire_equals_protobuf_serialisation(size):
             == whole.SerializeToString(deterministic=True))
     with pytest.raises(ValueError, match="CompressedImage.data is not the message's last field"):
         _append_bytes_field(b"", CompressedImage(), "data", payload)
+
+
+def test_3d_boxes_live_until_the_next_frame(tmp_path, morning):
+    """Cubes and markers hold until the record's next frame, also when frames are unevenly spaced (--frames)."""
+    import shutil
+
+    import pandas as pd
+    from rosbags.rosbag2 import Reader
+
+    from exporters.ros_types import typestore
+    from exporters.source import ExportSource
+
+    copy = tmp_path / "rec"
+    shutil.copytree(morning, copy)
+    frames = pd.read_parquet(copy / "frames.parquet")
+    frames.loc[frames.frame == 11, "time_s"] = 1.35  # frames 10 and 11 now 0.35 s apart
+    frames.to_parquet(copy / "frames.parquet", index=False)
+    (src,) = ExportSource([copy]).records
+    assert [src.hold_ns(f) for f in (10, 11)] == [350_000_000, 350_000_000]  # the last holds as the one before
+    get_exporter("mcap").export([copy], tmp_path / "run.mcap")
+    messages, _, _ = _read_mcap(tmp_path / "run.mcap")
+    lifetimes = {e.lifetime.ToNanoseconds() for _, t, _, m in messages if t == "/scene/objects" for e in m.entities}
+    assert lifetimes == {350_000_000}
+    get_exporter("rosbag2").export([copy], tmp_path / "bag")
+    store = typestore()
+    with Reader(tmp_path / "bag") as reader:
+        markers = [store.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()
+                   if c.topic == "/scene/markers"]
+    assert {(m.lifetime.sec, m.lifetime.nanosec) for a in markers for m in a.markers} == {(0, 350_000_000)}
