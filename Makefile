@@ -15,7 +15,7 @@ demo: setup
 	@echo "Outputs (README.md, 'Where outputs go'):"
 	@echo "  data/sim/<scenario>-<seed>/              simulated runs"
 	@echo "  data/records/<scenario>-<seed>-<cond>/   rendered dataset records; previews/*.png contact sheets"
-	@echo "  data/exports/{coco,kitti,runs.mcap}      exports (open runs.mcap in Foxglove with docs/foxglove_layout.json)"
+	@echo "  data/exports/{coco,kitti,mcap}           exports (open mcap/runs.mcap in Foxglove, layout mcap/runs.layout.json)"
 	@echo "  data/models/baseline/                    the trained baseline detector"
 	@echo "  reports/report.md, reports/examples.png  precision/recall per condition and IoU, COCO AP"
 	@echo "  $(BIN)/dvc metrics show | $(BIN)/dvc plots show"

@@ -56,7 +56,8 @@ def test_every_stage_wrote_its_outputs(clone):
                  "data/records/highway-1-morning/record.json", "data/records/highway-2-night/labels.parquet",
                  "previews/highway-1-night.png", "data/exports/coco/annotations_train.json",
                  "data/exports/coco/annotations_test.json", "data/exports/kitti/training/label_2",
-                 "data/exports/runs.mcap", "data/models/baseline/model.pt", "data/models/baseline/loss.csv",
+                 "data/exports/mcap/runs.mcap", "data/exports/mcap/runs.layout.json",
+                 "data/models/baseline/model.pt", "data/models/baseline/loss.csv",
                  "data/detections/test.json", "data/eval/metrics.json", "reports/report.md",
                  "reports/examples.png", "reports/metrics.json", "metrics/simulate/highway-2.json"]:
         assert (clone / path).exists(), path
