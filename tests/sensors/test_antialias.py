@@ -75,3 +75,15 @@ def test_extra_samples_change_only_edge_pixels(box_meshes, actors_factory, wall)
     everywhere = render_camera(scene, Camera(CameraConfig(width_px=200, height_px=150, samples_per_pixel=4,
                                                           samples_everywhere=True)), EGO)
     np.testing.assert_array_equal(everywhere.rgb[edge], four.rgb[edge])  # the same samples where both take them
+
+
+def test_the_rig_file_sets_the_sampling():
+    from pipeline.core.config import RigConfig, load_config
+    from pipeline.stages.rig import build_sensors
+
+    rig, _ = load_config(RigConfig, "default", "rigs")
+    camera = build_sensors(rig)[0][0].config
+    assert (camera.samples_per_pixel, camera.samples_everywhere) == (1, False)
+    spec = rig.cameras[0].model_copy(update={"samples_per_pixel": 4, "samples_everywhere": True})
+    camera = build_sensors(rig.model_copy(update={"cameras": [spec]}))[0][0].config
+    assert (camera.samples_per_pixel, camera.samples_everywhere) == (4, True)

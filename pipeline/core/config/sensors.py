@@ -29,7 +29,8 @@ class CameraConfig(_Model):
     distortion: tuple[float, float, float, float, float] = Field(
         (0.0, 0.0, 0.0, 0.0, 0.0), description="Brown-Conrady k1, k2, p1, p2, k3 (OpenCV order)"
     )
-    samples_per_pixel: int = Field(1, ge=1, le=64)
+    samples_per_pixel: int = Field(1, ge=1, le=64, description="anti-aliasing samples, taken at edge pixels")
+    samples_everywhere: bool = Field(False, description="take the samples at every pixel (shadow edges too)")
     mount: MountPose
 
     @model_validator(mode="after")
