@@ -214,11 +214,12 @@ class DatasetRecord:
         return cv2.imread(str(self.image_path(camera, "semantic", frame)), cv2.IMREAD_UNCHANGED)
 
     def depth_m(self, camera: str, frame: int) -> tuple[np.ndarray, np.ndarray]:
-        """(H, W) float32 z-depth in metres and (H, W) bool validity mask."""
+        """(H, W) float32 z-depth in metres and (H, W) bool validity mask: no hit (0) and the saturated value
+        (65535: 255.996 m or farther, not a measurement) are invalid."""
         import cv2
 
         raw = cv2.imread(str(self.image_path(camera, "depth", frame)), cv2.IMREAD_UNCHANGED)
-        return raw.astype(np.float32) / DEPTH_SCALE, raw > 0
+        return raw.astype(np.float32) / DEPTH_SCALE, (raw > 0) & (raw < np.iinfo(np.uint16).max)
 
     def points(self, lidar: str, frame: int) -> pd.DataFrame:
         """One LiDAR sweep: x_m, y_m, z_m (LiDAR frame), intensity, ring, instance_id, semantic."""

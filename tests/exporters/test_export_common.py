@@ -179,3 +179,19 @@ def test_a_visible_object_without_a_box_fails_naming_it(tmp_path, morning, fmt):
                                           rf"track {labels.track_id[row]} is visible but has no tight 2D box"):
         get_exporter(fmt).export([copy], tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_depth_reads_metres_and_marks_no_hit_and_saturation_invalid(tmp_path, morning):
+    import cv2
+
+    from pipeline.core.record import DatasetRecord
+
+    copy = tmp_path / "rec"
+    shutil.copytree(morning, copy)
+    record = DatasetRecord(copy)
+    path = record.image_path("front", "depth", 10)
+    raw = np.zeros((600, 800), np.uint16)
+    raw[0, :3] = [0, 2560, 65535]  # no hit, 10 m, 255.996 m or farther
+    cv2.imwrite(str(path), raw)
+    depth, valid = record.depth_m("front", 10)
+    assert depth[0, 1] == 10.0 and valid[0, :3].tolist() == [False, True, False]
