@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from exporters.scene import prefixed_frame, prefixed_topic
+
 _PUBLISH = {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
             "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5, "poseEstimateYDeviation": 0.5,
             "poseEstimateThetaDeviation": 0.26179939}
@@ -36,10 +38,10 @@ class RecordView:
     lidars: tuple[str, ...]
 
     def topic(self, name: str) -> str:
-        return f"/{self.prefix}{name}" if self.prefix else name
+        return prefixed_topic(self.prefix, name)
 
     def frame(self, name: str) -> str:
-        return f"{self.prefix}/{name}" if self.prefix else name
+        return prefixed_frame(self.prefix, name)
 
 
 def _camera_cfg(view: RecordView) -> dict[str, Any]:

@@ -112,6 +112,16 @@ def _loaded(loading: deque[tuple[FrameItem, Future[FrameData]]]) -> tuple[FrameI
     return item, future.result()
 
 
+def prefixed_topic(prefix: str, name: str) -> str:
+    """Topic ``name`` of the record with ``prefix`` ("" in a single-record log)."""
+    return f"/{prefix}{name}" if prefix else name
+
+
+def prefixed_frame(prefix: str, name: str) -> str:
+    """Frame id ``name`` of the record with ``prefix`` ("" in a single-record log)."""
+    return f"{prefix}/{name}" if prefix else name
+
+
 class Naming:
     """Topic and frame names of one record within a log."""
 
@@ -119,10 +129,10 @@ class Naming:
         self.prefix = "" if len(export.records) == 1 else source.stem
 
     def topic(self, name: str) -> str:
-        return f"/{self.prefix}{name}" if self.prefix else name
+        return prefixed_topic(self.prefix, name)
 
     def frame(self, name: str) -> str:
-        return f"{self.prefix}/{name}" if self.prefix else name
+        return prefixed_frame(self.prefix, name)
 
 
 class FrameRows:
