@@ -141,11 +141,10 @@ def _append_bytes_field(serialized: bytes, message: Any, name: str, payload: byt
 class _Log:
     """Registers one schema per message type and one channel per topic on first use.
 
-    Messages are serialised here and collected until :meth:`flush`, which hands them to ``calls`` (the
-    writer's thread) as one call: a call per frame rather than per message, so the writer thread waits for
-    the interpreter lock once per frame, not after every small message. A registration flushes and waits for
-    that thread to catch up, as the Writer is never used from two threads at once; the writer's calls are
-    the same, in the same order, as writing each message directly.
+    Messages are serialised here and held in ``calls`` (the writer's thread) until the caller flushes it, once
+    per frame (:meth:`OrderedCalls.add`). A registration waits for that thread to catch up, as the Writer is
+    never used from two threads at once; the writer's calls are the same, in the same order, as writing each
+    message directly.
     """
 
     def __init__(self, writer: Writer, calls: OrderedCalls) -> None:
@@ -154,14 +153,11 @@ class _Log:
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
-        self._batch: list[tuple[int, int, bytes, int]] = []
-        self._batch_bytes = 0
 
     def write(self, topic: str, message: Any, time_ns: int, last_bytes: tuple[str, bytes] | None = None) -> None:
         """Log ``message`` on ``topic``; ``last_bytes`` = (field, payload) sets a large bytes field on the wire
         instead (see :func:`_append_bytes_field`)."""
         if topic not in self.channels:
-            self.flush()
             self.calls.drain()
             name = type(message).DESCRIPTOR.full_name
             if name not in self.schemas:
@@ -171,19 +167,9 @@ class _Log:
         data = message.SerializeToString(deterministic=True)
         if last_bytes is not None:
             data = _append_bytes_field(data, message, *last_bytes)
-        self._batch.append((self.channels[topic], time_ns, data, self.counts[topic]))
-        self._batch_bytes += len(data)
+        self.calls.add(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
+                       publish_time=time_ns, data=data, sequence=self.counts[topic])
         self.counts[topic] += 1
-
-    def flush(self) -> None:
-        """Queue the messages written since the last flush on the writer thread."""
-        if self._batch:
-            self.calls.submit(self._batch_bytes, self._add_messages, self._batch)
-            self._batch, self._batch_bytes = [], 0
-
-    def _add_messages(self, batch: list[tuple[int, int, bytes, int]]) -> None:
-        for channel, time_ns, data, sequence in batch:
-            self.writer.add_message(channel, log_time=time_ns, publish_time=time_ns, data=data, sequence=sequence)
 
 
 @contextlib.contextmanager
@@ -237,7 +223,7 @@ class McapExporter(Exporter):
                 for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap",
                                        unit="frame", disable=not options.progress):
                     self._frame(out, item, data, Naming(item.source, source), rows[id(item.source)])
-                    out.flush()
+                    calls.flush()
             counts = {"frames": source.n_frames(), "messages": dict(sorted(out.counts.items())),
                       "objects": summary.to_dict()}
             for src in source.records:

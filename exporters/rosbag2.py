@@ -56,10 +56,9 @@ def _qos(transient_local: bool):
 
 
 class _Bag:
-    """Adds one connection per topic on first use; messages are serialised here and collected until
-    :meth:`flush`, which hands them to ``calls`` (the writer's thread) as one call per frame (see
-    ``exporters.mcap._Log``). Adding a connection flushes and waits for that thread to catch up, as the
-    rosbags Writer is never used from two threads at once."""
+    """Adds one connection per topic on first use; messages are serialised here and held in ``calls`` (the
+    writer's thread) until the caller flushes it, once per frame (:meth:`OrderedCalls.add`). Adding a
+    connection waits for that thread to catch up, as the rosbags Writer is never used from two threads at once."""
 
     def __init__(self, writer: Any, calls: OrderedCalls, msgs: RosMessages) -> None:
         self.writer = writer
@@ -67,30 +66,16 @@ class _Bag:
         self.store = msgs.store
         self.connections: dict[str, Any] = {}
         self.counts: dict[str, int] = {}
-        self._batch: list[tuple[Any, int, Any]] = []
-        self._batch_bytes = 0
 
     def write(self, topic: str, msgtype: str, msg: Any, time_ns: int, latched: bool = False) -> None:
         if topic not in self.connections:
-            self.flush()
             self.calls.drain()
             self.connections[topic] = self.writer.add_connection(topic, msgtype, typestore=self.store,
                                                                  offered_qos_profiles=[_qos(latched)])
             self.counts[topic] = 0
         data = self.store.serialize_cdr(msg, msgtype)
-        self._batch.append((self.connections[topic], time_ns, data))
-        self._batch_bytes += len(data)
+        self.calls.add(len(data), self.writer.write, self.connections[topic], time_ns, data)
         self.counts[topic] += 1
-
-    def flush(self) -> None:
-        """Queue the messages written since the last flush on the writer thread."""
-        if self._batch:
-            self.calls.submit(self._batch_bytes, self._write_all, self._batch)
-            self._batch, self._batch_bytes = [], 0
-
-    def _write_all(self, batch: list[tuple[Any, int, Any]]) -> None:
-        for connection, time_ns, data in batch:
-            self.writer.write(connection, time_ns, data)
 
 
 class Rosbag2Exporter(Exporter):
@@ -132,7 +117,7 @@ class Rosbag2Exporter(Exporter):
                     for topic, msgtype, msg in self._frame(msgs, item, data, Naming(item.source, source),
                                                            rows[id(item.source)]):
                         bag.write(topic, msgtype, msg, nanoseconds(item.time_s))
-                    bag.flush()
+                    calls.flush()
             summary = {"frames": source.n_frames(), "messages": dict(sorted(bag.counts.items())),
                        "objects": msgs.summary.to_dict()}
             writer.set_custom_data("roadsynth.export", dumps_json({**description, "counts": summary}, indent=None))

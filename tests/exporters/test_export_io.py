@@ -43,6 +43,21 @@ def test_ordered_calls_block_beyond_the_pending_bytes():
     assert finished == [0, 1]
 
 
+def test_held_calls_run_as_one_batch_in_order():
+    """add() holds calls; flush, submit or leaving the block queues them as one worker task, in order."""
+    done = []
+    with ordered_calls(100, "test-writer") as calls:
+        calls.add(1, done.append, "a")
+        calls.add(1, done.append, "b")
+        assert done == [] and not calls._pending  # held, not yet queued
+        calls.flush()
+        assert len(calls._pending) == 1  # one task for both
+        calls.add(1, done.append, "c")
+        calls.submit(1, done.append, "d")  # after the held call
+        calls.add(1, done.append, "e")  # queued when the block ends
+    assert done == ["a", "b", "c", "d", "e"]
+
+
 def test_ordered_calls_raise_a_failed_call_later():
     def fail() -> None:
         raise OSError("disk full")
