@@ -14,6 +14,23 @@ from tests.conftest import REPO, simulated_highway
 EVERY_10TH = 3  # --frames 3 of the 21-frame run: frames 0, 10, 20
 
 
+def kill_render_after(monkeypatch, shards: int) -> list[tuple[int, ...]]:
+    """Make the render stage fail as if killed (KeyboardInterrupt) when it starts shard number ``shards + 1``;
+    returns the frames of the shards it rendered, filled as they run. ``monkeypatch.undo()`` restores it."""
+    from pipeline.stages import render as render_module
+
+    real, done = render_module.render_shard, []
+
+    def killed(job):
+        if len(done) == shards:
+            raise KeyboardInterrupt("killed")
+        done.append(job.frames)
+        return real(job)
+
+    monkeypatch.setattr(render_module, "render_shard", killed)
+    return done
+
+
 @pytest.fixture(scope="session")
 def run_21_frames(tmp_path_factory) -> Path:
     """A highway run recording 21 frames at 10 Hz (2.1 s), traffic around the ego."""

@@ -10,26 +10,17 @@ import pytest
 from pipeline.core.config import ConditionConfig, load_config
 from pipeline.core.geometry import Transform
 from pipeline.core.record import DatasetRecord
-from pipeline.stages import render as render_module
 from pipeline.stages.render import record_rate_hz, render
 from tests.conftest import tree_hashes
-from tests.stages.conftest import EVERY_10TH
+from tests.stages.conftest import EVERY_10TH, kill_render_after
 
 
 @pytest.mark.parametrize(("first_size", "shards_before_kill", "second_size"), [(1, 2, 2), (2, 1, 1)])
 def test_a_resume_with_another_shard_size_renders_every_frame(run_21_frames, small_rig, noon_condition, small_record,
                                                               tmp_path, monkeypatch, first_size, shards_before_kill,
                                                               second_size):
-    real, done = render_module.render_shard, []
-
-    def killed(job):
-        if len(done) == shards_before_kill:
-            raise KeyboardInterrupt("killed")
-        done.append(job.frames)
-        return real(job)
-
     out = tmp_path / "resumed"
-    monkeypatch.setattr(render_module, "render_shard", killed)
+    kill_render_after(monkeypatch, shards_before_kill)
     with pytest.raises(KeyboardInterrupt):
         render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=first_size,
                progress=False)

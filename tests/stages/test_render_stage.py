@@ -11,9 +11,9 @@ import pytest
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.core.record import DatasetRecord, RecordError
-from pipeline.stages import render as render_module
 from pipeline.stages.render import render
 from tests.conftest import tree_hashes
+from tests.stages.conftest import kill_render_after
 
 FRAMES = 3
 
@@ -106,16 +106,8 @@ def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_di
 
 def test_an_interrupted_render_resumes_with_the_shards_done(dense_highway_run, rig, noon, record_dir, tmp_path,
                                                             monkeypatch):
-    real, done = render_module.render_shard, []
-
-    def killed_after_first_shard(job):
-        if done:
-            raise KeyboardInterrupt("killed")
-        done.append(job.index)
-        return real(job)
-
     out = tmp_path / "resumed"
-    monkeypatch.setattr(render_module, "render_shard", killed_after_first_shard)
+    kill_render_after(monkeypatch, 1)
     with pytest.raises(KeyboardInterrupt):
         render(dense_highway_run, noon, rig, out, frames=FRAMES, workers=1, shard_size=2, progress=False)
     assert not out.exists()  # nothing half-written where DVC looks
