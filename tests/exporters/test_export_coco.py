@@ -9,9 +9,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 
 from exporters.base import BoxMode, ExportOptions, get_exporter
+from exporters.coco import instance_rles
 from exporters.splits import SplitSpec
 from pipeline.core.record import DatasetRecord
 
@@ -132,3 +134,32 @@ def test_one_annotation_file_per_split_and_runs_stay_whole(tmp_path, records):
     assert not (out / "annotations.json").exists()
     recorded = json.loads((out / "export.json").read_text())["splits"]
     assert recorded["runs"] == {"highway:1": "train", "urban:2": "val"}
+
+
+def _encode(mask: np.ndarray) -> dict:
+    rle = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
+    return {"size": [int(s) for s in rle["size"]], "counts": rle["counts"].decode("ascii")}
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_instance_rles_equal_pycocotools_encode_of_each_mask(seed):
+    """One pass over the instance image gives, per id, the bytes pycocotools' encode gives for that id's mask:
+    blobs of random ids and sizes, ids touching the first and last pixel, one covering every pixel but one,
+    and an id that is absent."""
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(1, 40, 2)
+    image = np.zeros((h, w), np.int32)
+    for k in range(1, 9):
+        y, x = rng.integers(0, h), rng.integers(0, w)
+        image[y: y + rng.integers(1, h + 1), x: x + rng.integers(1, w + 1)] = k
+    if seed == 1:
+        image[0, 0], image[-1, -1] = 11, 12  # column-major first and last pixel
+    if seed == 2:
+        image[:] = 5
+        image[h // 2, w // 2] = 0
+    ids = np.array([1, 5, 8, 11, 12, 99])
+    for k, (rle, area) in zip(ids, instance_rles(image, ids), strict=True):
+        assert rle == _encode(image == k), k
+        assert area == int((image == k).sum())
+        np.testing.assert_array_equal(mask_utils.decode({"size": rle["size"], "counts": rle["counts"].encode()}),
+                                      (image == k).astype(np.uint8))
