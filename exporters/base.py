@@ -22,9 +22,9 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from exporters.filters import ObjectFilter
+from exporters.filters import HIDDEN, FilterSummary, ObjectFilter
 from exporters.io import atomic_dir, atomic_file, atomic_named_dir, write_json
-from exporters.source import ExportSource
+from exporters.source import ExportSource, RecordSource
 from exporters.splits import SplitSpec
 
 log = logging.getLogger(__name__)
@@ -88,6 +88,51 @@ def boxes_2d(labels: pd.DataFrame, mode: BoxMode) -> np.ndarray:
     cols = ["x1", "y1", "x2", "y2"] if mode is BoxMode.TIGHT else [
         "amodal_clip_x1", "amodal_clip_y1", "amodal_clip_x2", "amodal_clip_y2"]
     return labels[cols].astype("float64").to_numpy(dtype=np.float64, na_value=np.nan).reshape(-1, 4)
+
+
+class CameraRows:
+    """One camera's label rows of one record as NumPy columns, for the image exporters (COCO, KITTI, YOLO): the
+    filter's verdicts and the chosen 2D boxes are computed once for the whole table, and :meth:`rows` gives a
+    frame's rows. Per-row and per-frame pandas calls cost more than the exports' own work.
+
+    Attributes:
+        reasons: (N,) the filter's verdict per row (:data:`exporters.filters.REASONS`).
+        boxes: (N, 4) the ``options.box`` 2D box per row (:func:`boxes_2d`).
+        amodal: (N, 4) the unclipped amodal box, NaN where none.
+        columns: the label columns by name: ints as stored, floats as float64 with NaN for nulls, ``cls`` as str.
+    """
+
+    INTS = ("track_id", "category_id", "visible_px", "lidar_points")
+    FLOATS = ("occlusion", "truncation", "distance_m", "sensor_x_m", "sensor_y_m", "sensor_z_m", "length_m",
+              "width_m", "height_m", "sensor_yaw_rad")
+
+    def __init__(self, source: RecordSource, camera: str, options: ExportOptions) -> None:
+        labels = source.labels[source.labels["sensor"] == camera]  # sorted by (frame, track_id)
+        self.where = f"{source.record.root}: camera {camera}"
+        self.mode = options.box
+        self.reasons = options.filter.classify(labels)
+        self.boxes = boxes_2d(labels, options.box)
+        self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
+            na_value=np.nan)
+        self.columns: dict[str, np.ndarray] = {"cls": labels["cls"].to_numpy(dtype=object)}
+        self.columns |= {c: labels[c].to_numpy() for c in self.INTS}
+        self.columns |= {c: labels[c].astype("float64").to_numpy(na_value=np.nan) for c in self.FLOATS}
+        frames = labels["frame"].to_numpy(dtype=np.int64)
+        cuts = np.flatnonzero(np.diff(frames)) + 1
+        starts, ends = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(frames)]])
+        self._span = {int(frames[lo]): (int(lo), int(hi)) for lo, hi in zip(starts, ends, strict=True) if hi > lo}
+
+    def rows(self, frame: int, summary: FilterSummary) -> np.ndarray:
+        """Indices of ``frame``'s rows that are not hidden (in track id order), after counting all its rows in
+        ``summary``. Raises :class:`ExportError` for a shown object without a box: never dropped silently."""
+        lo, hi = self._span.get(int(frame), (0, 0))
+        summary.add(self.reasons[lo:hi], self.columns["cls"][lo:hi])
+        rows = lo + np.flatnonzero(self.reasons[lo:hi] != HIDDEN)
+        boxless = rows[~np.all(np.isfinite(self.boxes[rows]), axis=1)]
+        if len(boxless):
+            raise ExportError(f"{self.where}, frame {frame}, track {int(self.columns['track_id'][boxless[0]])}: "
+                              f"visible object without a {self.mode.value} 2D box")
+        return rows
 
 
 class Exporter(ABC):

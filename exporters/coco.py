@@ -25,10 +25,10 @@ import numpy as np
 from pycocotools import mask as mask_utils
 from tqdm import tqdm
 
-from exporters.base import BoxMode, Exporter, ExportError, ExportOptions, boxes_2d
-from exporters.filters import HIDDEN, KEPT, FilterSummary
+from exporters.base import BoxMode, CameraRows, Exporter, ExportOptions
+from exporters.filters import KEPT, FilterSummary
 from exporters.io import link_or_copy, write_json
-from exporters.source import ExportSource, FrameItem, RecordSource, safe_name
+from exporters.source import ExportSource, FrameItem, safe_name
 from pipeline.core.classes import COCO_CATEGORIES
 
 log = logging.getLogger(__name__)
@@ -79,29 +79,6 @@ def instance_rles(instance: np.ndarray, ids: np.ndarray) -> list[tuple[dict[str,
     return out
 
 
-class _CameraRows:
-    """One camera's label rows of one record as NumPy columns, with each frame's span of rows: filter reasons and
-    2D boxes are computed once per table. Per-row (``iloc``) and per-frame pandas calls cost more than the masks."""
-
-    INTS = ("track_id", "category_id", "visible_px", "lidar_points")
-    FLOATS = ("occlusion", "truncation", "distance_m", "sensor_x_m", "sensor_y_m", "sensor_z_m", "length_m",
-              "width_m", "height_m", "sensor_yaw_rad")
-
-    def __init__(self, source: RecordSource, camera: str, options: ExportOptions) -> None:
-        labels = source.labels[source.labels["sensor"] == camera]  # sorted by (frame, track_id)
-        self.reasons = options.filter.classify(labels)
-        self.boxes = boxes_2d(labels, options.box)
-        self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
-            na_value=np.nan)
-        self.cls = labels["cls"].to_numpy(dtype=object)
-        self.ints = {c: labels[c].to_numpy() for c in self.INTS}
-        self.floats = {c: labels[c].astype("float64").to_numpy(na_value=np.nan) for c in self.FLOATS}
-        frames = labels["frame"].to_numpy(dtype=np.int64)
-        cuts = np.flatnonzero(np.diff(frames)) + 1
-        starts, ends = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(frames)]])
-        self.span = {int(frames[lo]): (int(lo), int(hi)) for lo, hi in zip(starts, ends, strict=True) if hi > lo}
-
-
 class CocoExporter(Exporter):
     name = "coco"
 
@@ -111,7 +88,7 @@ class CocoExporter(Exporter):
         annotations: dict[str, list] = {s: [] for s in source.split_names}
         summary = FilterSummary()
         linked = copied = 0
-        rows_of = {(id(s), c.name): _CameraRows(s, c.name, options) for s in source.records for c in s.info.cameras}
+        rows_of = {(id(s), c.name): CameraRows(s, c.name, options) for s in source.records for c in s.info.cameras}
         for item in tqdm(source.frames(), total=source.n_frames(), desc="coco", unit="frame",
                          disable=not options.progress):
             for cam in item.source.info.cameras:
@@ -126,12 +103,10 @@ class CocoExporter(Exporter):
                     "id": image_id, "file_name": file_name, "width": int(cam.width_px), "height": int(cam.height_px),
                     "camera": cam.name, **item.source.attributes(item.frame, item.time_s),
                 })
-                rows = rows_of[(id(item.source), cam.name)]
-                if item.frame not in rows.span:
-                    continue
+                table = rows_of[(id(item.source), cam.name)]
                 first_id = sum(len(v) for v in annotations.values()) + 1
-                anns = self._annotations(item, cam.name, rows, image_id, first_id, options, summary)
-                annotations[item.source.split] += anns
+                annotations[item.source.split] += self._annotations(
+                    item, cam.name, table, table.rows(item.frame, summary), image_id, first_id, options)
         for split in source.split_names:
             name = "annotations.json" if source.splits is None else f"annotations_{safe_name(split)}.json"
             coco = {"info": {"description": "roadsynth export", "version": "1", "contributor": "roadsynth",
@@ -143,21 +118,12 @@ class CocoExporter(Exporter):
                 "annotations": sum(len(v) for v in annotations.values()),
                 "images_linked": linked, "images_copied": copied, "objects": summary.to_dict()}
 
-    def _annotations(self, item: FrameItem, camera: str, table: _CameraRows, image_id: int, first_id: int,
-                     options: ExportOptions, summary: FilterSummary) -> list[dict[str, Any]]:
-        lo, hi = table.span[item.frame]
-        reasons = table.reasons[lo:hi]
-        summary.add(reasons, table.cls[lo:hi])
-        rows = lo + np.flatnonzero(reasons != HIDDEN)
+    def _annotations(self, item: FrameItem, camera: str, table: CameraRows, rows: np.ndarray, image_id: int,
+                     first_id: int, options: ExportOptions) -> list[dict[str, Any]]:
         if not len(rows):
             return []
-        bad = rows[~np.all(np.isfinite(table.boxes[rows]), axis=1)]
-        if len(bad):
-            raise ExportError(f"{item.source.record.root}: frame {item.frame}, camera {camera}, track "
-                              f"{int(table.ints['track_id'][bad[0]])}: visible object without a "
-                              f"{options.box.value} 2D box")
-        ints = {c: v[rows].tolist() for c, v in table.ints.items()}
-        num = {c: v[rows].tolist() for c, v in table.floats.items()}
+        ints = {c: table.columns[c][rows].tolist() for c in CameraRows.INTS}
+        num = {c: table.columns[c][rows].tolist() for c in CameraRows.FLOATS}
         instance = item.source.record.instance(camera, item.frame)
         masks = instance_rles(instance, np.asarray(ints["track_id"], np.int64))
         out = []
@@ -167,7 +133,7 @@ class CocoExporter(Exporter):
                 "id": first_id + j, "image_id": image_id, "category_id": int(ints["category_id"][j]),
                 "bbox": xywh(table.boxes[i]), "area": float(area), "segmentation": rle,
                 "iscrowd": 0 if table.reasons[i] == KEPT else 1,
-                "track_id": int(ints["track_id"][j]), "subclass": str(table.cls[i]), "camera": camera,
+                "track_id": int(ints["track_id"][j]), "subclass": str(table.columns["cls"][i]), "camera": camera,
                 "occlusion": _r(num["occlusion"][j], 6), "truncation": _r(num["truncation"][j], 6),
                 "distance_m": _r(num["distance_m"][j]), "visible_px": int(ints["visible_px"][j]),
                 "bbox_amodal": xywh(table.amodal[i]) if np.all(np.isfinite(table.amodal[i])) else None,

@@ -26,11 +26,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from tqdm import tqdm
 
-from exporters.base import Exporter, ExportError, ExportOptions, boxes_2d
-from exporters.filters import HIDDEN, KEPT, FilterSummary
+from exporters.base import CameraRows, Exporter, ExportError, ExportOptions
+from exporters.filters import KEPT, FilterSummary
 from exporters.io import link_or_copy
 from exporters.source import ExportSource, RecordSource, safe_name
 from pipeline.core.geometry import wrap_angle
@@ -87,31 +86,23 @@ def calib_text(cam: CameraInfo, lidar: LidarInfo) -> str:
     return "".join(f"{name}: {' '.join(f'{v:.12e}' for v in m.reshape(-1))}\n" for name, m in rows)
 
 
-def label_lines(labels: pd.DataFrame, options: ExportOptions, summary: FilterSummary, where: str) -> list[str]:
-    """label_2 lines of one frame's camera rows: objects by track id, then DontCare regions."""
-    if labels is None or labels.empty:
-        return []
-    reasons = options.filter.classify(labels)
-    summary.add(reasons, labels["cls"].to_numpy())
-    boxes = boxes_2d(labels, options.box)
+def label_lines(table: CameraRows, rows: np.ndarray) -> list[str]:
+    """label_2 lines of one frame's shown rows (``CameraRows.rows``): objects by track id, then DontCare regions."""
     objects, dont_care = [], []
-    levels = occlusion_level(labels["occlusion"].fillna(0.0).to_numpy(dtype=np.float64))
-    for i, row in enumerate(labels.itertuples(index=False)):
-        if reasons[i] == HIDDEN:
-            continue
-        if not np.all(np.isfinite(boxes[i])):
-            raise ExportError(f"{where}: track {row.track_id} is visible but has no {options.box.value} 2D box")
-        x1, y1, x2, y2 = boxes[i]
-        if reasons[i] != KEPT:
+    col = table.columns
+    levels = occlusion_level(np.nan_to_num(col["occlusion"][rows], nan=0.0))
+    for j, i in enumerate(rows):
+        x1, y1, x2, y2 = table.boxes[i]
+        if table.reasons[i] != KEPT:
             dont_care.append(DONT_CARE.format(x1, y1, x2, y2))
             continue
-        h, w, length = row.height_m, row.width_m, row.length_m
-        x, y, z = row.sensor_x_m, row.sensor_y_m + h / 2.0, row.sensor_z_m  # bottom centre (camera y is down)
-        ry = wrap_angle(row.sensor_yaw_rad)
+        h, w, length = col["height_m"][i], col["width_m"][i], col["length_m"][i]
+        x, y, z = col["sensor_x_m"][i], col["sensor_y_m"][i] + h / 2.0, col["sensor_z_m"][i]  # bottom centre (y down)
+        ry = wrap_angle(col["sensor_yaw_rad"][i])
         alpha = wrap_angle(ry - np.arctan2(x, z))
-        objects.append(f"{KITTI_TYPE[row.cls]} {min(max(float(row.truncation), 0.0), 1.0):.2f} {int(levels[i])} "
-                       f"{alpha:.2f} {x1:.2f} {y1:.2f} {x2:.2f} {y2:.2f} {h:.2f} {w:.2f} {length:.2f} "
-                       f"{x:.2f} {y:.2f} {z:.2f} {ry:.2f}")
+        objects.append(f"{KITTI_TYPE[col['cls'][i]]} {min(max(float(col['truncation'][i]), 0.0), 1.0):.2f} "
+                       f"{int(levels[j])} {alpha:.2f} {x1:.2f} {y1:.2f} {x2:.2f} {y2:.2f} {h:.2f} {w:.2f} "
+                       f"{length:.2f} {x:.2f} {y:.2f} {z:.2f} {ry:.2f}")
     return objects + dont_care
 
 
@@ -137,15 +128,14 @@ class KittiExporter(Exporter):
         per_record = {}
         for src in source.records:
             cam, lidar = sensors_of(src, options)
-            per_record[id(src)] = (cam, lidar, src.sensor_labels(cam.name), calib_text(cam, lidar))
+            per_record[id(src)] = (cam, lidar, CameraRows(src, cam.name, options), calib_text(cam, lidar))
         for index, item in enumerate(tqdm(source.frames(), total=source.n_frames(), desc="kitti", unit="frame",
                                           disable=not options.progress)):
             cam, lidar, labels, calib = per_record[id(item.source)]
             stem = f"{index:06d}"
             linked += link_or_copy(item.source.record.image_path(cam.name, "rgb", item.frame),
                                    training / "image_2" / f"{stem}.png", link=options.link_images)
-            where = f"{item.source.record.root}: frame {item.frame}, camera {cam.name}"
-            lines = label_lines(labels.get(item.frame), options, summary, where)
+            lines = label_lines(labels, labels.rows(item.frame, summary))
             (training / "label_2" / f"{stem}.txt").write_text("".join(f"{line}\n" for line in lines))
             (training / "calib" / f"{stem}.txt").write_text(calib)
             cloud = item.source.record.points(lidar.name, item.frame)

@@ -73,11 +73,6 @@ class RecordSource:
     def labels(self) -> pd.DataFrame:
         return self.record.labels.sort_values(["frame", "sensor", "track_id"], kind="stable").reset_index(drop=True)
 
-    def sensor_labels(self, sensor: str) -> dict[int, pd.DataFrame]:
-        """Label rows of ``sensor`` by frame (frames without rows are absent)."""
-        rows = self.labels[self.labels["sensor"] == sensor]
-        return {int(f): g.reset_index(drop=True) for f, g in rows.groupby("frame", sort=True)}
-
     @cached_property
     def meta_text(self) -> str | None:
         """The record's meta.json, verbatim, or None when it has none."""

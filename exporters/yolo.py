@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from exporters.base import Exporter, ExportError, ExportOptions, boxes_2d
+from exporters.base import CameraRows, Exporter, ExportOptions
 from exporters.filters import KEPT, FilterSummary
 from exporters.io import link_or_copy
 from exporters.source import ExportSource, safe_name
@@ -61,7 +61,7 @@ class YoloExporter(Exporter):
         rows = io.StringIO()
         table = csv.writer(rows, lineterminator="\n")
         table.writerow(IMAGES_CSV_COLUMNS)
-        labels_of = {(id(s), c.name): s.sensor_labels(c.name) for s in source.records for c in s.info.cameras}
+        rows_of = {(id(s), c.name): CameraRows(s, c.name, options) for s in source.records for c in s.info.cameras}
         for split in source.split_names:
             (tmp / "images" / safe_name(split)).mkdir(parents=True)
             (tmp / "labels" / safe_name(split)).mkdir(parents=True)
@@ -77,20 +77,13 @@ class YoloExporter(Exporter):
                 info = item.source.info
                 table.writerow([image, split, info.scenario, int(info.seed), info.condition, cam.name, item.frame,
                                 repr(float(item.time_s))])
-                labels = labels_of[(id(item.source), cam.name)].get(item.frame)
-                if labels is not None and not labels.empty:
-                    reasons = options.filter.classify(labels)
-                    summary.add(reasons, labels["cls"].to_numpy())
-                    boxes = boxes_2d(labels, options.box)
-                    keep = reasons == KEPT
-                    boxless = keep & ~np.all(np.isfinite(boxes), axis=1)
-                    if boxless.any():
-                        track = int(labels["track_id"].to_numpy()[boxless][0])
-                        raise ExportError(f"{item.source.record.root}: frame {item.frame}, camera {cam.name}, track "
-                                          f"{track}: visible object without a {options.box.value} 2D box")
-                    classes = np.array([CLASS_INDEX[int(c)] for c in labels["category_id"].to_numpy()[keep]], int)
-                    text = label_text(boxes[keep], classes, cam.width_px, cam.height_px)
-                    objects += int(keep.sum())
+                labels = rows_of[(id(item.source), cam.name)]
+                shown = labels.rows(item.frame, summary)
+                keep = shown[labels.reasons[shown] == KEPT]
+                if len(keep):
+                    classes = np.array([CLASS_INDEX[int(c)] for c in labels.columns["category_id"][keep]], int)
+                    text = label_text(labels.boxes[keep], classes, cam.width_px, cam.height_px)
+                    objects += len(keep)
                 (tmp / "labels" / split / f"{stem}.txt").write_text(text)
                 counts[item.source.split] += 1
         data = {"train": f"images/{safe_name(source.split_names[0])}"}
