@@ -6,9 +6,12 @@ then times, frame by frame, only the Embree casts those frames need (camera prim
 rays of lit hits, LiDAR rays; static world and actors, scenes built outside the timing; see
 bench_render_core.BareCasts). Prints frames per second and the ratio stage time / bare casts
 (targets: >= 10 labelled frames/s on 2 cores, ratio <= 2.5), and the same ratio of CPU seconds, which other
-work on the machine does not skew.
+work on the machine does not skew. Then profiles --breakdown frames (default 10) on one thread, as each pool
+worker renders them, and prints where a frame's time goes by part (Embree casts, PNG encoding, ground truth,
+shading, ...) with the frames/s that total allows on this machine's cores, and the bound if all but the casts
+were free.
 
-    python bench/bench_render.py [--frames 100] [--sim DIR] [--condition noon] [--workers 2]
+    python bench/bench_render.py [--frames 100] [--sim DIR] [--condition noon] [--workers 2] [--breakdown 10]
 """
 
 from __future__ import annotations
@@ -69,12 +72,87 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
     return total, caster.cpu_s
 
 
+EMBREE, PNG, PARQUET = "Embree casts (+ actor BVH builds, lazy)", "PNG encoding (4 images)", "Parquet writes"
+GT = "ground truth (2D/3D boxes, occlusion, truncation)"
+POST = "post effects + tone map"
+RAYS = "camera rays, hit attributes, depth"
+# Where one frame's CPU time goes (--breakdown): built-in calls that are a part wherever they run ...
+LEAF_PARTS = {"cast_rays": EMBREE, "test_occlusions": EMBREE, "imwrite": PNG}
+# ... and the pipeline functions that own the rest of the time (numpy, OpenCV, pandas) they call.
+STEP_PARTS = {
+    "shade": "shading (sun, sky, lights, wet road)", "apply_post": POST, "to_srgb8": POST, "camera_labels": GT,
+    "project_actors": GT, "_camera_rows": GT, "_lidar_rows": GT, "_label_table": GT,
+    "render_lidar": "LiDAR model (noise, drop-out, intensity)", "__init__@scene.py": "frame scene (actors placed)",
+    "_write_camera": "images converted for writing", "_write_points": PARQUET, "write_parquet": PARQUET,
+    "render_camera": RAYS, "cast_rays@scene.py": RAYS, "render_shard": "trajectories, signals, other",
+}
+
+
+def _part_of(func: tuple[str, int, str]) -> str | None:
+    filename, _, name = func
+    if filename == "~":  # a built-in: "<built-in method open3d.pybind.t.geometry.cast_rays>", "<imwrite>"
+        return LEAF_PARTS.get(name.split()[-1].strip("<>").split(".")[-1])
+    if "pyarrow" in filename:
+        return PARQUET
+    if "pipeline" not in filename:
+        return None
+    return STEP_PARTS.get(f"{name}@{Path(filename).name}") or STEP_PARTS.get(name)
+
+
+def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames: list[int],
+              tmp: Path) -> list[tuple[str, float]]:
+    """(part, seconds) of rendering ``frames`` in this process on one thread (as each pool worker does), from a
+    cProfile run. A call's own time goes to its part (LEAF_PARTS, pyarrow) or else, up the profile's call graph,
+    to the innermost step that called it (STEP_PARTS), split among callers by their share of its time."""
+    import cProfile
+    import dataclasses
+    import pstats
+
+    from pipeline.stages.render import _check_sim, _static_world
+    from pipeline.stages.render_frames import ShardJob, render_shard
+
+    tmp.mkdir(parents=True, exist_ok=True)
+    seed = int(_check_sim(sim)["seed"])
+    _static_world(sim, seed, tmp / "static.pkl")
+    job = ShardJob(0, tuple(frames[:1]), sim, tmp / "static.pkl", tmp / "rec", tmp / "shards", rig, condition_cfg,
+                   seed, threads=1)
+    render_shard(job)  # loads the world and builds its BVH outside the profile
+    profile = cProfile.Profile()
+    profile.runcall(render_shard, dataclasses.replace(job, index=1, frames=tuple(frames)))
+    stats = pstats.Stats(profile).stats
+    owners: dict = {}
+
+    def owner(func, depth: int = 0) -> dict[str, float]:
+        if func in owners:
+            return owners[func]
+        part = _part_of(func)
+        if part is not None or depth > 50 or func not in stats:
+            owners[func] = {part or "other": 1.0}
+            return owners[func]
+        callers = stats[func][4]
+        total = sum(c[3] for c in callers.values()) or 1.0
+        share: dict[str, float] = {}
+        for caller, c in callers.items():
+            for name, frac in owner(caller, depth + 1).items():
+                share[name] = share.get(name, 0.0) + frac * (c[3] / total if callers else 1.0)
+        owners[func] = share or {"other": 1.0}
+        return owners[func]
+
+    parts: dict[str, float] = {}
+    for func, (_, _, tottime, _, _) in stats.items():
+        for name, frac in owner(func).items():
+            parts[name] = parts.get(name, 0.0) + tottime * frac
+    return sorted(parts.items(), key=lambda kv: -kv[1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--sim", type=Path)
     ap.add_argument("--condition", default="noon")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--breakdown", type=int, default=10, metavar="N",
+                    help="also profile N of the frames on one thread and print where the time goes (0: skip)")
     args = ap.parse_args()
     rig, _ = load_config(RigConfig, "default", "rigs")
     condition, _ = load_config(ConditionConfig, args.condition, "conditions")
@@ -95,6 +173,8 @@ def main() -> None:
         frames = select_frames(pd.read_parquet(sim / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
                                args.frames)
         bare_s, bare_cpu_s = bare_seconds(sim, frames, rig, condition)
+        parts = breakdown(sim, rig, condition, frames[:: max(1, len(frames) // args.breakdown)][: args.breakdown],
+                          tmp / "breakdown") if args.breakdown > 0 else []
     n = len(frames)
     rows = [
         ("frames rendered (800x600 camera + 64x1800 LiDAR + GT, on disk)", f"{n} ({size_mb:.0f} MB)"),
@@ -111,6 +191,19 @@ def main() -> None:
     print(f"{'measure':<{width}} | value\n{'-' * width}-|------")
     for key, value in rows:
         print(f"{key:<{width}} | {value}")
+    if parts:
+        count = min(args.breakdown, len(frames))
+        total = sum(t for _, t in parts)
+        embree = sum(t for name, t in parts if name.startswith("Embree"))
+        width = max(len(k) for k, _ in parts)
+        print(f"\nwhere one frame's time goes: {count} frames on one thread, cProfile (adds ~5%)\n"
+              f"{'part':<{width}} | ms/frame | share\n{'-' * width}-|----------|------")
+        for name, t in parts:
+            print(f"{name:<{width}} | {1000 * t / count:8.1f} | {100 * t / total:4.1f}%")
+        cores = os.cpu_count() or 1
+        print(f"{'total':<{width}} | {1000 * total / count:8.1f} |\n"
+              f"frames/s on {cores} cores at this total: {cores * count / total:.1f}; "
+              f"with everything but the Embree casts free: {cores * count / embree:.1f}")
 
 
 if __name__ == "__main__":
