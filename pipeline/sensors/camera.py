@@ -22,6 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
+from pipeline.world.scene import rectangles_mask
+
+# Corner k of an axis-aligned box takes hi on axis i where bit i of k is set; edges join corners one bit apart.
+_CORNER_BITS = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], bool)
+CLIP_Z_M = 1e-6  # boxes_pixel_mask: a box is projected where it lies beyond this depth (a micrometre)
+_BOX_EDGES = np.array([(k, k | 1 << i) for k in range(8) for i in range(3) if not k & 1 << i])
 
 
 @dataclass(frozen=True)
@@ -182,6 +188,71 @@ class Camera:
                              np.column_stack([np.full_like(edge_v, w), edge_v])])
         d, _ = self.unproject(uv)
         return float(np.max(np.abs(d[:, 0] / d[:, 2]))) * 1.001, float(np.max(np.abs(d[:, 1] / d[:, 2]))) * 1.001
+
+    def spheres_in_view(self, centre_cam: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        """(N,) bool: spheres (optical-frame centres (N, 3), radii (N,), metres) that may meet a ray of the image:
+        not wholly behind the near plane nor beyond the widest border ray (:attr:`border_tangents`)."""
+        near = self.config.near_m * (1.0 + 1e-6)
+        tan_x, tan_y = self.border_tangents
+        return (centre_cam[:, 2] + radius > near) & (
+            np.abs(centre_cam[:, 0]) - tan_x * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
+            np.abs(centre_cam[:, 1]) - tan_y * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_y))
+
+    def boxes_pixel_mask(self, cam_to_world: Transform, lo: np.ndarray, hi: np.ndarray, margin_px: int = 1) -> np.ndarray:
+        """(H*W,) bool row-major: a superset of the pixels whose centre ray can meet one of the axis-aligned
+        world boxes [lo, hi] (each (N, 3), metres); the camera at ``cam_to_world``. Rays start at the optical
+        centre, so geometry nearer than the near plane counts too.
+
+        Each box is clipped to the plane z = CLIP_Z_M (its corners in front, and where its edges cross the
+        plane) and projected without the lens's distortion, which keeps the projection of a convex box convex: its
+        bounding rectangle, grown by ``margin_px``, covers every ray through the box. With distortion the
+        rectangles are drawn on a grid of undistorted pixel coordinates and each pixel looks up its own cell.
+        """
+        lo, hi = np.asarray(lo, np.float64).reshape(-1, 3), np.asarray(hi, np.float64).reshape(-1, 3)
+        world_to_cam = cam_to_world.inverse()
+        keep = self.spheres_in_view(world_to_cam.apply((lo + hi) / 2), 0.5 * np.linalg.norm(hi - lo, axis=1))
+        corners = np.where(_CORNER_BITS[None], hi[keep, None], lo[keep, None]) @ world_to_cam.rotation.T
+        corners += world_to_cam.translation
+        front = corners[:, :, 2] > CLIP_Z_M
+        whole = front.all(axis=1)
+        # Boxes across the clip plane (few: the ground under the camera) add where their edges cross it.
+        part = corners[front.any(axis=1) & ~whole]
+        a, b = part[:, _BOX_EDGES[:, 0]], part[:, _BOX_EDGES[:, 1]]
+        cross = (a[:, :, 2] > CLIP_Z_M) != (b[:, :, 2] > CLIP_Z_M)
+        s = (CLIP_Z_M - a[:, :, 2]) / np.where(cross, b[:, :, 2] - a[:, :, 2], 1.0)
+        rects = [self._undistorted_bounds(corners[whole]), self._undistorted_bounds(
+            np.concatenate([part, a + s[:, :, None] * (b - a)], axis=1),
+            np.concatenate([part[:, :, 2] > CLIP_Z_M, cross], axis=1))]
+        rect_lo, rect_hi = (np.concatenate([r[i] for r in rects]) for i in range(2))
+        origin, shape, cells = self._undistorted_grid
+        limit = np.array(shape) + margin_px + 1
+        rect_lo = np.clip(np.floor(rect_lo) - origin - margin_px, -1, limit).astype(np.int64)
+        rect_hi = np.clip(np.ceil(rect_hi) - origin + margin_px, -1, limit).astype(np.int64)
+        mask = rectangles_mask(shape[0], shape[1], rect_lo, rect_hi).reshape(-1)
+        return mask if cells is None else mask[cells]
+
+    def _undistorted_bounds(self, points: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding (row, col) lo and hi, each (N, 2) float64, of N sets of optical-frame points (N, P, 3), or of
+        their ``valid`` (N, P) ones, projected without distortion (undistorted pixel coordinates)."""
+        z = np.maximum(points[:, :, 2], CLIP_Z_M)
+        row, col = self.fy * points[:, :, 1] / z + self.cy, self.fx * points[:, :, 0] / z + self.cx
+        if valid is None:
+            return np.column_stack([row.min(axis=1), col.min(axis=1)]), np.column_stack([row.max(axis=1), col.max(axis=1)])
+        return (np.column_stack([np.where(valid, row, np.inf).min(axis=1), np.where(valid, col, np.inf).min(axis=1)]),
+                np.column_stack([np.where(valid, row, -np.inf).max(axis=1), np.where(valid, col, -np.inf).max(axis=1)]))
+
+    @functools.cached_property
+    def _undistorted_grid(self) -> tuple[np.ndarray, tuple[int, int], np.ndarray | None]:
+        """The grid :meth:`boxes_pixel_mask` draws on: (row, col) of its first cell in undistorted pixel
+        coordinates, its (rows, cols), and each pixel's flat cell index (None without distortion: the image)."""
+        if not self.has_distortion:
+            return np.zeros(2), (self.height, self.width), None
+        d = self.pixel_directions.astype(np.float64)
+        row = np.floor(self.fy * d[:, 1] / d[:, 2] + self.cy).astype(np.int64)
+        col = np.floor(self.fx * d[:, 0] / d[:, 2] + self.cx).astype(np.int64)
+        origin = np.array([row.min(), col.min()])
+        shape = (int(row.max() - origin[0]) + 1, int(col.max() - origin[1]) + 1)
+        return origin.astype(np.float64), shape, (row - origin[0]) * shape[1] + (col - origin[1])
 
     @functools.cached_property
     def sample_directions(self) -> np.ndarray:

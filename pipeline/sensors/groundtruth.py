@@ -66,10 +66,7 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     centre = world_to_cam.apply(scene.actors.boxes.center)
     radius = 0.5 * np.linalg.norm(scene.actors.boxes.size, axis=1)
     near = camera.config.near_m * (1.0 + 1e-6)
-    tan_x, tan_y = camera.border_tangents
-    in_view = (centre[:, 2] + radius > near) & (
-        np.abs(centre[:, 0]) - tan_x * centre[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
-        np.abs(centre[:, 1]) - tan_y * centre[:, 2] <= radius * np.hypot(1.0, tan_y))
+    in_view = camera.spheres_in_view(centre, radius)
     verts = world_to_cam.apply(geo.vertices)
     tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)
     vsel = np.flatnonzero(in_view[geo.vertex_actor])

@@ -79,7 +79,9 @@ def render_camera(
     actor_rays = amodal.pixel_mask(w, h)
     dirs_cam = camera.pixel_directions
     rays = make_rays(cam_to_world.translation, dirs_cam, cam_to_world.rotation)
-    hits = scene.cast_rays(rays, actor_rays=actor_rays)
+    # Rays outside every static chunk's projection (most of the sky) cannot hit the static world: not cast.
+    static_rays = camera.boxes_pixel_mask(cam_to_world, *scene.static.chunk_boxes)
+    hits = scene.cast_rays(rays, actor_rays=actor_rays, static_rays=static_rays)
 
     actor_image = np.where(hits.instance_id > 0, hits.actor_index + 1, 0).astype(np.int32).reshape(h, w)
     labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image)

@@ -8,6 +8,10 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   actor index, material and semantic arrays; a ray's result is the nearer of the two casts. Callers may
   pass a conservative mask of the rays that can reach an actor at all (from projected boxes) to skip the
   actor cast for the rest.
+- The static world is also cut into chunks (:attr:`StaticScene.chunk_boxes`: axis-aligned boxes around nearby
+  triangles, tall geometry in 10 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
+  their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
+  hit is still found (``static_rays``).
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
   canonical mesh is affine, so a ray transformed into the actor's unit box frame hits the cached
   canonical mesh of its class exactly where the original ray hits the placed mesh, with the same ray
@@ -83,6 +87,9 @@ def _embree(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.Rayca
     return scene
 
 
+_MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
+
+
 def _cast(
     scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, threads: int = 0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -130,10 +137,11 @@ def rectangles_mask(rows: int, cols: int, lo: np.ndarray, hi: np.ndarray) -> np.
     lo = np.clip(np.asarray(lo, np.int64).reshape(-1, 2), 0, [rows, cols])
     hi = np.clip(np.asarray(hi, np.int64).reshape(-1, 2), 0, [rows, cols])
     hi = np.maximum(hi, lo)
-    corners = np.zeros((rows + 1, cols + 1), np.float32)  # small integers: exact in float32
-    for r, c, sign in ((lo[:, 0], lo[:, 1], 1), (lo[:, 0], hi[:, 1], -1),
-                       (hi[:, 0], lo[:, 1], -1), (hi[:, 0], hi[:, 1], 1)):
-        np.add.at(corners, (r, c), sign)
+    at = np.concatenate([lo[:, 0] * (cols + 1) + lo[:, 1], lo[:, 0] * (cols + 1) + hi[:, 1],
+                         hi[:, 0] * (cols + 1) + lo[:, 1], hi[:, 0] * (cols + 1) + hi[:, 1]])
+    sign = np.repeat(np.array([1.0, -1.0, -1.0, 1.0], np.float32), len(lo))
+    # Small integers: exact in float32.
+    corners = np.bincount(at, sign, minlength=(rows + 1) * (cols + 1)).astype(np.float32).reshape(rows + 1, cols + 1)
     return cv2.integral(corners, sdepth=cv2.CV_32F)[1:rows + 1, 1:cols + 1] > 0
 
 
@@ -145,12 +153,43 @@ def _canonical_scene(meshes: ActorMeshes, object_class: ObjectClass) -> o3d.t.ge
     return meshes.scene_cache[object_class]
 
 
+# Chunks of the static world (StaticScene.chunk_boxes): only how tight the camera's skip test is depends on them.
+CHUNK_M = 20.0  # triangles whose centres share a CHUNK_M cell get one box ...
+LOW_CHUNK_M = 80.0  # ... or a LOW_CHUNK_M cell where they lie at most LOW_M above the world's lowest point:
+LOW_M = 1.0  # ground, roads, markings, kerbs and barriers stay below a camera's horizon however wide their box
+SUBSET_MAX = 0.8  # StaticScene.cast casts all the rays where ``where`` keeps more than this fraction of them
+CHUNK_PAD_M = 1e-3  # boxes are grown by this, far beyond Embree's float32 rounding of the vertices
+
+
+def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi), each (C, 3) float64: axis-aligned boxes that together contain every triangle (T, 3) of
+    ``vertices`` (V, 3), one per group of nearby triangles (see CHUNK_M); a triangle longer than its cell gets
+    a box of its own, so one long ground strip does not make a tall group wide."""
+    if not len(triangles):
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    corners = np.asarray(vertices, np.float64)[np.asarray(triangles, np.int64)]
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    low = hi[:, 2] <= lo[:, 2].min() + LOW_M
+    cell_m = np.where(low, LOW_CHUNK_M, CHUNK_M)
+    cell = np.floor((lo[:, :2] + hi[:, :2]) / (2.0 * cell_m[:, None])).astype(np.int64)
+    alone = np.where((hi - lo)[:, :2].max(axis=1) > cell_m, np.arange(len(lo)), -1)
+    _, group = np.unique(np.column_stack([low, cell, alone]), axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    box_lo = np.full((group.max() + 1, 3), np.inf)
+    box_hi = np.full((group.max() + 1, 3), -np.inf)
+    np.minimum.at(box_lo, group, lo)
+    np.maximum.at(box_hi, group, hi)
+    return box_lo - CHUNK_PAD_M, box_hi + CHUNK_PAD_M
+
+
 class StaticScene:
     """The static world (built once per run): all meshes merged into one Embree geometry.
 
     Attributes:
         triangle_material: (T,) int32; triangle_semantic: (T,) uint8; num_triangles: T.
         mesh_offsets: (M + 1,) int64 first merged triangle of each input mesh (input order), then T.
+        chunk_boxes: (lo, hi), each (C, 3) float64 world metres: boxes that contain all the triangles
+            (:func:`chunk_boxes`); a ray that meets none of them cannot hit the static world.
     """
 
     def __init__(self, meshes: list[Mesh]) -> None:
@@ -162,10 +201,12 @@ class StaticScene:
             self.triangle_material = merged.material
             self.triangle_semantic = np.concatenate([np.full(len(m), int(m.semantic), np.uint8) for m in meshes])
             self._scene = _embree(merged.vertices, merged.triangles)
+            self.chunk_boxes = chunk_boxes(merged.vertices, merged.triangles)
         else:
             self.triangle_material = np.zeros(0, np.int32)
             self.triangle_semantic = np.zeros(0, np.uint8)
             self._scene = None
+            self.chunk_boxes = chunk_boxes(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
 
     def set_triangle_materials(self, mesh_index: int, triangles: np.ndarray, material: np.ndarray | int) -> None:
         """Change the material of some triangles of input mesh ``mesh_index`` (indices within that mesh), e.g.
@@ -176,12 +217,22 @@ class StaticScene:
             raise ValueError(f"triangle indices out of range for mesh {mesh_index} of {stop - start} triangles")
         self.triangle_material[start + triangles] = material
 
-    def cast(self, rays: np.ndarray, threads: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Raw cast of (N, 6) float32 rays: t (inf = miss), primitive id, normal."""
-        if self._scene is None:
-            n = len(rays)
-            return np.full(n, np.inf, np.float32), np.zeros(n, np.int64), np.zeros((n, 3), np.float32)
-        return _cast(self._scene, rays, threads)
+    def cast(
+        self, rays: np.ndarray, threads: int = 0, where: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Raw cast of (N, 6) float32 rays: t (inf = miss), primitive id (Embree's invalid id on a miss),
+        normal (0 on a miss). ``where`` (N,) bool, optional: cast only these rays; the others are reported as
+        misses, so it must contain every ray that can hit (e.g. from :attr:`chunk_boxes`)."""
+        n = len(rays)
+        if self._scene is None or (where is not None and not where.any()):
+            return np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
+        sub = None if where is None else np.flatnonzero(where)
+        if sub is None or len(sub) > SUBSET_MAX * n:  # gathering and scattering would cost more than they save
+            return _cast(self._scene, rays, threads)
+        t_sub, prim_sub, normal_sub = _cast(self._scene, np.take(rays, sub, axis=0), threads)
+        t, prim, normal = np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
+        t[sub], prim[sub], normal[sub] = t_sub, prim_sub, normal_sub
+        return t, prim, normal
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0) -> np.ndarray:
         if self._scene is None:
@@ -221,14 +272,18 @@ class FrameScene:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
         return self.cast_rays(_rays(origins, directions), actor_rays)
 
-    def cast_rays(self, rays: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
+    def cast_rays(
+        self, rays: np.ndarray, actor_rays: np.ndarray | None = None, static_rays: np.ndarray | None = None
+    ) -> Hits:
         """First hits of (N, 6) float32 rays [origin | unit direction] (world; directions are trusted unit).
 
         ``actor_rays`` (N,) bool, optional: a conservative mask of the rays that may hit an actor; the
-        others skip the actor cast. Without it every ray is cast against the actors.
+        others skip the actor cast. Without it every ray is cast against the actors. ``static_rays`` likewise
+        for the static world (e.g. :meth:`pipeline.sensors.camera.Camera.boxes_pixel_mask` of its
+        :attr:`StaticScene.chunk_boxes`).
         """
         n = len(rays)
-        t, prim, normal = self.static.cast(rays, self.threads)
+        t, prim, normal = self.static.cast(rays, self.threads, static_rays)
         hit = t < np.inf
         instance_id = np.zeros(n, np.int32)
         actor_index = np.zeros(n, np.int32)

@@ -93,3 +93,52 @@ def test_distortion_beyond_its_fold_is_refused():
     assert invertible.tolist() == [True, False]
     with pytest.raises(ValueError, match="cannot be inverted"):
         _ = cam.pixel_directions
+
+
+def _box_hits(cam: Camera, cam_to_world: Transform, lo, hi) -> np.ndarray:
+    """(H*W,) bool: pixel-centre rays that hit the box [lo, hi] (world), cast with Embree."""
+    from pipeline.core.classes import SemanticClass
+    from pipeline.world.actor_shapes import cuboid
+    from pipeline.world.mesh import Mesh
+    from pipeline.world.scene import StaticScene, make_rays
+
+    scene = StaticScene([Mesh(*cuboid(tuple(lo), tuple(hi), "concrete"), semantic=SemanticClass.BUILDING)])
+    rays = make_rays(cam_to_world.translation, cam.pixel_directions, cam_to_world.rotation)
+    return np.isfinite(scene.cast(rays)[0])
+
+
+def test_boxes_pixel_mask_of_a_box_in_front_is_its_projected_rectangle():
+    cam = Camera(CameraConfig(width_px=800, height_px=600, hfov_deg=90.0))  # fx = fy = 400, centre (400, 300)
+    optical = Transform.identity()  # the optical frame is the world: x right, y down, z forward
+    mask = cam.boxes_pixel_mask(optical, [[-1.0, -0.5, 4.0]], [[1.0, 0.5, 6.0]]).reshape(600, 800)
+    # The nearest face spans x/z in [-1/4, 1/4], y/z in [-1/8, 1/8]: columns [300, 500], rows [250, 350],
+    # grown by the one-pixel margin.
+    expected = np.zeros((600, 800), bool)
+    expected[249:351, 299:501] = True
+    np.testing.assert_array_equal(mask, expected)
+    assert _box_hits(cam, optical, [-1.0, -0.5, 4.0], [1.0, 0.5, 6.0]).reshape(600, 800)[expected].mean() > 0.95
+
+
+@pytest.mark.parametrize("distortion", [(0.0,) * 5, DISTORTION])
+@pytest.mark.parametrize("box", [
+    ((-30.0, -40.0, -0.05), (30.0, 40.0, 0.0)),  # ground under and behind the camera, across the image plane
+    ((8.0, 1.5, 0.0), (9.0, 2.5, 12.0)),  # a tall pole ahead and to the left
+    ((0.02, -0.3, 0.5), (0.03, 0.3, 1.0)),  # a sheet 2 cm in front of the lens: nearer than the near plane
+    ((-5.0, -5.0, -1.0), (5.0, 5.0, 5.0)),  # around the camera: every ray
+])
+def test_boxes_pixel_mask_covers_every_ray_through_a_box(distortion, box):
+    cam = Camera(CameraConfig(width_px=160, height_px=120, distortion=distortion))
+    cam_to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 0.75), (0.0, 0.05, 0.1)))
+    lo, hi = np.array([box[0]]), np.array([box[1]])
+    hits = _box_hits(cam, cam_to_world, lo[0], hi[0])
+    mask = cam.boxes_pixel_mask(cam_to_world, lo, hi)
+    assert hits.any()
+    assert not (hits & ~mask).any(), f"{np.count_nonzero(hits & ~mask)} rays hit the box outside the mask"
+
+
+def test_boxes_pixel_mask_is_empty_behind_the_camera_and_full_around_it():
+    cam = Camera(CameraConfig(width_px=80, height_px=60))
+    optical = Transform.identity()
+    assert not cam.boxes_pixel_mask(optical, [[-1.0, -1.0, -6.0]], [[1.0, 1.0, -4.0]]).any()
+    assert not cam.boxes_pixel_mask(optical, np.zeros((0, 3)), np.zeros((0, 3))).any()
+    assert cam.boxes_pixel_mask(optical, [[-1.0, -1.0, -1.0]], [[1.0, 1.0, 1.0]]).all()

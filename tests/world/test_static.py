@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.core.classes import SemanticClass
+from pipeline.core.geometry import Transform
 from pipeline.traffic.roadgeometry import read_network_geometry, write_road_geometry
 from pipeline.world.materials import MATERIAL_NAMES
 from pipeline.world.static import build_static_world
@@ -222,3 +223,38 @@ def test_triangulate_ring_covers_polygons() -> None:
             areas = np.array([signed_area(r[t]) for t in tris])
             assert len(tris) == n - 2 and (areas >= -1e-12).all()
             assert areas.sum() == pytest.approx(abs(signed_area(r)))
+
+
+def test_chunk_boxes_contain_every_triangle(grid_world) -> None:
+    from pipeline.world.scene import StaticScene
+
+    scene = StaticScene(grid_world.meshes)
+    lo, hi = scene.chunk_boxes
+    verts = np.concatenate([m.vertices[m.triangles] for m in grid_world.meshes if len(m)])  # (T, 3, 3)
+    assert len(lo) < len(verts) / 10  # boxes of many triangles each
+    inside = np.zeros(len(verts), bool)
+    for start in range(0, len(lo), 256):  # every triangle: some box holds all three of its vertices
+        a, b = lo[start:start + 256], hi[start:start + 256]
+        inside |= ((verts[:, None] >= a[None, :, None]) & (verts[:, None] <= b[None, :, None])).all(axis=(2, 3)).any(1)
+    assert inside.all(), f"{np.count_nonzero(~inside)} triangles outside every chunk box"
+
+
+@pytest.mark.parametrize("pose", [((50.0, 1.6, 1.4), (0.0, 0.0, 0.0)), ((100.0, 100.0, 1.4), (0.0, -1.2, 0.0)),
+                                  ((-20.0, 20.0, 3.0), (0.1, 0.05, -0.7)), ((150.0, 98.0, 0.3), (0.0, 0.1, 3.0))])
+def test_camera_skips_only_rays_that_cannot_hit_the_static_world(grid_world, pose) -> None:
+    """The camera's static mask (chunk boxes projected) leaves out rays, and every hit is the same as without it."""
+    from pipeline.sensors.camera import Camera, CameraConfig
+    from pipeline.world.scene import StaticScene, make_rays
+
+    scene = StaticScene(grid_world.meshes)
+    cam = Camera(CameraConfig(width_px=400, height_px=300))
+    cam_to_world = cam.camera_to_world(Transform.from_xyz_rpy(*pose))
+    rays = make_rays(cam_to_world.translation, cam.pixel_directions, cam_to_world.rotation)
+    where = cam.boxes_pixel_mask(cam_to_world, *scene.chunk_boxes)
+    full, masked = scene.cast(rays, where=None), scene.cast(rays, where=where)
+    for a, b in zip(full, masked, strict=True):
+        np.testing.assert_array_equal(a, b)
+    sky = ~np.isfinite(full[0])
+    assert not where[~sky].size or where[~sky].all()
+    if pose[1][1] < 0:  # looking up: most rays are sky and skipped, so the subset path ran
+        assert where.mean() < 0.8 and sky.mean() > 0.3
