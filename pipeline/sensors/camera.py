@@ -198,7 +198,9 @@ class Camera:
             np.abs(centre_cam[:, 0]) - tan_x * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
             np.abs(centre_cam[:, 1]) - tan_y * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_y))
 
-    def boxes_pixel_mask(self, cam_to_world: Transform, lo: np.ndarray, hi: np.ndarray, margin_px: int = 1) -> np.ndarray:
+    def boxes_pixel_mask(
+        self, cam_to_world: Transform, lo: np.ndarray, hi: np.ndarray, margin_px: int = 1
+    ) -> np.ndarray:
         """(H*W,) bool row-major: a superset of the pixels whose centre ray can meet one of the axis-aligned
         world boxes [lo, hi] (each (N, 3), metres); the camera at ``cam_to_world``. Rays start at the optical
         centre, so geometry nearer than the near plane counts too.
@@ -237,7 +239,8 @@ class Camera:
         z = np.maximum(points[:, :, 2], CLIP_Z_M)
         row, col = self.fy * points[:, :, 1] / z + self.cy, self.fx * points[:, :, 0] / z + self.cx
         if valid is None:
-            return np.column_stack([row.min(axis=1), col.min(axis=1)]), np.column_stack([row.max(axis=1), col.max(axis=1)])
+            return (np.column_stack([row.min(axis=1), col.min(axis=1)]),
+                    np.column_stack([row.max(axis=1), col.max(axis=1)]))
         return (np.column_stack([np.where(valid, row, np.inf).min(axis=1), np.where(valid, col, np.inf).min(axis=1)]),
                 np.column_stack([np.where(valid, row, -np.inf).max(axis=1), np.where(valid, col, -np.inf).max(axis=1)]))
 
