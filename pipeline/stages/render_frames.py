@@ -24,7 +24,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ConditionConfig, RigConfig
 from pipeline.core.geometry import Boxes3D, Transform, wrap_angle
 from pipeline.core.record import DEPTH_SCALE, FRAME_COLUMNS, LABEL_COLUMNS, POINT_COLUMNS, camera_path, lidar_path
-from pipeline.core.tables import read_parquet, write_arrow, write_parquet
+from pipeline.core.tables import read_parquet, write_parquet, write_sweep
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.render import render_camera
 from pipeline.stages.rig import build_sensors
@@ -299,5 +299,5 @@ def _write_points(path: Path, sweep) -> None:
         "x_m": sweep.points_m[:, 0], "y_m": sweep.points_m[:, 1], "z_m": sweep.points_m[:, 2],
         "intensity": sweep.intensity, "ring": sweep.ring, "instance_id": sweep.instance_id, "semantic": sweep.semantic,
     }
-    # Straight to Arrow (no DataFrame): the same bytes as write_parquet, in half the time.
-    write_arrow(pa.table({c: np.ascontiguousarray(columns[c], dtype=t) for c, t in POINT_COLUMNS.items()}), path)
+    # Straight to Arrow (no DataFrame): half the time of a DataFrame.
+    write_sweep(pa.table({c: np.ascontiguousarray(columns[c], dtype=t) for c, t in POINT_COLUMNS.items()}), path)
