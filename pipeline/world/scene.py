@@ -172,13 +172,15 @@ def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray
     low = hi[:, 2] <= lo[:, 2].min() + LOW_M
     cell_m = np.where(low, LOW_CHUNK_M, CHUNK_M)
     cell = np.floor((lo[:, :2] + hi[:, :2]) / (2.0 * cell_m[:, None])).astype(np.int64)
-    alone = np.where((hi - lo)[:, :2].max(axis=1) > cell_m, np.arange(len(lo)), -1)
-    _, group = np.unique(np.column_stack([low, cell, alone]), axis=0, return_inverse=True)
-    group = group.reshape(-1)
-    box_lo = np.full((group.max() + 1, 3), np.inf)
-    box_hi = np.full((group.max() + 1, 3), -np.inf)
-    np.minimum.at(box_lo, group, lo)
-    np.maximum.at(box_hi, group, hi)
+    cell -= cell.min(axis=0)
+    # One int64 key per triangle: its cell (and whether low), or its own index where it is alone.
+    key = (cell[:, 0] * (cell[:, 1].max() + 1) + cell[:, 1]) * 2 + low
+    alone = (hi - lo)[:, :2].max(axis=1) > cell_m
+    key[alone] = key.max() + 1 + np.flatnonzero(alone)
+    order = np.argsort(key, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(key[order]) != 0])
+    box_lo = np.minimum.reduceat(lo[order], starts, axis=0)
+    box_hi = np.maximum.reduceat(hi[order], starts, axis=0)
     return box_lo - CHUNK_PAD_M, box_hi + CHUNK_PAD_M
 
 
