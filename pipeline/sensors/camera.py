@@ -24,9 +24,9 @@ import numpy as np
 from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
 from pipeline.world.scene import rectangles_mask
 
+CLIP_Z_M = 1e-6  # boxes_pixel_mask: a box is projected where it lies beyond this depth (a micrometre)
 # Corner k of an axis-aligned box takes hi on axis i where bit i of k is set; edges join corners one bit apart.
 _CORNER_BITS = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], bool)
-CLIP_Z_M = 1e-6  # boxes_pixel_mask: a box is projected where it lies beyond this depth (a micrometre)
 _BOX_EDGES = np.array([(k, k | 1 << i) for k in range(8) for i in range(3) if not k & 1 << i])
 
 

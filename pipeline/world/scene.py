@@ -9,7 +9,7 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   pass a conservative mask of the rays that can reach an actor at all (from projected boxes) to skip the
   actor cast for the rest.
 - The static world is also cut into chunks (:attr:`StaticScene.chunk_boxes`: axis-aligned boxes around nearby
-  triangles, tall geometry in 10 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
+  triangles, tall geometry in 20 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
