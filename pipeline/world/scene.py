@@ -208,7 +208,7 @@ class StaticScene:
             self.triangle_material = np.zeros(0, np.int32)
             self.triangle_semantic = np.zeros(0, np.uint8)
             self._scene = None
-            self.chunk_boxes = chunk_boxes(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+            self.chunk_boxes = (np.zeros((0, 3)), np.zeros((0, 3)))
 
     def set_triangle_materials(self, mesh_index: int, triangles: np.ndarray, material: np.ndarray | int) -> None:
         """Change the material of some triangles of input mesh ``mesh_index`` (indices within that mesh), e.g.
@@ -226,14 +226,12 @@ class StaticScene:
         normal (0 on a miss). ``where`` (N,) bool, optional: cast only these rays; the others are reported as
         misses, so it must contain every ray that can hit (e.g. from :attr:`chunk_boxes`)."""
         n = len(rays)
-        if self._scene is None or (where is not None and not where.any()):
-            return np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
-        sub = None if where is None else np.flatnonzero(where)
-        if sub is None or len(sub) > SUBSET_MAX * n:  # gathering and scattering would cost more than they save
+        sub = np.arange(n) if where is None else np.flatnonzero(where)
+        if self._scene is not None and len(sub) > SUBSET_MAX * n:  # gathering, scattering would cost more than saved
             return _cast(self._scene, rays, threads)
-        t_sub, prim_sub, normal_sub = _cast(self._scene, np.take(rays, sub, axis=0), threads)
         t, prim, normal = np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
-        t[sub], prim[sub], normal[sub] = t_sub, prim_sub, normal_sub
+        if self._scene is not None and len(sub):
+            t[sub], prim[sub], normal[sub] = _cast(self._scene, np.take(rays, sub, axis=0), threads)
         return t, prim, normal
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0) -> np.ndarray:
