@@ -38,22 +38,15 @@ import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.Color_pb2 import Color
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
-from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
-from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
-from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
-from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
-from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
-from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
-from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.duration_pb2 import Duration
 from google.protobuf.timestamp_pb2 import Timestamp
@@ -79,7 +72,7 @@ from exporters.scene import (
     quat_from_yaw,
     split_ns,
 )
-from exporters.source import ExportSource, FrameItem
+from exporters.source import ExportSource, FrameItem, RecordSource
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +90,9 @@ def _stamp(time_ns: int) -> Timestamp:
     return Timestamp(seconds=sec, nanos=nsec)
 
 
+_WHITE = Color(r=1, g=1, b=1, a=1)
+
+
 def _color(cls: str, alpha: float | None = None) -> Color:
     r, g, b, a = CLASS_COLORS.get(cls, DEFAULT_COLOR)
     return Color(r=r, g=g, b=b, a=a if alpha is None else alpha)
@@ -109,8 +105,14 @@ def _pose(matrix: np.ndarray) -> Pose:
 
 
 def _yaw_pose(x: float, y: float, z: float, yaw: float) -> Pose:
-    qx, qy, qz, qw = quat_from_yaw(yaw)
-    return Pose(position=Vector3(x=float(x), y=float(y), z=float(z)), orientation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+    pose = Pose()
+    _set_yaw_pose(pose, x, y, z, yaw)
+    return pose
+
+
+def _set_yaw_pose(pose: Pose, x: float, y: float, z: float, yaw: float) -> None:
+    pose.position.x, pose.position.y, pose.position.z = float(x), float(y), float(z)
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = quat_from_yaw(yaw)
 
 
 def _varint(value: int) -> bytes:
@@ -122,20 +124,32 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
-def _append_bytes_field(serialized: bytes, message: Any, name: str, payload: bytes) -> bytes:
-    """``serialized`` (``message`` without field ``name``) followed by that bytes field holding ``payload``.
+def serialize_with_bytes(message: Any, name: str, payload: bytes) -> bytes:
+    """``message`` serialised with its bytes field ``name`` (unset in ``message``) holding ``payload``.
 
-    When ``name`` is the message's highest-numbered field this is byte for byte what
-    ``SerializeToString(deterministic=True)`` gives with the field set (fields go out in number order; an
-    empty proto3 bytes field is not written), without the two copies protobuf makes of the payload
-    (setting, then serialising): ~6 ms of a 2.4 MB LiDAR sweep's ~6.5 ms.
+    Byte for byte what ``SerializeToString(deterministic=True)`` gives with the field set: fields go out in
+    number order, so the field is spliced in after those numbered below it; an empty proto3 bytes field is
+    not written. The payload is copied once, not twice as protobuf does (setting, then serialising): ~6 ms
+    of a 2.4 MB LiDAR sweep's ~6.5 ms.
     """
     field = message.DESCRIPTOR.fields_by_name[name]
-    if field.type != field.TYPE_BYTES or field.number != max(f.number for f in message.DESCRIPTOR.fields):
-        raise ValueError(f"{message.DESCRIPTOR.full_name}.{name} is not the message's last field of type bytes")
+    value = getattr(message, name)
+    if field.type != field.TYPE_BYTES or not isinstance(value, bytes):  # a repeated field is a container
+        raise ValueError(f"{message.DESCRIPTOR.full_name}.{name} is not a singular bytes field")
+    if value:
+        raise ValueError(f"{message.DESCRIPTOR.full_name}.{name} is already set")
+    whole = message.SerializeToString(deterministic=True)
     if not payload:
-        return serialized
-    return b"".join((serialized, _varint(field.number << 3 | 2), _varint(len(payload)), payload))
+        return whole
+    head = len(whole)
+    later = [f.name for f, _ in message.ListFields() if f.number > field.number]
+    if later:
+        first = type(message)()
+        first.CopyFrom(message)
+        for other in later:
+            first.ClearField(other)
+        head = first.ByteSize()
+    return b"".join((whole[:head], _varint(field.number << 3 | 2), _varint(len(payload)), payload, whole[head:]))
 
 
 class _Log:
@@ -154,9 +168,9 @@ class _Log:
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
 
-    def write(self, topic: str, message: Any, time_ns: int, last_bytes: tuple[str, bytes] | None = None) -> None:
-        """Log ``message`` on ``topic``; ``last_bytes`` = (field, payload) sets a large bytes field on the wire
-        instead (see :func:`_append_bytes_field`)."""
+    def write(self, topic: str, message: Any, time_ns: int, big_bytes: tuple[str, bytes] | None = None) -> None:
+        """Log ``message`` on ``topic``; ``big_bytes`` = (field, payload) sets a large bytes field on the wire
+        instead (see :func:`serialize_with_bytes`)."""
         if topic not in self.channels:
             self.calls.drain()
             name = type(message).DESCRIPTOR.full_name
@@ -164,9 +178,10 @@ class _Log:
                 self.schemas[name] = register_schema(self.writer, type(message))
             self.channels[topic] = self.writer.register_channel(topic, "protobuf", self.schemas[name])
             self.counts[topic] = 0
-        data = message.SerializeToString(deterministic=True)
-        if last_bytes is not None:
-            data = _append_bytes_field(data, message, *last_bytes)
+        if big_bytes is None:
+            data = message.SerializeToString(deterministic=True)
+        else:
+            data = serialize_with_bytes(message, *big_bytes)
         self.calls.add(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
                        publish_time=time_ns, data=data, sequence=self.counts[topic])
         self.counts[topic] += 1
@@ -217,12 +232,13 @@ class McapExporter(Exporter):
         with tmp.open("wb") as stream, _zstd_level(ZSTD_LEVEL):
             writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=_COMPRESSION[options.compression])
             writer.start(profile="", library=f"roadsynth exporters; mcap {mcap.__version__}")
-            rows = {id(s): FrameRows(s, options, summary) for s in source.records}
+            records = {id(s): _RecordMessages(s, Naming(s, source), FrameRows(s, options, summary))
+                       for s in source.records}
             with ordered_calls(QUEUE_BYTES, "mcap-writer") as calls:
                 out = _Log(writer, calls)
                 for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap",
                                        unit="frame", disable=not options.progress):
-                    self._frame(out, item, data, Naming(item.source, source), rows[id(item.source)])
+                    records[id(item.source)].frame(out, item, data)
                     calls.flush()
             counts = {"frames": source.n_frames(), "messages": dict(sorted(out.counts.items())),
                       "objects": summary.to_dict()}
@@ -237,75 +253,99 @@ class McapExporter(Exporter):
             writer.finish()
         return counts
 
-    def _frame(self, out: _Log, item: FrameItem, data: FrameData, names: Naming, rows: FrameRows) -> None:
+
+class _RecordMessages:
+    """Builds the messages of one record's frames.
+
+    What does not change from frame to frame (sensor mounts, calibrations, point layouts, frame ids) is built
+    once, as messages whose time stamp is set before each use; a frame's messages are serialised as soon as
+    they are built (:meth:`_Log.write`), so reusing them is safe. Objects are added in place
+    (``repeated.add``) rather than built and then copied into their parent.
+    """
+
+    def __init__(self, source: RecordSource, names: Naming, rows: FrameRows) -> None:
+        info = source.info
+        self.source, self.names, self.rows = source, names, rows
+        self.world, self.ego = names.frame("world"), names.frame("ego")
+        self.topics = {key: names.topic(key) for key in ("/tf", "/ego/pose", "/scene/objects")}
+        self.mounts = [(names.frame(s.name), _pose(s.T_array)) for s in [*info.cameras, *info.lidars]]
+        self.cameras = []
+        for cam in info.cameras:
+            k = cam.K_array
+            calibration = CameraCalibration(
+                frame_id=names.frame(cam.name), width=cam.width_px, height=cam.height_px, distortion_model="plumb_bob",
+                D=[float(v) for v in cam.distortion], K=k.reshape(-1).tolist(), R=np.eye(3).reshape(-1).tolist(),
+                P=np.hstack([k, np.zeros((3, 1))]).reshape(-1).tolist())
+            self.cameras.append((cam.name, names.frame(cam.name), names.topic(f"/camera/{cam.name}/image"),
+                                 names.topic(f"/camera/{cam.name}/calibration"), calibration,
+                                 names.topic(f"/camera/{cam.name}/annotations")))
+        self.lidars = [(lidar.name, names.topic(f"/lidar/{lidar.name}/points"),
+                        PointCloud(frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
+                                   point_stride=POINT_STRIDE, fields=_FIELDS)) for lidar in info.lidars]
+
+    def frame(self, out: _Log, item: FrameItem, data: FrameData) -> None:
         t = nanoseconds(item.time_s)
         stamp = _stamp(t)
-        info, row = item.source.info, item.row
+        row = item.row
         world_ego = _yaw_pose(row.ego_x_m, row.ego_y_m, row.ego_z_m, row.ego_yaw_rad)
-        transforms = [FrameTransform(timestamp=stamp, parent_frame_id=names.frame("world"),
-                                     child_frame_id=names.frame("ego"), translation=world_ego.position,
-                                     rotation=world_ego.orientation)]
-        for sensor in [*info.cameras, *info.lidars]:
-            pose = _pose(sensor.T_array)
-            transforms.append(FrameTransform(timestamp=stamp, parent_frame_id=names.frame("ego"),
-                                             child_frame_id=names.frame(sensor.name), translation=pose.position,
-                                             rotation=pose.orientation))
-        out.write(names.topic("/tf"), FrameTransforms(transforms=transforms), t)
-        out.write(names.topic("/ego/pose"),
-                  PoseInFrame(timestamp=stamp, frame_id=names.frame("world"), pose=world_ego), t)
-        for cam in info.cameras:
-            frame_id = names.frame(cam.name)
-            out.write(names.topic(f"/camera/{cam.name}/image"),
-                      CompressedImage(timestamp=stamp, frame_id=frame_id, data=data.images[cam.name], format="png"), t)
-            k = cam.K_array
-            p = np.hstack([k, np.zeros((3, 1))])
-            out.write(names.topic(f"/camera/{cam.name}/calibration"), CameraCalibration(
-                timestamp=stamp, frame_id=frame_id, width=cam.width_px, height=cam.height_px,
-                distortion_model="plumb_bob", D=[float(v) for v in cam.distortion], K=k.reshape(-1).tolist(),
-                R=np.eye(3).reshape(-1).tolist(), P=p.reshape(-1).tolist()), t)
-            out.write(names.topic(f"/camera/{cam.name}/annotations"),
-                      self._annotations(rows.sensor(item.frame, cam.name), stamp), t)
-        for lidar in info.lidars:
-            out.write(names.topic(f"/lidar/{lidar.name}/points"), PointCloud(
-                timestamp=stamp, frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
-                point_stride=POINT_STRIDE, fields=_FIELDS), t, last_bytes=("data", data.points[lidar.name]))
-        out.write(names.topic("/scene/objects"), self._scene(rows.objects(item.frame), stamp, names,
-                                                             item.source.hold_ns(item.frame)), t)
+        tf = FrameTransforms()
+        tf.transforms.add(timestamp=stamp, parent_frame_id=self.world, child_frame_id=self.ego,
+                          translation=world_ego.position, rotation=world_ego.orientation)
+        for child, pose in self.mounts:
+            tf.transforms.add(timestamp=stamp, parent_frame_id=self.ego, child_frame_id=child,
+                              translation=pose.position, rotation=pose.orientation)
+        out.write(self.topics["/tf"], tf, t)
+        out.write(self.topics["/ego/pose"], PoseInFrame(timestamp=stamp, frame_id=self.world, pose=world_ego), t)
+        for name, frame_id, image_topic, calibration_topic, calibration, annotations_topic in self.cameras:
+            out.write(image_topic, CompressedImage(timestamp=stamp, frame_id=frame_id, format="png"), t,
+                      big_bytes=("data", data.images[name]))
+            calibration.timestamp.CopyFrom(stamp)
+            out.write(calibration_topic, calibration, t)
+            out.write(annotations_topic, _annotations(self.rows.sensor(item.frame, name), stamp), t)
+        for name, topic, cloud in self.lidars:
+            cloud.timestamp.CopyFrom(stamp)
+            out.write(topic, cloud, t, big_bytes=("data", data.points[name]))
+        out.write(self.topics["/scene/objects"], _scene(self.rows.objects(item.frame), stamp, self.world,
+                                                        self.source.hold_ns(item.frame)), t)
 
-    @staticmethod
-    def _annotations(rows: list[dict], stamp: Timestamp) -> ImageAnnotations:
-        msg = ImageAnnotations()
-        for row in rows:
-            reason, cls, track = row["reason"], row["cls"], row["track_id"]
-            if reason == HIDDEN or not np.all(np.isfinite(row["box"])):
-                continue
-            x1, y1, x2, y2 = (float(v) for v in row["box"])
-            alpha = 1.0 if reason == KEPT else 0.35
-            corners = [Point2(x=x1, y=y1), Point2(x=x2, y=y1), Point2(x=x2, y=y2), Point2(x=x1, y=y2)]
-            msg.points.append(PointsAnnotation(timestamp=stamp, type=PointsAnnotation.LINE_LOOP, points=corners,
-                                               outline_color=_color(cls, alpha), thickness=2.0))
-            text = f"{cls} {track}" + ("" if reason == KEPT else f" ({reason})")
-            msg.texts.append(TextAnnotation(timestamp=stamp, position=Point2(x=x1, y=max(y1 - 2.0, 0.0)), text=text,
-                                            font_size=12.0, text_color=Color(r=1, g=1, b=1, a=1),
-                                            background_color=_color(cls, 0.7 * alpha)))
-        return msg
 
-    @staticmethod
-    def _scene(objects: list[dict], stamp: Timestamp, names: Naming, lifetime_ns: int) -> SceneUpdate:
-        update = SceneUpdate()
-        for o in objects:
-            track, cls = int(o["track_id"]), o["cls"]
-            pose = _yaw_pose(o["x_m"], o["y_m"], o["z_m"], o["yaw_rad"])
-            label_pose = _yaw_pose(o["x_m"], o["y_m"], o["z_m"] + o["height_m"] / 2 + 0.5, 0.0)
-            update.entities.append(SceneEntity(
-                timestamp=stamp, frame_id=names.frame("world"), id=f"track-{track}",
-                lifetime=Duration(seconds=lifetime_ns // 1_000_000_000, nanos=lifetime_ns % 1_000_000_000),
-                metadata=[KeyValuePair(key="track_id", value=str(track)), KeyValuePair(key="class", value=cls)],
-                cubes=[CubePrimitive(pose=pose, size=Vector3(x=o["length_m"], y=o["width_m"], z=o["height_m"]),
-                                     color=_color(cls))],
-                texts=[TextPrimitive(pose=label_pose, billboard=True, font_size=14.0, scale_invariant=True,
-                                     color=Color(r=1, g=1, b=1, a=1), text=f"{cls} {track}")]))
-        return update
+def _annotations(rows: list[dict], stamp: Timestamp) -> ImageAnnotations:
+    msg = ImageAnnotations()
+    for row in rows:
+        reason, cls, track = row["reason"], row["cls"], row["track_id"]
+        if reason == HIDDEN or not row["box_finite"]:
+            continue
+        x1, y1, x2, y2 = row["box"].tolist()
+        alpha = 1.0 if reason == KEPT else 0.35
+        loop = msg.points.add(timestamp=stamp, type=PointsAnnotation.LINE_LOOP, thickness=2.0)
+        for x, y in ((x1, y1), (x2, y1), (x2, y2), (x1, y2)):
+            loop.points.add(x=x, y=y)
+        loop.outline_color.CopyFrom(_color(cls, alpha))
+        text = f"{cls} {track}" + ("" if reason == KEPT else f" ({reason})")
+        label = msg.texts.add(timestamp=stamp, text=text, font_size=12.0)
+        label.position.x, label.position.y = x1, max(y1 - 2.0, 0.0)
+        label.text_color.CopyFrom(_WHITE)
+        label.background_color.CopyFrom(_color(cls, 0.7 * alpha))
+    return msg
+
+
+def _scene(objects: list[dict], stamp: Timestamp, world: str, lifetime_ns: int) -> SceneUpdate:
+    update = SceneUpdate()
+    lifetime = Duration(seconds=lifetime_ns // 1_000_000_000, nanos=lifetime_ns % 1_000_000_000)
+    for o in objects:
+        track, cls = int(o["track_id"]), o["cls"]
+        x, y, z, height = float(o["x_m"]), float(o["y_m"]), float(o["z_m"]), float(o["height_m"])
+        entity = update.entities.add(timestamp=stamp, frame_id=world, id=f"track-{track}", lifetime=lifetime)
+        entity.metadata.add(key="track_id", value=str(track))
+        entity.metadata.add(key="class", value=cls)
+        cube = entity.cubes.add()
+        _set_yaw_pose(cube.pose, x, y, z, o["yaw_rad"])
+        cube.size.x, cube.size.y, cube.size.z = float(o["length_m"]), float(o["width_m"]), height
+        cube.color.CopyFrom(_color(cls))
+        label = entity.texts.add(billboard=True, font_size=14.0, scale_invariant=True, text=f"{cls} {track}")
+        _set_yaw_pose(label.pose, x, y, z + height / 2 + 0.5, 0.0)
+        label.color.CopyFrom(_WHITE)
+    return update
 
 
 EXPORTER = McapExporter()

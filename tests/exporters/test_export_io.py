@@ -6,11 +6,12 @@ import random
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from exporters.base import get_exporter
 from exporters.io import ordered_calls
-from exporters.scene import frames_with_data, pack_points
+from exporters.scene import POINT_FIELDS, POINT_STRIDE, frames_with_data, pack_points
 from exporters.source import ExportSource
 
 
@@ -75,6 +76,30 @@ def test_ordered_calls_drop_queued_calls_when_the_block_fails():
         threading.Timer(0.05, gate.set).start()
         raise KeyError("caller failed")
     assert started == []
+
+
+def test_pack_points_follows_the_point_fields():
+    """The packed sweep equals a structured array built from POINT_FIELDS (names, offsets, dtypes), padding zero,
+    over each column's whole range."""
+    rng = np.random.default_rng(7)
+    n = 1000
+    columns = {"x_m": rng.normal(0, 50, n).astype(np.float32), "y_m": rng.normal(0, 50, n).astype(np.float32),
+               "z_m": rng.normal(0, 5, n).astype(np.float32), "intensity": rng.random(n, dtype=np.float32),
+               "ring": rng.integers(0, 2**16, n).astype(np.uint16),
+               "semantic": rng.integers(0, 256, n).astype(np.uint8),
+               "instance_id": rng.integers(-2**31, 2**31, n).astype(np.int32)}
+    columns["x_m"][:3] = [np.nan, np.inf, -0.0]
+    record_name = {"x": "x_m", "y": "y_m", "z": "z_m", "intensity": "intensity", "ring": "ring", "class": "semantic",
+                   "instance": "instance_id"}
+    dtype = np.dtype({"names": [f[0] for f in POINT_FIELDS], "formats": [f[2] for f in POINT_FIELDS],
+                      "offsets": [f[1] for f in POINT_FIELDS], "itemsize": POINT_STRIDE})
+    expected = np.zeros(n, dtype=dtype)
+    for name, _, _ in POINT_FIELDS:
+        expected[name] = columns[record_name[name]]
+    packed = pack_points(columns)
+    assert len(packed) == n * POINT_STRIDE
+    assert bytes(packed) == expected.tobytes()
+    assert bytes(pack_points({k: v[:0] for k, v in columns.items()})) == b""
 
 
 def test_frames_with_data_keeps_export_order(morning, night):

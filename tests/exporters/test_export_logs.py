@@ -215,19 +215,27 @@ def test_foxglove_layout_of_a_merged_mcap_has_a_tab_per_record(tmp_path, morning
 
 @pytest.mark.parametrize("size", [0, 1, 127, 128, 300_000])
 def test_bytes_field_on_the_wire_equals_protobuf_serialisation(size):
-    """The LiDAR sweep goes on the wire after the rest of the PointCloud (no protobuf copies): the same bytes."""
+    """Sweeps and images go on the wire spliced into the rest of their message (no protobuf copies): the same
+    bytes as protobuf's, for a last field (PointCloud.data) and one between others (CompressedImage.data)."""
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+    from google.protobuf.timestamp_pb2 import Timestamp
 
-    from exporters.mcap import _FIELDS, _append_bytes_field
+    from exporters.mcap import _FIELDS, serialize_with_bytes
 
     payload = np.random.default_rng(size).bytes(size)
-    head = PointCloud(frame_id="top", point_stride=24, fields=_FIELDS)
-    whole = PointCloud(frame_id="top", point_stride=24, fields=_FIELDS, data=payload)
-    assert (_append_bytes_field(head.SerializeToString(deterministic=True), head, "data", payload)
-            == whole.SerializeToString(deterministic=True))
-    with pytest.raises(ValueError, match="CompressedImage.data is not the message's last field"):
-        _append_bytes_field(b"", CompressedImage(), "data", payload)
+    stamp = Timestamp(seconds=3, nanos=500)
+    for message in (PointCloud(timestamp=stamp, frame_id="top", point_stride=24, fields=_FIELDS),
+                    CompressedImage(timestamp=stamp, frame_id="front", format="png"),
+                    CompressedImage(frame_id="front"), CompressedImage(timestamp=stamp), CompressedImage()):
+        whole = type(message)()
+        whole.CopyFrom(message)
+        whole.data = payload
+        assert serialize_with_bytes(message, "data", payload) == whole.SerializeToString(deterministic=True)
+    with pytest.raises(ValueError, match="PointCloud.frame_id is not a singular bytes field"):
+        serialize_with_bytes(PointCloud(), "frame_id", payload)
+    with pytest.raises(ValueError, match="CompressedImage.data is already set"):
+        serialize_with_bytes(CompressedImage(data=b"x"), "data", payload)
 
 
 def test_3d_boxes_live_until_the_next_frame(tmp_path, morning):
