@@ -57,7 +57,7 @@ from tqdm import tqdm
 from exporters.base import Compression, Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
 from exporters.foxglove_layout import RecordView, layout, layout_path
-from exporters.io import ZSTD_LEVEL, OrderedCalls, dumps_json, ordered_calls
+from exporters.io import OrderedCalls, dumps_json, ordered_calls, zstd_compressor
 from exporters.scene import (
     CLASS_COLORS,
     DEFAULT_COLOR,
@@ -188,25 +188,21 @@ class _Log:
 
 
 @contextlib.contextmanager
-def _zstd_level(level: int) -> Iterator[None]:
-    """Make mcap's Writer compress chunks at ``level``.
+def _zstd_chunks() -> Iterator[None]:
+    """Make mcap's Writer compress chunks with :func:`exporters.io.zstd_compressor` (level and workers).
 
-    The mcap library calls ``zstandard.compress`` (level 3) and offers no option. On the benchmark record
-    level 1 takes half the CPU time of level 3 (8 vs 16 ms per frame) for a file of the same size (within
-    2%). It runs single-threaded: chunks are compressed on the writer thread (:class:`_Log`), which already
-    overlaps the message building, and zstd's own workers only added CPU time on two cores. The output
-    for a fixed level is deterministic. The swap is scoped to one export.
+    The mcap library calls ``zstandard.compress`` (level 3, one thread) and offers no option. On the benchmark
+    record level 1 takes half the CPU time of level 3 (8 vs 16 ms per frame) for a file of the same size
+    (within 2%). The swap is scoped to one export.
     """
     import mcap.writer as mcap_writer
-    import zstandard
 
     original = getattr(mcap_writer, "zstandard", None)
     if getattr(original, "compress", None) is None:  # an mcap release that compresses otherwise: its own level
         log.warning("mcap %s: cannot set the zstd level; chunks use the library's default", mcap.__version__)
         yield
         return
-    compressor = zstandard.ZstdCompressor(level=level)
-    mcap_writer.zstandard = types.SimpleNamespace(compress=compressor.compress)
+    mcap_writer.zstandard = types.SimpleNamespace(compress=zstd_compressor().compress)
     try:
         yield
     finally:
@@ -229,7 +225,7 @@ class McapExporter(Exporter):
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
         summary = FilterSummary()
-        with tmp.open("wb") as stream, _zstd_level(ZSTD_LEVEL):
+        with tmp.open("wb") as stream, _zstd_chunks():
             writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=_COMPRESSION[options.compression])
             writer.start(profile="", library=f"roadsynth exporters; mcap {mcap.__version__}")
             records = {id(s): _RecordMessages(s, Naming(s, source), FrameRows(s, options, summary))

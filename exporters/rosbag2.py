@@ -31,11 +31,10 @@ import logging
 from pathlib import Path
 from typing import Any
 
-import zstandard
 from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportError, ExportOptions
-from exporters.io import ZSTD_LEVEL, OrderedCalls, dumps_json, ordered_calls
+from exporters.io import OrderedCalls, dumps_json, ordered_calls, zstd_compressor
 from exporters.ros_messages import RosMessages
 from exporters.scene import FrameData, FrameRows, Naming, frames_with_data, nanoseconds
 from exporters.source import ExportSource, FrameItem
@@ -101,7 +100,7 @@ class Rosbag2Exporter(Exporter):
         if options.compression is Compression.ZSTD:
             # rosbags' MCAP storage compresses each chunk with this callable (zstd level 3) and has no option.
             if hasattr(writer.storage, "compressor"):
-                writer.storage.compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+                writer.storage.compressor = zstd_compressor().compress
             else:  # a rosbags release that compresses otherwise: its own level
                 log.warning("rosbags: cannot set the zstd level; chunks use the library's default")
         try:

@@ -129,3 +129,23 @@ def test_writer_thread_error_fails_the_export_atomically(tmp_path, morning, monk
         get_exporter(fmt).export([morning], tmp_path / "out")
     assert list(tmp_path.iterdir()) == []  # nor the MCAP's layout beside it
     assert all(name.startswith(f"{fmt}-writer") for name in threads)
+
+
+def test_zstd_chunks_do_not_depend_on_the_worker_count(monkeypatch):
+    """Log chunks are compressed by ZSTD_THREADS zstd workers: the bytes are the same with 1, 2 or 4 workers (so
+    the same on any machine), one zstd frame that decompresses to the chunk."""
+    import zstandard
+
+    from exporters import io
+
+    rng = np.random.default_rng(3)
+    points = np.repeat(rng.normal(0, 30, (1 << 18, 1)).astype(np.float32), 3, axis=1)  # compressible, ~3 MB
+    chunk = rng.bytes(1 << 20) + points.tobytes()
+    outputs = []
+    for workers in (1, 2, 4):
+        monkeypatch.setattr(io, "ZSTD_THREADS", workers)
+        outputs.append(io.zstd_compressor().compress(chunk))
+    assert outputs[0] == outputs[1] == outputs[2]
+    assert len(outputs[0]) < 0.8 * len(chunk)
+    assert zstandard.ZstdDecompressor().decompress(outputs[0]) == chunk
+    assert zstandard.get_frame_parameters(outputs[0]).content_size == len(chunk)
