@@ -13,7 +13,8 @@ time, and ``cpu s`` / ``s`` shows how much of the work overlaps. ``MB out`` is t
 output (hard-linked images included, though linking writes no image bytes); ``MB/s`` = MB out / seconds.
 For compressed logs, ``raw MB/s`` counts the bytes before compression instead (the size of the same
 export uncompressed / seconds), the usual measure of a compressor's speed. ``files/s`` = output files /
-seconds. Target: MCAP with zstd >= 150 MB/s.
+seconds. Target: MCAP with zstd >= 150 MB/s. The allocator is set as ``roadsynth export`` sets it
+(:func:`pipeline.core.memory.keep_freed_memory`; ``--default-malloc`` leaves it as it is).
 
     python bench/bench_export.py [--dataset DIR] [--frames 100] [--repeats 3]
 """
@@ -30,6 +31,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from exporters.base import Compression, ExportOptions, get_exporter
+from pipeline.core.memory import keep_freed_memory
 from pipeline.core.record import DatasetRecord
 from tests.exporters.synthetic_record import build_record
 
@@ -53,7 +55,10 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=100, help="frames of the synthetic record")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--ground-points", type=int, default=100_000, help="LiDAR points per sweep (64 ch: ~100k)")
+    parser.add_argument("--default-malloc", action="store_true", help="leave the allocator as it is (no mallopt)")
     args = parser.parse_args()
+    if not args.default_malloc:
+        print(f"allocator thresholds raised as by roadsynth export: {keep_freed_memory()}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if args.dataset is not None:

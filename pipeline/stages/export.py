@@ -75,7 +75,9 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 def main(args: argparse.Namespace) -> int:
     from exporters.base import get_exporter
+    from pipeline.core.memory import keep_freed_memory
 
+    keep_freed_memory()  # this process ends with the export: keep freed buffers mapped (pipeline.core.memory)
     args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)
     config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}
