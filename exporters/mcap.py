@@ -124,7 +124,7 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
-def serialize_with_bytes(message: Any, name: str, payload: bytes) -> bytes:
+def serialize_with_bytes(message: Any, name: str, payload: bytes | memoryview) -> bytes:
     """``message`` serialised with its bytes field ``name`` (unset in ``message``) holding ``payload``.
 
     Byte for byte what ``SerializeToString(deterministic=True)`` gives with the field set: fields go out in
@@ -168,7 +168,8 @@ class _Log:
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
 
-    def write(self, topic: str, message: Any, time_ns: int, big_bytes: tuple[str, bytes] | None = None) -> None:
+    def write(self, topic: str, message: Any, time_ns: int,
+              big_bytes: tuple[str, bytes | memoryview] | None = None) -> None:
         """Log ``message`` on ``topic``; ``big_bytes`` = (field, payload) sets a large bytes field on the wire
         instead (see :func:`serialize_with_bytes`)."""
         if topic not in self.channels:
@@ -261,7 +262,7 @@ class _RecordMessages:
 
     def __init__(self, source: RecordSource, names: Naming, rows: FrameRows) -> None:
         info = source.info
-        self.source, self.names, self.rows = source, names, rows
+        self.source, self.rows = source, rows
         self.world, self.ego = names.frame("world"), names.frame("ego")
         self.topics = {key: names.topic(key) for key in ("/tf", "/ego/pose", "/scene/objects")}
         self.mounts = [(names.frame(s.name), _pose(s.T_array)) for s in [*info.cameras, *info.lidars]]

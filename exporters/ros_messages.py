@@ -90,7 +90,7 @@ class RosMessages:
             roi=self.t["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
                                                            do_rectify=False))
 
-    def point_cloud(self, packed: bytes, frame_id: str, time_ns: int):
+    def point_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
         """PointCloud2 of one sweep packed by :func:`exporters.scene.pack_points`."""
         fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
                   for n, o, d in POINT_FIELDS]
