@@ -189,12 +189,17 @@ class Camera:
         d, _ = self.unproject(uv)
         return float(np.max(np.abs(d[:, 0] / d[:, 2]))) * 1.001, float(np.max(np.abs(d[:, 1] / d[:, 2]))) * 1.001
 
+    @property
+    def clip_near_m(self) -> float:
+        """Depth at which geometry is clipped for projection: the near plane, a hair beyond so that points
+        clipped onto it count as in front."""
+        return self.config.near_m * (1.0 + 1e-6)
+
     def spheres_in_view(self, centre_cam: np.ndarray, radius: np.ndarray) -> np.ndarray:
         """(N,) bool: spheres (optical-frame centres (N, 3), radii (N,), metres) that may meet a ray of the image:
         not wholly behind the near plane nor beyond the widest border ray (:attr:`border_tangents`)."""
-        near = self.config.near_m * (1.0 + 1e-6)
         tan_x, tan_y = self.border_tangents
-        return (centre_cam[:, 2] + radius > near) & (
+        return (centre_cam[:, 2] + radius > self.clip_near_m) & (
             np.abs(centre_cam[:, 0]) - tan_x * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
             np.abs(centre_cam[:, 1]) - tan_y * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_y))
 

@@ -65,7 +65,7 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     world_to_cam = cam_to_world.inverse()
     centre = world_to_cam.apply(scene.actors.boxes.center)
     radius = 0.5 * np.linalg.norm(scene.actors.boxes.size, axis=1)
-    near = camera.config.near_m * (1.0 + 1e-6)
+    near = camera.clip_near_m
     in_view = camera.spheres_in_view(centre, radius)
     verts = world_to_cam.apply(geo.vertices)
     tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)

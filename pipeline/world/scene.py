@@ -226,11 +226,11 @@ class StaticScene:
         normal (0 on a miss). ``where`` (N,) bool, optional: cast only these rays; the others are reported as
         misses, so it must contain every ray that can hit (e.g. from :attr:`chunk_boxes`)."""
         n = len(rays)
-        sub = np.arange(n) if where is None else np.flatnonzero(where)
-        if self._scene is not None and len(sub) > SUBSET_MAX * n:  # gathering, scattering would cost more than saved
-            return _cast(self._scene, rays, threads)
+        if self._scene is not None and (where is None or np.count_nonzero(where) > SUBSET_MAX * n):
+            return _cast(self._scene, rays, threads)  # gathering and scattering would cost more than they save
         t, prim, normal = np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
-        if self._scene is not None and len(sub):
+        sub = np.flatnonzero(where) if self._scene is not None else ()  # here ``where`` is given when there is a scene
+        if len(sub):
             t[sub], prim[sub], normal[sub] = _cast(self._scene, np.take(rays, sub, axis=0), threads)
         return t, prim, normal
 
