@@ -3,9 +3,9 @@
 An export is written into a temporary sibling of its destination (``.<name>.tmp-<pid>``) and renamed
 into place only when complete, so a failure leaves the destination as it was and nothing half-written.
 Images are hard-linked from the record when the file system allows it (same device, links permitted),
-copied otherwise; either way the bytes are the record's. Log writers hand their messages to
+copied otherwise; either way the bytes are the record's. The rosbag2 export hands its writer's calls to
 :class:`OrderedCalls`, which runs them on one worker thread in order, so output bytes never depend on
-timing.
+timing (MCAP has its own pipeline: :mod:`exporters.mcap_writer`).
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ log = logging.getLogger(__name__)
 # zstd level of MCAP and rosbag2 chunks (both libraries hard-code 3): level 1 takes half the CPU time
 # for a file within 2% of the size (bench/bench_export.py).
 ZSTD_LEVEL = 1
-# zstd workers per chunk. Compressing chunks on the writer thread is the log exports' longest path, so zstd
-# splits each chunk into 2 MB jobs compressed at once (same CPU time; an MCAP chunk of two frames, ~6.4 MB, in
-# 25-40% less time when a core is free).
+# zstd workers per rosbag2 chunk. Compressing chunks on the writer thread is that export's longest path, so
+# zstd splits each chunk into 2 MB jobs compressed at once (same CPU time; a chunk of two frames, ~6.4 MB, in
+# 25-40% less time when a core is free). MCAP compresses whole chunks on a pool instead (one thread each).
 # The output does not depend on the number of workers once there is one, but differs from single-threaded
 # output, so the count is fixed rather than taken from the machine: the same bytes everywhere.
 ZSTD_THREADS = 2

@@ -1,9 +1,10 @@
 """MCAP export with Foxglove protobuf schemas: one file that opens in Foxglove with everything visible.
 
 Chunked, zstd (level 1) by default (``--compression lz4|none``); every message's log and publish time is
-the simulation time of its frame (nanoseconds). Frames are read one or two ahead on a loader thread and
-chunks are compressed and written on a writer thread, in order, so the file's bytes do not depend on
-timing. Channels per record (names: :mod:`exporters.scene`):
+the simulation time of its frame (nanoseconds). Frames are read one or two ahead on a loader thread, and
+full chunks are compressed on worker threads while the next fill (:mod:`exporters.mcap_writer`: mcap's
+records, written in order, so the file's bytes do not depend on timing). Channels per record (names:
+:mod:`exporters.scene`):
 
 =================================  ==========================  ==========================================
 topic                              schema                      content
@@ -26,10 +27,6 @@ file (:mod:`exporters.foxglove_layout`): the camera with its boxes, a 3D view wi
 
 from __future__ import annotations
 
-import contextlib
-import logging
-import types
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -50,14 +47,14 @@ from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.duration_pb2 import Duration
 from google.protobuf.timestamp_pb2 import Timestamp
-from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
 from tqdm import tqdm
 
-from exporters.base import Compression, Exporter, ExportOptions
+from exporters.base import Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
 from exporters.foxglove_layout import RecordView, layout, layout_path
-from exporters.io import OrderedCalls, dumps_json, ordered_calls, zstd_compressor
+from exporters.io import dumps_json
+from exporters.mcap_writer import PipelinedWriter
 from exporters.scene import (
     CLASS_COLORS,
     DEFAULT_COLOR,
@@ -74,12 +71,11 @@ from exporters.scene import (
 )
 from exporters.source import ExportSource, FrameItem, RecordSource
 
-log = logging.getLogger(__name__)
-
-CHUNK_SIZE = 4 << 20  # bytes; a few camera frames per chunk
-QUEUE_BYTES = 2 * CHUNK_SIZE  # messages waiting for the writer thread, at most
-_COMPRESSION = {Compression.ZSTD: CompressionType.ZSTD, Compression.LZ4: CompressionType.LZ4,
-                Compression.NONE: CompressionType.NONE}
+# A chunk is sealed once it exceeds this: about one frame of the default rig (0.75 MB PNG + 2.4 MB sweep) per
+# chunk. Against two frames per chunk (4 MB): export of the benchmark record 1.08-1.30 s vs 1.26-1.45 s
+# (4 alternating fresh processes each), the same file size within 0.1%.
+CHUNK_SIZE = 2 << 20
+COMPRESS_WORKERS = 2  # threads compressing chunks while the next fill (each chunk by one thread)
 _NUMERIC = {"<f4": PackedElementField.FLOAT32, "<u2": PackedElementField.UINT16, "u1": PackedElementField.UINT8,
             "<i4": PackedElementField.INT32}
 _FIELDS = [PackedElementField(name=n, offset=o, type=_NUMERIC[t]) for n, o, t in POINT_FIELDS]
@@ -124,13 +120,14 @@ def _varint(value: int) -> bytes:
     return bytes(out)
 
 
-def serialize_with_bytes(message: Any, name: str, payload: bytes | memoryview) -> bytes:
-    """``message`` serialised with its bytes field ``name`` (unset in ``message``) holding ``payload``.
+def serialized_parts(message: Any, name: str, payload: bytes | memoryview) -> list[bytes | memoryview]:
+    """``message`` serialised with its bytes field ``name`` (unset in ``message``) holding ``payload``, as parts
+    whose join is byte for byte what ``SerializeToString(deterministic=True)`` gives with the field set;
+    ``payload`` is one of them, uncopied.
 
-    Byte for byte what ``SerializeToString(deterministic=True)`` gives with the field set: fields go out in
-    number order, so the field is spliced in after those numbered below it; an empty proto3 bytes field is
-    not written. The payload is copied once, not twice as protobuf does (setting, then serialising): ~6 ms
-    of a 2.4 MB LiDAR sweep's ~6.5 ms.
+    Fields go out in number order, so the field is spliced in after those numbered below it; an empty proto3
+    bytes field is not written. Protobuf would copy the payload twice (setting, then serialising); the MCAP
+    writer joins the parts into its chunk, the one copy left.
     """
     field = message.DESCRIPTOR.fields_by_name[name]
     value = getattr(message, name)
@@ -140,7 +137,7 @@ def serialize_with_bytes(message: Any, name: str, payload: bytes | memoryview) -
         raise ValueError(f"{message.DESCRIPTOR.full_name}.{name} is already set")
     whole = message.SerializeToString(deterministic=True)
     if not payload:
-        return whole
+        return [whole]
     head = len(whole)
     later = [f.name for f, _ in message.ListFields() if f.number > field.number]
     if later:
@@ -149,21 +146,15 @@ def serialize_with_bytes(message: Any, name: str, payload: bytes | memoryview) -
         for other in later:
             first.ClearField(other)
         head = first.ByteSize()
-    return b"".join((whole[:head], _varint(field.number << 3 | 2), _varint(len(payload)), payload, whole[head:]))
+    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
+    return [whole[:head] + _varint(field.number << 3 | 2) + _varint(size), payload, whole[head:]]
 
 
 class _Log:
-    """Registers one schema per message type and one channel per topic on first use.
+    """Registers one schema per message type and one channel per topic on first use, and counts messages."""
 
-    Messages are serialised here and held in ``calls`` (the writer's thread) until the caller flushes it, once
-    per frame (:meth:`OrderedCalls.add`). A registration waits for that thread to catch up, as the Writer is
-    never used from two threads at once; the writer's calls are the same, in the same order, as writing each
-    message directly.
-    """
-
-    def __init__(self, writer: Writer, calls: OrderedCalls) -> None:
+    def __init__(self, writer: PipelinedWriter) -> None:
         self.writer = writer
-        self.calls = calls
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
@@ -171,43 +162,20 @@ class _Log:
     def write(self, topic: str, message: Any, time_ns: int,
               big_bytes: tuple[str, bytes | memoryview] | None = None) -> None:
         """Log ``message`` on ``topic``; ``big_bytes`` = (field, payload) sets a large bytes field on the wire
-        instead (see :func:`serialize_with_bytes`)."""
+        instead (see :func:`serialized_parts`)."""
         if topic not in self.channels:
-            self.calls.drain()
             name = type(message).DESCRIPTOR.full_name
             if name not in self.schemas:
                 self.schemas[name] = register_schema(self.writer, type(message))
             self.channels[topic] = self.writer.register_channel(topic, "protobuf", self.schemas[name])
             self.counts[topic] = 0
         if big_bytes is None:
-            data = message.SerializeToString(deterministic=True)
+            data: bytes | list[bytes | memoryview] = message.SerializeToString(deterministic=True)
         else:
-            data = serialize_with_bytes(message, *big_bytes)
-        self.calls.add(len(data), self.writer.add_message, self.channels[topic], log_time=time_ns,
-                       publish_time=time_ns, data=data, sequence=self.counts[topic])
+            data = serialized_parts(message, *big_bytes)
+        self.writer.add_message(self.channels[topic], log_time=time_ns, publish_time=time_ns, data=data,
+                                sequence=self.counts[topic])
         self.counts[topic] += 1
-
-
-@contextlib.contextmanager
-def _zstd_chunks() -> Iterator[None]:
-    """Make mcap's Writer compress chunks with :func:`exporters.io.zstd_compressor` (level and workers).
-
-    The mcap library calls ``zstandard.compress`` (level 3, one thread) and offers no option. On the benchmark
-    record level 1 takes half the CPU time of level 3 (8 vs 16 ms per frame) for a file of the same size
-    (within 2%). The swap is scoped to one export.
-    """
-    import mcap.writer as mcap_writer
-
-    original = getattr(mcap_writer, "zstandard", None)
-    if getattr(original, "compress", None) is None:  # an mcap release that compresses otherwise: its own level
-        log.warning("mcap %s: cannot set the zstd level; chunks use the library's default", mcap.__version__)
-        yield
-        return
-    mcap_writer.zstandard = types.SimpleNamespace(compress=zstd_compressor().compress)
-    try:
-        yield
-    finally:
-        mcap_writer.zstandard = original
 
 
 class McapExporter(Exporter):
@@ -226,17 +194,15 @@ class McapExporter(Exporter):
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
         summary = FilterSummary()
-        with tmp.open("wb") as stream, _zstd_chunks():
-            writer = Writer(stream, chunk_size=CHUNK_SIZE, compression=_COMPRESSION[options.compression])
+        with tmp.open("wb") as stream, PipelinedWriter(stream, chunk_size=CHUNK_SIZE, compression=options.compression,
+                                                       workers=COMPRESS_WORKERS) as writer:
             writer.start(profile="", library=f"roadsynth exporters; mcap {mcap.__version__}")
             records = {id(s): _RecordMessages(s, Naming(s, source), FrameRows(s, options, summary))
                        for s in source.records}
-            with ordered_calls(QUEUE_BYTES, "mcap-writer") as calls:
-                out = _Log(writer, calls)
-                for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap",
-                                       unit="frame", disable=not options.progress):
-                    records[id(item.source)].frame(out, item, data)
-                    calls.flush()
+            out = _Log(writer)
+            for item, data in tqdm(frames_with_data(source), total=source.n_frames(), desc="mcap", unit="frame",
+                                   disable=not options.progress):
+                records[id(item.source)].frame(out, item, data)
             counts = {"frames": source.n_frames(), "messages": dict(sorted(out.counts.items())),
                       "objects": summary.to_dict()}
             for src in source.records:

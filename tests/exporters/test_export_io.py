@@ -1,7 +1,9 @@
-"""Background writing (:class:`exporters.io.OrderedCalls`) and frame prefetching (``frames_with_data``)."""
+"""Background writing (:class:`exporters.io.OrderedCalls`, MCAP chunk compression) and frame prefetching
+(``frames_with_data``)."""
 
 from __future__ import annotations
 
+import pkgutil
 import random
 import threading
 import time
@@ -111,24 +113,25 @@ def test_frames_with_data_keeps_export_order(morning, night):
         assert data.points["top"] == pack_points(item.source.record.points("top", item.frame))
 
 
-@pytest.mark.parametrize(("fmt", "writer_method"), [("mcap", "mcap.writer.Writer.add_message"),
-                                                   ("rosbag2", "rosbags.rosbag2.Writer.write")])
-def test_writer_thread_error_fails_the_export_atomically(tmp_path, morning, monkeypatch, fmt, writer_method):
-    module, cls, method = writer_method.rsplit(".", 2)
-    writer_cls = getattr(__import__(module, fromlist=[cls]), cls)
-    original, threads = getattr(writer_cls, method), []
+@pytest.mark.parametrize(("fmt", "target", "thread"), [("mcap", "exporters.mcap_writer:_seal", "mcap-compress"),
+                                                      ("rosbag2", "rosbags.rosbag2:Writer.write", "rosbag2-writer")])
+def test_background_error_fails_the_export_atomically(tmp_path, morning, monkeypatch, fmt, target, thread):
+    """An error on a background thread (MCAP: compressing a chunk; rosbag2: the writer's thread) fails the
+    export and leaves nothing behind."""
+    original, threads = pkgutil.resolve_name(target), []
+    fail_at = 1 if fmt == "mcap" else 5  # the two-frame record fills one MCAP chunk
 
-    def failing(self, *args, **kwargs):
+    def failing(*args, **kwargs):
         threads.append(threading.current_thread().name)
-        if len(threads) == 5:
+        if len(threads) == fail_at:
             raise OSError("disk full")
-        return original(self, *args, **kwargs)
+        return original(*args, **kwargs)
 
-    monkeypatch.setattr(writer_cls, method, failing)
+    monkeypatch.setattr(target.replace(":", "."), failing)
     with pytest.raises(OSError, match="disk full"):
         get_exporter(fmt).export([morning], tmp_path / "out")
     assert list(tmp_path.iterdir()) == []  # nor the MCAP's layout beside it
-    assert all(name.startswith(f"{fmt}-writer") for name in threads)
+    assert threads and all(name.startswith(thread) for name in threads)
 
 
 def test_zstd_chunks_do_not_depend_on_the_worker_count(monkeypatch):
