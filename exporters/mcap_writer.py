@@ -73,7 +73,8 @@ def _zstd(data: bytes) -> bytes:
     return compressor.compress(data)
 
 
-def _seal(parts: list[Payload], compress: Callable[[bytes], bytes]) -> tuple[bytes, int, int]:
+def _compress_chunk(parts: list[Payload], compress: Callable[[bytes], bytes]) -> tuple[bytes, int, int]:
+    """(compressed chunk, its uncompressed size, CRC-32 of the uncompressed bytes); runs on a worker."""
     data = b"".join(parts)
     return compress(data), len(data), zlib.crc32(data)
 
@@ -155,7 +156,8 @@ class PipelinedWriter:
 
     def add_message(self, channel_id: int, log_time: int, data: Payload | Sequence[Payload], publish_time: int,
                     sequence: int = 0) -> None:
-        """Add a message; ``data`` may be given as a sequence of parts that are joined only in the chunk."""
+        """Add a message; ``data`` may be given as a sequence of parts that are joined only in the chunk. The
+        parts are held, not copied, until their chunk is compressed: do not change them after the call."""
         parts = [data] if isinstance(data, bytes | bytearray | memoryview) else list(data)
         length = sum(len(p) if not isinstance(p, memoryview) else p.nbytes for p in parts)
         stats = self._stats
@@ -221,7 +223,7 @@ class PipelinedWriter:
         if chunk.messages == 0:
             return
         self._stats.chunk_count += 1
-        self._sealed.append(_Sealed(chunk, self._pool.submit(_seal, chunk.parts, self._compress)))
+        self._sealed.append(_Sealed(chunk, self._pool.submit(_compress_chunk, chunk.parts, self._compress)))
         self._chunk = _Chunk()
         self._write_sealed(self._max_sealed)
 

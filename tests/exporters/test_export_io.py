@@ -113,8 +113,9 @@ def test_frames_with_data_keeps_export_order(morning, night):
         assert data.points["top"] == pack_points(item.source.record.points("top", item.frame))
 
 
-@pytest.mark.parametrize(("fmt", "target", "thread"), [("mcap", "exporters.mcap_writer:_seal", "mcap-compress"),
-                                                      ("rosbag2", "rosbags.rosbag2:Writer.write", "rosbag2-writer")])
+@pytest.mark.parametrize(("fmt", "target", "thread"),
+                         [("mcap", "exporters.mcap_writer:_compress_chunk", "mcap-compress"),
+                          ("rosbag2", "rosbags.rosbag2:Writer.write", "rosbag2-writer")])
 def test_background_error_fails_the_export_atomically(tmp_path, morning, monkeypatch, fmt, target, thread):
     """An error on a background thread (MCAP: compressing a chunk; rosbag2: the writer's thread) fails the
     export and leaves nothing behind."""

@@ -116,7 +116,7 @@ def test_a_failed_compression_is_raised_and_the_workers_stop(monkeypatch):
     import exporters.mcap_writer as module
 
     calls = []
-    original = module._seal
+    original = module._compress_chunk
 
     def failing(parts, compress):
         calls.append(threading.current_thread().name)
@@ -124,7 +124,7 @@ def test_a_failed_compression_is_raised_and_the_workers_stop(monkeypatch):
             raise OSError("no space for the chunk")
         return original(parts, compress)
 
-    monkeypatch.setattr(module, "_seal", failing)
+    monkeypatch.setattr(module, "_compress_chunk", failing)
     writer = PipelinedWriter(io.BytesIO(), chunk_size=CHUNK, compression=Compression.ZSTD)
     with pytest.raises(OSError, match="no space for the chunk"), writer:
         _write(writer, _operations(3))
