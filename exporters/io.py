@@ -28,8 +28,8 @@ log = logging.getLogger(__name__)
 # for a file within 2% of the size (bench/bench_export.py).
 ZSTD_LEVEL = 1
 # zstd workers per rosbag2 chunk. Compressing chunks on the writer thread is that export's longest path, so
-# zstd splits each chunk into 2 MB jobs compressed at once (same CPU time; a chunk of two frames, ~6.4 MB, in
-# 25-40% less time when a core is free). MCAP compresses whole chunks on a pool instead (one thread each).
+# zstd splits each chunk into 2 MB jobs compressed at once (same CPU time; measured on two-frame chunks of
+# ~6.4 MB: 25-40% less time when a core is free). MCAP compresses whole chunks on a pool instead (one thread each).
 # The output does not depend on the number of workers once there is one, but differs from single-threaded
 # output, so the count is fixed rather than taken from the machine: the same bytes everywhere.
 ZSTD_THREADS = 2

@@ -1,6 +1,6 @@
 """Process-wide allocator setting for stages that stream large buffers (the log exports).
 
-A log export handles a few MB per frame (PNG bytes, packed sweeps, 4 MB chunks and their compressed copies)
+A log export handles a few MB per frame (PNG bytes, packed sweeps, MB-sized chunks and their compressed copies)
 and frees them again. glibc's malloc serves blocks above its mmap threshold (128 kB at start, adapting up to
 32 MB) with fresh ``mmap`` calls and returns freed heap tops above its trim threshold to the system, so such
 a process keeps unmapping memory and faulting it in again, page by page; on this project's 2-core machine
