@@ -1,11 +1,12 @@
 """Benchmark: export a 100-frame record to every format; MB/s and files/s per format.
 
-The input is either a rendered record (``--dataset DIR``, e.g. 100 frames of the default rig from
-``roadsynth render --frames 100``) or, by default, the exporters' hand-built record
-(tests/exporters/synthetic_record.py: one 800x600 camera with RGB/instance/semantic/depth PNGs, one LiDAR
-of ``--ground-points`` points, 5 objects per frame), built once and not timed. Its points are uniform
-random floats in no order, harder for zstd than a real sweep (ordered by ring and azimuth): the rendered
-record is the realistic case, the synthetic one the worst.
+The input, made once and not timed, is by default a rendered record: the highway simulated here (seed 1)
+and ``--frames`` frames of the default rig rendered under morning, as the pipeline makes them (about a
+minute on 2 cores). ``--dataset DIR`` exports a record of your own instead; ``--synthetic`` the exporters'
+hand-built record (tests/exporters/synthetic_record.py: one 800x600 camera with RGB/instance/semantic/depth
+PNGs, one LiDAR of ``--ground-points`` points, 5 objects per frame), quicker to make. Its points are
+uniform random floats in no order, harder for zstd than a real sweep (ordered by ring and azimuth): the
+rendered record is the realistic case, the synthetic one the worst.
 
 Each format is exported ``--repeats`` times into a fresh folder; the best time counts. ``cpu s`` is the
 least process CPU time of the repeats (all threads): on a shared machine it varies less than the wall
@@ -16,12 +17,13 @@ export uncompressed / seconds), the usual measure of a compressor's speed. ``fil
 seconds. Target: MCAP with zstd >= 150 MB/s. The allocator is set as ``roadsynth export`` sets it
 (:func:`pipeline.core.memory.keep_freed_memory`; ``--default-malloc`` leaves it as it is).
 
-    python bench/bench_export.py [--dataset DIR] [--frames 100] [--repeats 3]
+    python bench/bench_export.py [--dataset DIR | --synthetic] [--frames 100] [--repeats 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import sys
 import tempfile
@@ -31,8 +33,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from exporters.base import Compression, ExportOptions, get_exporter
+from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.memory import keep_freed_memory
 from pipeline.core.record import DatasetRecord
+from pipeline.stages.render import render
+from pipeline.stages.simulate import resolve_scenario, simulate
 from tests.exporters.synthetic_record import build_record
 
 # The uncompressed log of each format comes before its compressed ones (their raw MB/s needs its size).
@@ -49,12 +54,25 @@ def _size_and_files(path: Path) -> tuple[int, int]:
     return sum(p.stat().st_size for p in files), len(files)
 
 
+def rendered_record(tmp: Path, frames: int) -> Path:
+    """``frames`` frames of the default rig under morning, rendered from a highway run simulated here."""
+    config, _ = resolve_scenario("highway", duration_s=frames / 10.0, warmup_s=90.0)
+    simulate(config, 1, tmp / "sim", progress=True)
+    rig, _ = load_config(RigConfig, "default", "rigs")
+    condition, _ = load_config(ConditionConfig, "morning", "conditions")
+    render(tmp / "sim", condition, rig, tmp / "record", frames=frames, workers=os.cpu_count() or 1, progress=True)
+    return tmp / "record"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", type=Path, help="a rendered record to export (default: the synthetic one)")
-    parser.add_argument("--frames", type=int, default=100, help="frames of the synthetic record")
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--dataset", type=Path, help="a rendered record to export (default: render one here)")
+    source.add_argument("--synthetic", action="store_true", help="export the hand-built record (random points)")
+    parser.add_argument("--frames", type=int, default=100, help="frames of the record rendered or built here")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--ground-points", type=int, default=100_000, help="LiDAR points per sweep (64 ch: ~100k)")
+    parser.add_argument("--ground-points", type=int, default=100_000,
+                        help="LiDAR points per sweep of the synthetic record (64 ch: ~100k)")
     parser.add_argument("--default-malloc", action="store_true", help="leave the allocator as it is (no mallopt)")
     args = parser.parse_args()
     if not args.default_malloc:
@@ -63,9 +81,12 @@ def main() -> None:
         tmp = Path(tmp)
         if args.dataset is not None:
             record, kind = args.dataset, f"rendered record {args.dataset}"
-        else:
+        elif args.synthetic:
             record = build_record(tmp / "record", frames=args.frames, ground_points=args.ground_points)
             kind = f"synthetic record, {args.ground_points} random ground points per sweep"
+        else:
+            record = rendered_record(tmp, args.frames)
+            kind = "record rendered here (highway seed 1, morning, default rig)"
         frames = len(DatasetRecord(record).frames)
         in_mb = sum(p.stat().st_size for p in record.rglob("*") if p.is_file()) / 1e6
         print(f"input: {kind}; {frames} frames, {in_mb:.1f} MB")
