@@ -3,10 +3,12 @@
 A log export handles a few MB per frame (PNG bytes, packed sweeps, MB-sized chunks and their compressed copies)
 and frees them again. glibc's malloc serves blocks above its mmap threshold (128 kB at start, adapting up to
 32 MB) with fresh ``mmap`` calls and returns freed heap tops above its trim threshold to the system, so such
-a process keeps unmapping memory and faulting it in again, page by page; on this project's 2-core machine
-that cost an MCAP export of the 100-frame benchmark record about a third of its time in a fresh process
-(2.05-2.40 s against 1.46-1.54 s with the thresholds below). :func:`keep_freed_memory` raises both
-thresholds, so blocks below 64 MB come from the heap and up to 256 MB of freed heap stays mapped for reuse.
+a process keeps unmapping memory and faulting it in again, page by page. :func:`keep_freed_memory` raises
+both thresholds, so blocks below 64 MB come from the heap and up to 256 MB of freed heap stays mapped for
+reuse. On this project's 2-core machine, exporting the 100-frame benchmark record in a fresh process:
+rosbag2 takes 2.13-2.65 s with the thresholds and 2.72-2.91 s without (3 alternating runs each). MCAP took
+1.46-1.54 s with and 2.05-2.40 s without until its writer came to copy each chunk once
+(:mod:`exporters.mcap_writer`); now the two differ by no more than the noise.
 
 It changes the whole process, for as long as it runs: the ``roadsynth export`` command calls it (a process
 that ends with its export); library users may call it in their own processes. The render stage gains
