@@ -57,8 +57,14 @@ system-deps:
 		exit 1; \
 	fi
 
+# The benchmarks that make their own input; bench_antialias (--sim DIR) and bench_detector (--coco DIR) take one.
 bench: setup-dev
 	$(BIN)/python bench/bench_simulate.py
+	$(BIN)/python bench/bench_render_core.py
+	$(BIN)/python bench/bench_render.py
+	$(BIN)/python bench/bench_export.py
+	$(BIN)/python bench/bench_coco_eval.py
+	$(BIN)/python bench/bench_kitti_eval.py
 
 clean-data:
 	rm -rf data
