@@ -11,6 +11,7 @@ import mcap.writer
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
 
 from exporters.base import Compression
@@ -82,8 +83,7 @@ def test_bytes_equal_mcaps_own_writer(compression, monkeypatch):
     expected = _reference(ops, compression, monkeypatch)
     assert _pipelined(ops, compression) == expected
     assert _pipelined(ops, compression, parts=True) == expected
-    chunks = [r for r in StreamReader(io.BytesIO(expected), emit_chunks=True).records
-              if type(r).__name__ == "Chunk"]
+    chunks = [r for r in StreamReader(io.BytesIO(expected), emit_chunks=True).records if isinstance(r, Chunk)]
     assert len(chunks) > 20  # the log spans many chunks, so the pipeline really ran
     assert {c.compression for c in chunks} == {{"none": ""}.get(compression.value, compression.value)}
 
