@@ -54,7 +54,7 @@ from exporters.base import Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
 from exporters.foxglove_layout import RecordView, layout, layout_path
 from exporters.io import dumps_json
-from exporters.mcap_writer import PipelinedWriter
+from exporters.mcap_writer import PipelinedWriter, payload_size
 from exporters.scene import (
     CLASS_COLORS,
     DEFAULT_COLOR,
@@ -146,8 +146,7 @@ def serialized_parts(message: Any, name: str, payload: bytes | memoryview) -> li
         for other in later:
             first.ClearField(other)
         head = first.ByteSize()
-    size = payload.nbytes if isinstance(payload, memoryview) else len(payload)
-    return [whole[:head] + _varint(field.number << 3 | 2) + _varint(size), payload, whole[head:]]
+    return [whole[:head] + _varint(field.number << 3 | 2) + _varint(payload_size(payload)), payload, whole[head:]]
 
 
 class _Log:

@@ -52,6 +52,11 @@ _NAMES = {Compression.ZSTD: "zstd", Compression.LZ4: "lz4", Compression.NONE: ""
 _local = threading.local()
 
 
+def payload_size(part: Payload) -> int:
+    """Bytes in ``part`` (a memoryview's ``len`` counts items, not bytes)."""
+    return part.nbytes if isinstance(part, memoryview) else len(part)
+
+
 def chunk_compressor(compression: Compression) -> Callable[[bytes], bytes]:
     """The function that compresses one chunk: zstd at :data:`exporters.io.ZSTD_LEVEL` on the calling thread
     (one compressor per thread), lz4 frames as mcap writes them, or none."""
@@ -142,7 +147,8 @@ class PipelinedWriter:
         schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
         self._schemas.append(schema)
         self._stats.schema_count += 1
-        self._add_to_chunk([_serialised(schema)])
+        record = _serialised(schema)
+        self._add_to_chunk([record], len(record))
         return schema.id
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
@@ -151,7 +157,8 @@ class PipelinedWriter:
                           schema_id=schema_id, metadata=dict(metadata or {}))
         self._channels.append(channel)
         self._stats.channel_count += 1
-        self._add_to_chunk([_serialised(channel)])
+        record = _serialised(channel)
+        self._add_to_chunk([record], len(record))
         return channel.id
 
     def add_message(self, channel_id: int, log_time: int, data: Payload | Sequence[Payload], publish_time: int,
@@ -159,7 +166,7 @@ class PipelinedWriter:
         """Add a message; ``data`` may be given as a sequence of parts that are joined only in the chunk. The
         parts are held, not copied, until their chunk is compressed: do not change them after the call."""
         parts = [data] if isinstance(data, bytes | bytearray | memoryview) else list(data)
-        length = sum(len(p) if not isinstance(p, memoryview) else p.nbytes for p in parts)
+        length = sum(map(payload_size, parts))
         stats = self._stats
         stats.message_start_time = log_time if stats.message_count == 0 else min(log_time, stats.message_start_time)
         stats.message_end_time = max(log_time, stats.message_end_time)
@@ -210,10 +217,10 @@ class PipelinedWriter:
         self._write(MCAP0_MAGIC)
         self.close()
 
-    def _add_to_chunk(self, parts: list[Payload], size: int | None = None) -> None:
+    def _add_to_chunk(self, parts: list[Payload], size: int) -> None:
         chunk = self._chunk
         chunk.parts.extend(parts)
-        chunk.size += sum(len(p) for p in parts) if size is None else size
+        chunk.size += size
         if chunk.size > self._chunk_size:
             self._seal()
 
