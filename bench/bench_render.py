@@ -4,8 +4,9 @@ Simulates the highway (200 vehicles; or takes --sim), renders N frames (default 
 800x600 camera + 64-channel LiDAR + all ground truth, written to disk — with the stage's process pool, then
 times, frame by frame, only the Embree casts those frames need (camera primary rays, sun shadow rays of lit
 hits, LiDAR rays; static world and actors, scenes built outside the timing; see bench_render_core.BareCasts).
-The baseline casts every primary ray against the static world, as the issue defines it; the stage itself skips
-those that its chunk-box test rules out (most of the sky). Prints frames per second and the ratio stage time /
+The baseline casts every primary ray against the static world and every shadow ray against the actors, as the
+issue defines it; the stage itself skips those that its conservative tests rule out (most of the sky; the shadow
+rays that cannot meet an actor). Prints frames per second and the ratio stage time /
 bare casts (targets: >= 10 labelled frames/s on 2 cores, ratio <= 2.5), and the same ratio of CPU seconds,
 which other work on the machine does not skew. Then profiles --breakdown frames (default 10) on one thread, as
 each pool worker renders them, and prints where a frame's time goes by part (Embree casts, PNG encoding, ground

@@ -155,8 +155,9 @@ def _sun_blocked(scene: FrameScene, r: list[np.ndarray], n: list[np.ndarray], t_
     normals' 3 columns, ``t_m``: the hit distances (all (M,) float32)."""
     lift = 1e-3 + 1e-4 * t_m  # off the surface, against self-intersection
     ones = np.ones_like(t_m)
-    shadow = cv2.merge([r[k] + r[3 + k] * t_m + n[k] * lift for k in range(3)] + [ones * sun[k] for k in range(3)])
-    return scene.occluded_rays(shadow.reshape(-1, 6))
+    origin = [r[k] + r[3 + k] * t_m + n[k] * lift for k in range(3)]
+    shadow = cv2.merge(origin + [ones * sun[k] for k in range(3)])
+    return scene.occluded_rays(shadow.reshape(-1, 6), actor_rays=scene.sun_actor_candidates(*origin, sun))
 
 
 def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:

@@ -12,6 +12,9 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   triangles, tall geometry in 20 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
+- Sun shadow rays are tested against the actors only where they can meet one
+  (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
+  along the sun; ~1-3% of the lit pixels of a highway or urban frame); against the static world, all of them.
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
   canonical mesh is affine, so a ray transformed into the actor's unit box frame hits the cached
   canonical mesh of its class exactly where the original ray hits the placed mesh, with the same ray
@@ -111,6 +114,15 @@ def take_columns(a: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
     return [c.reshape(-1) for c in cv2.split(np.take(a, rows, axis=0).reshape(-1, 1, a.shape[1]))]
 
 
+def put_rows(a: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
+    """``a[rows] = values`` for a C-contiguous (N, C) array ``a`` and (M, C) ``values``: one 1D scatter of C-item
+    records, ~2.5x faster than numpy's assignment of rows."""
+    if not a.flags.c_contiguous:
+        raise ValueError("put_rows needs a C-contiguous array")
+    record = np.dtype((np.void, a.dtype.itemsize * a.shape[1]))
+    a.view(record).reshape(-1)[rows] = np.ascontiguousarray(values, a.dtype).view(record).reshape(-1)
+
+
 def make_rays(origin: np.ndarray, directions: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """(N, 6) float32 world rays [origin | rotation @ d] from one origin (3,) and (N, 3) float32 unit
     directions in a sensor frame rotated by ``rotation`` (3, 3) into the world.
@@ -159,6 +171,9 @@ LOW_CHUNK_M = 80.0  # ... or a LOW_CHUNK_M cell where they lie at most LOW_M abo
 LOW_M = 1.0  # ground, roads, markings, kerbs and barriers stay below a camera's horizon however wide their box
 SUBSET_MAX = 0.8  # StaticScene.cast casts all the rays where ``where`` keeps more than this fraction of them
 CHUNK_PAD_M = 1e-3  # boxes are grown by this, far beyond Embree's float32 rounding of the vertices
+# The grid of FrameScene.sun_actor_candidates: only how tight that test is depends on them.
+SHADOW_CELL_M = 0.5  # cells at least this wide ...
+SHADOW_MAX_CELLS = 250_000  # ... and at most about this many
 
 
 def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -231,7 +246,8 @@ class StaticScene:
         t, prim, normal = np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
         sub = np.flatnonzero(where) if self._scene is not None else ()  # here ``where`` is given when there is a scene
         if len(sub):
-            t[sub], prim[sub], normal[sub] = _cast(self._scene, np.take(rays, sub, axis=0), threads)
+            t[sub], prim[sub], sub_normal = _cast(self._scene, np.take(rays, sub, axis=0), threads)
+            put_rows(normal, sub, sub_normal)
         return t, prim, normal
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0) -> np.ndarray:
@@ -368,10 +384,50 @@ class FrameScene:
         """(N,) bool: something (static or actor) lies on each ray within ``t_max_m`` (shadow rays)."""
         return self.occluded_rays(_rays(origins, directions), t_max_m)
 
-    def occluded_rays(self, rays: np.ndarray, t_max_m: float = np.inf) -> np.ndarray:
-        """:meth:`occluded` for prebuilt (N, 6) float32 rays [origin | unit direction]."""
+    def occluded_rays(self, rays: np.ndarray, t_max_m: float = np.inf, actor_rays: np.ndarray | None = None
+                      ) -> np.ndarray:
+        """:meth:`occluded` for prebuilt (N, 6) float32 rays [origin | unit direction]. ``actor_rays`` (N,) bool,
+        optional: a conservative mask of the rays that may meet an actor (e.g. :meth:`sun_actor_candidates`); the
+        others are tested against the static world only."""
         blocked = self.static.occluded(rays, t_max_m, self.threads)
         if self._actor_scene is not None:
-            tensor = o3d.core.Tensor.from_numpy(rays)
-            blocked |= self._actor_scene.test_occlusions(tensor, tfar=t_max_m, nthreads=self.threads).numpy()
+            sub = np.arange(len(rays)) if actor_rays is None else np.flatnonzero(actor_rays & ~blocked)
+            if len(sub):
+                tensor = o3d.core.Tensor.from_numpy(np.take(rays, sub, axis=0))
+                blocked[sub] |= self._actor_scene.test_occlusions(tensor, tfar=t_max_m, nthreads=self.threads).numpy()
         return blocked
+
+    def sun_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
+        """(M,) bool, conservative: which rays from the world points (x, y, z) (each (M,) float32) along the upward
+        unit direction ``sun`` (3,) may meet an actor; the others cannot (a mask for :meth:`occluded_rays`).
+
+        Along ``sun``, a point p projects onto the plane z = 0 at p_xy - p_z * sun_xy / sun_z, and so does every
+        point of its ray: a ray that meets an actor projects inside the projection of that actor's vertices, and
+        so inside their 2D bounding box. Those boxes are marked on a grid over the points' projections (cells of
+        at least SHADOW_CELL_M; each box grown by a cell, far beyond rounding) and each point looks up its cell. A
+        point above every actor's highest vertex is no candidate: its ray only rises.
+        """
+        if not sun[2] > 0:
+            raise ValueError(f"sun must point upwards (z > 0), got {np.asarray(sun).tolist()}")
+        if not len(self.actors) or not len(x):
+            return np.zeros(len(x), bool)
+        slope_x, slope_y = float(sun[0] / sun[2]), float(sun[1] / sun[2])
+        vertices = self.geometry.vertices
+        flat = np.column_stack([vertices[:, 0] - vertices[:, 2] * slope_x, vertices[:, 1] - vertices[:, 2] * slope_y])
+        # Each actor's vertices are one run (place_actors): bounds per run.
+        starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
+        lo, hi = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
+        # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
+        px, py = x - z * np.float32(slope_x), y - z * np.float32(slope_y)
+        p_lo, p_hi = np.array([px.min(), py.min()]), np.array([px.max(), py.max()])
+        near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))
+        if not len(near):
+            return np.zeros(len(x), bool)
+        cell = max(SHADOW_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + SHADOW_CELL_M) / SHADOW_MAX_CELLS)))
+        rows, cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
+        # Cell (i, j) covers [p_lo + (i, j) * cell, p_lo + (i + 1, j + 1) * cell).
+        grid = rectangles_mask(rows, cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
+                               np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
+        i = np.minimum(((px - np.float32(p_lo[0])) * np.float32(1.0 / cell)).astype(np.int32), rows - 1)
+        j = np.minimum(((py - np.float32(p_lo[1])) * np.float32(1.0 / cell)).astype(np.int32), cols - 1)
+        return np.take(grid.reshape(-1), i * cols + j) & (z <= vertices[:, 2].max() + CHUNK_PAD_M)

@@ -126,3 +126,67 @@ def test_make_rays_rotates_directions_and_repeats_the_origin():
     np.testing.assert_array_equal(rays[:, :3], [[1.0, -2.0, 3.5]] * 2)
     np.testing.assert_allclose(rays[:, 3:], dirs @ rotation.T, atol=1e-7)
     assert make_rays([0.0, 0.0, 0.0], np.zeros((0, 3), np.float32), rotation).shape == (0, 6)
+
+
+def sun_towards(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def test_sun_actor_candidates_closed_form():
+    # A car (x in [-2.25, 2.25], z in [0, 1.5]) under a sun 45 degrees up towards +x: its shadow reaches
+    # x = -3.75 on the road. A ray from (-3, 0) rises through the car; from (-10, 0) it passes 7.8 m above it;
+    # (2, 0, 5) lies on the line of a car's point along the sun, but above the car: its ray only rises.
+    scene = FrameScene(StaticScene([ground()]), car_at(0.0, 0.0))
+    sun = sun_towards(45.0, 0.0)
+    points = np.array([[-3.0, 0.0, 0.01], [-10.0, 0.0, 0.01], [0.0, 5.0, 0.01], [2.0, 0.0, 5.0], [3.0, 0.0, 0.01]],
+                      np.float32)
+    cand = scene.sun_actor_candidates(*points.T, sun)
+    assert cand.tolist() == [True, False, False, False, False]
+    rays = np.column_stack([points, np.broadcast_to(sun, points.shape)]).astype(np.float32)
+    assert scene.occluded_rays(rays, actor_rays=cand).tolist() == [True, False, False, False, False]
+    with pytest.raises(ValueError, match="upwards"):
+        scene.sun_actor_candidates(*points.T, -sun)
+    empty = FrameScene(StaticScene([ground()]), Actors.empty())
+    assert not empty.sun_actor_candidates(*points.T, sun).any()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
+    """Random actors, points on and above the road and suns: the candidates contain every ray that the actors
+    block (cast against all of them), so the masked shadow test equals the unmasked one; and they leave most
+    rays out (the mask does work)."""
+    import open3d as o3d
+
+    rng = np.random.default_rng(seed)
+    n = 60
+    classes = [list(ObjectClass)[i] for i in rng.integers(0, len(ObjectClass), n)]
+    size = rng.uniform([0.5, 0.5, 1.2], [12.0, 2.6, 3.6], (n, 3))
+    centre = np.column_stack([rng.uniform(-80, 80, (n, 2)), size[:, 2] / 2])
+    actors = Actors(np.arange(1, n + 1), classes, Boxes3D(centre, size, rng.uniform(-np.pi, np.pi, n)),
+                    rng.uniform(0, 1, (n, 3)))
+    scene = FrameScene(StaticScene([ground()]), actors, threads=1)
+    points = np.column_stack([rng.uniform(-90, 90, (20000, 2)), rng.choice([0.01, 0.5, 2.0, 4.0], 20000)])
+    points = points.astype(np.float32)
+    sun = sun_towards(rng.uniform(3.0, 89.0), rng.uniform(-180.0, 180.0))
+    rays = np.column_stack([points, np.broadcast_to(sun, points.shape)]).astype(np.float32)
+    cand = scene.sun_actor_candidates(*points.T, sun)
+    by_actors = scene._actor_scene.test_occlusions(o3d.core.Tensor.from_numpy(rays)).numpy().astype(bool)
+    assert by_actors.any() and not (by_actors & ~cand).any()
+    np.testing.assert_array_equal(scene.occluded_rays(rays, actor_rays=cand), scene.occluded_rays(rays))
+    assert cand.mean() < 0.5
+
+
+def test_put_rows_equals_row_assignment():
+    from pipeline.world.scene import put_rows
+
+    rng = np.random.default_rng(0)
+    a = rng.random((50, 3), dtype=np.float32)
+    expected = a.copy()
+    rows = rng.choice(50, 20, replace=False)
+    values = rng.random((20, 3)).astype(np.float32)
+    expected[rows] = values
+    put_rows(a, rows, values)
+    np.testing.assert_array_equal(a, expected)
+    with pytest.raises(ValueError, match="contiguous"):
+        put_rows(np.zeros((6, 4), np.float32)[:, :3], rows[:2] % 6, values[:2])
