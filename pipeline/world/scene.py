@@ -283,6 +283,8 @@ class FrameScene:
         affine = unit_to_world(actors.boxes)
         self._inv_linear = np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3))
         self._center = affine[:, :, 3]
+        self._top_z = float(self.geometry.vertices[:, 2].max()) if len(actors) else -np.inf
+        self._footprints: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
@@ -412,11 +414,7 @@ class FrameScene:
         if not len(self.actors) or not len(x):
             return np.zeros(len(x), bool)
         slope_x, slope_y = float(sun[0] / sun[2]), float(sun[1] / sun[2])
-        vertices = self.geometry.vertices
-        flat = np.column_stack([vertices[:, 0] - vertices[:, 2] * slope_x, vertices[:, 1] - vertices[:, 2] * slope_y])
-        # Each actor's vertices are one run (place_actors): bounds per run.
-        starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
-        lo, hi = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
+        lo, hi = self._sun_footprints(slope_x, slope_y)
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
         px, py = x - z * np.float32(slope_x), y - z * np.float32(slope_y)
         p_lo, p_hi = np.array([px.min(), py.min()]), np.array([px.max(), py.max()])
@@ -430,4 +428,17 @@ class FrameScene:
                                np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
         i = np.minimum(((px - np.float32(p_lo[0])) * np.float32(1.0 / cell)).astype(np.int32), rows - 1)
         j = np.minimum(((py - np.float32(p_lo[1])) * np.float32(1.0 / cell)).astype(np.int32), cols - 1)
-        return np.take(grid.reshape(-1), i * cols + j) & (z <= vertices[:, 2].max() + CHUNK_PAD_M)
+        return np.take(grid.reshape(-1), i * cols + j) & (z <= self._top_z + CHUNK_PAD_M)
+
+    def _sun_footprints(self, slope_x: float, slope_y: float) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (slopes sun_xy / sun_z)
+        onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
+        key = (slope_x, slope_y)
+        if key not in self._footprints:
+            vertices = self.geometry.vertices
+            flat = np.column_stack([vertices[:, 0] - vertices[:, 2] * slope_x,
+                                    vertices[:, 1] - vertices[:, 2] * slope_y])
+            # Each actor's vertices are one run (place_actors): bounds per run.
+            starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
+            self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
+        return self._footprints[key]
