@@ -48,7 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
     parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run (default: all)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
-    parser.add_argument("--shard-size", type=int, default=4, help="frames per shard (the unit of resumption)")
+    parser.add_argument("--shard-size", type=int, default=4,
+                        help="frames per shard, the unit of resumption (the last few shards are smaller)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -60,6 +61,21 @@ def select_frames(available: np.ndarray, count: int | None) -> list[int]:
     if count < 1:
         raise ValueError(f"--frames must be >= 1, got {count}")
     return available[np.round(np.linspace(0, len(available) - 1, count)).astype(int)].tolist()
+
+
+def plan_shards(frames: list[int], shard_size: int) -> list[tuple[int, ...]]:
+    """The shards of ``frames``, in order: ``shard_size`` frames each, but the last 2-3 shards' worth split into
+    shrinking shards (a quarter of the frames left, rounded up), so that the workers, handed shards in order,
+    finish within about a frame of each other instead of a whole shard. A function of the frames and the shard
+    size only, so a resume with the same ones finds the same shards."""
+    full = max(0, (len(frames) - 2 * shard_size) // shard_size)
+    shards = [tuple(frames[i * shard_size: (i + 1) * shard_size]) for i in range(full)]
+    start = full * shard_size
+    while start < len(frames):
+        size = -(-(len(frames) - start) // 4)
+        shards.append(tuple(frames[start: start + size]))
+        start += size
+    return shards
 
 
 def record_rate_hz(frames: list[int], sim_rate_hz: float) -> float:
@@ -128,7 +144,7 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
     _prepare_work(work, key)
-    shards = [tuple(selection[i: i + shard_size]) for i in range(0, len(selection), shard_size)]
+    shards = plan_shards(selection, shard_size)
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=1 if workers > 1 else 0)
             for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]

@@ -1,18 +1,37 @@
-"""The render stage: resuming with another shard size, the record's frame rate, and which objects get LiDAR
-label rows when a condition shortens the LiDAR's range."""
+"""The render stage: the shard plan, resuming with another shard size, the record's frame rate, and which objects
+get LiDAR label rows when a condition shortens the LiDAR's range."""
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from pipeline.core.config import ConditionConfig, load_config
 from pipeline.core.geometry import Transform
 from pipeline.core.record import DatasetRecord
-from pipeline.stages.render import record_rate_hz, render
+from pipeline.stages.render import plan_shards, record_rate_hz, render
 from tests.conftest import tree_hashes
 from tests.stages.conftest import EVERY_10TH, kill_render_after
+
+
+def test_the_last_shards_shrink_so_workers_finish_together():
+    sizes = [len(s) for s in plan_shards(list(range(100)), 5)]
+    assert sizes == [5] * 18 + [3, 2, 2, 1, 1, 1]
+
+
+@given(st.lists(st.integers(0, 10_000), unique=True, max_size=200).map(sorted), st.integers(1, 12))
+def test_the_shard_plan_covers_every_frame_once_in_order(frames, shard_size):
+    shards = plan_shards(frames, shard_size)
+    assert [f for shard in shards for f in shard] == frames
+    sizes = [len(s) for s in shards]
+    assert all(0 < n <= shard_size for n in sizes)
+    assert sizes == sorted(sizes, reverse=True)  # full shards first, then shrinking ones
+    assert sum(n < shard_size for n in sizes) <= 2 * shard_size  # only the tail is cut up
+    if frames:
+        assert sizes[-1] == 1
 
 
 @pytest.mark.parametrize(("first_size", "shards_before_kill", "second_size"), [(1, 2, 2), (2, 1, 1)])
