@@ -195,13 +195,27 @@ class Camera:
         clipped onto it count as in front."""
         return self.config.near_m * (1.0 + 1e-6)
 
-    def spheres_in_view(self, centre_cam: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    def spheres_in_view(self, centre_cam: np.ndarray, radius: np.ndarray, near_m: float | None = None) -> np.ndarray:
         """(N,) bool: spheres (optical-frame centres (N, 3), radii (N,), metres) that may meet a ray of the image:
-        not wholly behind the near plane nor beyond the widest border ray (:attr:`border_tangents`)."""
+        not wholly behind the near plane (at ``near_m``; default :attr:`clip_near_m`) nor beyond the widest border
+        ray (:attr:`border_tangents`)."""
+        return self.capsules_in_view(centre_cam, centre_cam, radius, near_m)
+
+    def capsules_in_view(self, a_cam: np.ndarray, b_cam: np.ndarray, radius: np.ndarray,
+                         near_m: float | None = None) -> np.ndarray:
+        """(N,) bool: capsules (the points within ``radius`` (N,) of the segments from ``a_cam`` to ``b_cam``, each
+        (N, 3) in the optical frame, metres) that may meet a ray of the image: not wholly beyond any one of the
+        frustum's planes (near plane at ``near_m``, default :attr:`clip_near_m`; side planes through the widest
+        border rays). A distance to a plane is linear along a segment, so its ends decide."""
         tan_x, tan_y = self.border_tangents
-        return (centre_cam[:, 2] + radius > self.clip_near_m) & (
-            np.abs(centre_cam[:, 0]) - tan_x * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_x)) & (
-            np.abs(centre_cam[:, 1]) - tan_y * centre_cam[:, 2] <= radius * np.hypot(1.0, tan_y))
+        near_m = self.clip_near_m if near_m is None else near_m
+        inside = np.maximum(a_cam[:, 2], b_cam[:, 2]) + radius > near_m
+        for axis, tan in ((0, tan_x), (1, tan_y)):
+            reach = radius * np.hypot(1.0, tan)
+            for sign in (1.0, -1.0):
+                inside &= np.minimum(sign * a_cam[:, axis] - tan * a_cam[:, 2],
+                                     sign * b_cam[:, axis] - tan * b_cam[:, 2]) <= reach
+        return inside
 
     def boxes_pixel_mask(
         self, cam_to_world: Transform, lo: np.ndarray, hi: np.ndarray, margin_px: int = 1

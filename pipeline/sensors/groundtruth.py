@@ -67,6 +67,11 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     radius = 0.5 * np.linalg.norm(scene.actors.boxes.size, axis=1)
     near = camera.clip_near_m
     in_view = camera.spheres_in_view(centre, radius)
+    left_out = np.flatnonzero(in_view & ~scene.active)
+    if len(left_out):
+        raise ValueError(f"camera {camera.config.name!r} sees actors {scene.actors.track_id[left_out].tolist()} (track "
+                         "ids) that the frame scene left out of its Embree scene (FrameScene active); pass a mask "
+                         "from pipeline.sensors.reach.actors_in_reach with this camera")
     verts = world_to_cam.apply(geo.vertices)
     tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)
     vsel = np.flatnonzero(in_view[geo.vertex_actor])

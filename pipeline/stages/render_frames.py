@@ -26,6 +26,7 @@ from pipeline.core.geometry import Boxes3D, Transform, wrap_angle
 from pipeline.core.record import DEPTH_SCALE, FRAME_COLUMNS, LABEL_COLUMNS, POINT_COLUMNS, camera_path, lidar_path
 from pipeline.core.tables import read_parquet, write_parquet, write_sweep
 from pipeline.sensors.lidar import render_lidar
+from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
 from pipeline.stages.rig import build_sensors
 from pipeline.world.actors import Actors, srgb8_to_linear
@@ -258,7 +259,11 @@ def render_shard(job: ShardJob) -> int:
         ego, others = state.trajectories.frame(frame)
         ego_pose = Transform.from_xyz_rpy((ego["x_m"], ego["y_m"], ego["z_m"]), (0.0, 0.0, ego["yaw_rad"]))
         signals.apply(frame)
-        scene = FrameScene(static, _actors(others), threads=job.threads)
+        actors = _actors(others)
+        ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
+        active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
+                                 street_lights_m=world.street_lights, ego_size_m=ego_size_m)
+        scene = FrameScene(static, actors, threads=job.threads, active=active)
         lidar_points = np.zeros(len(scene.actors), np.int64)
         for k, lidar in enumerate(lidars):
             sweep = render_lidar(scene, lidar, ego_pose, frame_rng(job.seed, condition.name, frame, 1000 + k),
@@ -269,7 +274,7 @@ def render_shard(job: ShardJob) -> int:
         for k, camera in enumerate(cameras):
             cam = render_camera(scene, camera, ego_pose, condition, frame_rng(job.seed, condition.name, frame, k),
                                 street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
-                                ego_size_m=(ego["length_m"], ego["width_m"], ego["height_m"]))
+                                ego_size_m=ego_size_m)
             _write_camera(job.record_dir, camera.config.name, frame, cam)
             label_parts.append(_camera_rows(frame, camera.config.name, cam, others, lidar_points))
         frame_rows.append((frame, float(ego["time_s"]), int(ego["track_id"]), ego["x_m"], ego["y_m"], ego["z_m"],

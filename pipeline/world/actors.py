@@ -160,9 +160,16 @@ class ActorGeometry:
     triangle_semantic: np.ndarray
 
 
-def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES) -> ActorGeometry:
-    """Scale and place every actor's canonical mesh (vectorised per class) and merge them."""
+def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None
+                 ) -> ActorGeometry:
+    """Scale and place every actor's canonical mesh (vectorised per class) and merge them; with ``where`` (A,) bool,
+    only those actors' (their indices stay positions in ``actors``)."""
     codes = actors.class_codes
+    if where is not None:
+        where = np.asarray(where, bool)
+        if where.shape != (len(actors),):
+            raise ValueError(f"where must be ({len(actors)},) bool, one per actor; got shape {where.shape}")
+        codes = np.where(where, codes, -1)
     parts: list[tuple[np.ndarray, ...]] = []
     vertex_offset = 0
     for code, object_class in enumerate(ObjectClass):
