@@ -109,14 +109,14 @@ def van() -> Mesh:
 
 def truck() -> Mesh:
     """8.0 x 2.5 x 3.5 m rigid truck: chassis, painted cab with windscreen, cargo box, six wheels."""
-    chassis = cuboid((-4.0, -1.0, 0.45), (4.0, 1.0, 0.95), "rubber")
+    chassis = cuboid((-4.0, -1.0, 0.45), (3.99, 1.0, 0.95), "rubber")  # not flush with the cab's front (no tie)
     cab = cuboid((2.1, -1.25, 0.6), (4.0, 1.25, 3.0), "paint")
     screen = cuboid((3.98, -1.1, 1.85), (4.02, 1.1, 2.8), "glass")
     side = mirrored(lambda y0, y1: cuboid((2.6, y0, 1.85), (3.7, y1, 2.7), "glass"), 1.23, 1.27)
     cargo = cuboid((-4.0, -1.25, 0.95), (1.95, 1.25, 3.5), "cargo")
     wheels = [wheel(x, 0.5, 0.5, y0, y1) for x in (3.1, -1.6, -2.8) for y0, y1 in ((0.9, 1.22), (-1.22, -0.9))]
     return merge([chassis, cab, screen, *side, cargo, *wheels,
-                  *_lights(4.0, -4.0, 0.7, 1.1, (0.75, 0.95), (0.6, 0.8), (0.5, 0.66), 0.28)], ObjectClass.TRUCK)
+                  *_lights(4.0, -4.0, 0.7, 1.1, (0.75, 0.94), (0.6, 0.8), (0.5, 0.66), 0.28)], ObjectClass.TRUCK)
 
 
 def bus() -> Mesh:
@@ -149,7 +149,8 @@ def motorcycle() -> Mesh:
     lights = [cuboid((0.6, -0.08, 0.72), (0.66, 0.08, 0.82), "headlight"),
               cuboid((-0.81, -0.08, 0.7), (-0.75, 0.08, 0.78), "taillight"),
               cuboid((-0.83, -0.09, 0.52), (-0.79, 0.09, 0.64), "plate")]
-    return merge([*wheels, body, bars, *lights, *_rider(-0.2, 0.85, 0.5, 0.9)], ObjectClass.MOTORCYCLE)
+    # Hands just above the bars' underside: coplanar faces of two materials would make the hit's material a tie.
+    return merge([*wheels, body, bars, *lights, *_rider(-0.2, 0.85, 0.5, 0.91)], ObjectClass.MOTORCYCLE)
 
 
 def bicycle() -> Mesh:

@@ -31,6 +31,44 @@ def test_canonical_mesh_spans_the_unit_box_exactly(object_class):
     assert np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0 > 0.05
 
 
+def _coplanar_overlaps(mesh: Mesh) -> list[tuple[int, int]]:
+    """Pairs of triangles of different materials that lie in one plane and overlap with positive area (separating
+    axis test on the in-plane edge normals)."""
+    v = mesh.vertices[mesh.triangles]
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    plane = np.round(np.column_stack([normal, np.einsum("ij,ij->i", normal, v[:, 0])]), 9)
+    pairs = []
+    for i in range(len(v)):
+        for j in np.flatnonzero(np.all(plane[i + 1:] == plane[i], axis=1)) + i + 1:
+            if mesh.material[i] == mesh.material[j]:
+                continue
+            edges = np.concatenate([np.roll(v[k], -1, axis=0) - v[k] for k in (i, j)])
+            axes = np.cross(edges, normal[i])  # in-plane normals of all six edges
+            pi, pj = v[i] @ axes.T, v[j] @ axes.T
+            if np.all(np.minimum(pi.max(0), pj.max(0)) - np.maximum(pi.min(0), pj.min(0)) > 1e-9):
+                pairs.append((i, j))
+    return pairs
+
+
+@pytest.mark.parametrize("object_class", list(ObjectClass))
+def test_no_two_materials_share_a_surface(object_class):
+    # Where two coplanar triangles overlap, a ray hits both at the same t and Embree reports either, depending on
+    # the BVH: the pixel's material would depend on which other actors are in the frame's scene.
+    mesh = canonical_mesh(object_class)
+    assert _coplanar_overlaps(mesh) == []
+
+
+def test_the_coplanar_check_finds_an_overlap():
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    shifted = square + [0.5, 0.5, 0.0]
+    apart = square + [1.0, 0.0, 0.0]  # shares an edge only
+    for other, expected in ((shifted, [(0, 2), (1, 3)]), (apart, [])):  # triangles across the diagonal only touch
+        mesh = Mesh(np.concatenate([square, other]), np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
+                    np.array([0, 0, 1, 1], np.int32), ObjectClass.CAR.semantic)
+        assert sorted(_coplanar_overlaps(mesh)) == expected
+
+
 @pytest.mark.parametrize("object_class", [ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.BUS])
 def test_vehicles_have_glass_wheels_lights_and_paint(object_class):
     materials = set(canonical_mesh(object_class).material.tolist())
