@@ -74,17 +74,21 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
     return total, caster.cpu_s
 
 
-EMBREE, PNG, PARQUET = "Embree casts (+ actor BVH builds, lazy)", "PNG encoding (4 images)", "Parquet writes"
+EMBREE, PNG, PARQUET = "Embree casts", "PNG encoding (4 images)", "Parquet writes"
+BVH = "actors' Embree BVH build (per frame)"
 GT = "ground truth (2D/3D boxes, occlusion, truncation)"
 POST = "post effects + tone map"
 RAYS = "camera rays, hit attributes, depth"
+SCENE = "frame scene (actors in reach, placed)"
 # Where one frame's CPU time goes (--breakdown): built-in calls that are a part wherever they run ...
 LEAF_PARTS = {"cast_rays": EMBREE, "test_occlusions": EMBREE, "imwrite": PNG}
+LEAF_CALLER_PARTS = {"_build_bvh@scene.py": BVH}  # ... or the part of the pipeline function that called them
 # ... and the pipeline functions that own the rest of the time (numpy, OpenCV, pandas) they call.
 STEP_PARTS = {
     "shade": "shading (sun, sky, lights, wet road)", "apply_post": POST, "to_srgb8": POST, "camera_labels": GT,
     "project_actors": GT, "_camera_rows": GT, "_lidar_rows": GT, "_label_table": GT,
-    "render_lidar": "LiDAR model (noise, drop-out, intensity)", "__init__@scene.py": "frame scene (actors placed)",
+    "render_lidar": "LiDAR model (noise, drop-out, intensity)", "__init__@scene.py": SCENE,
+    "actors_in_reach": SCENE,
     "_write_camera": "images converted for writing", "_write_points": PARQUET, "write_parquet": PARQUET,
     "render_camera": RAYS, "cast_rays@scene.py": RAYS, "render_shard": "trajectories, signals, other",
 }
@@ -104,8 +108,9 @@ def _part_of(func: tuple[str, int, str]) -> str | None:
 def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames: list[int],
               tmp: Path) -> list[tuple[str, float]]:
     """(part, seconds) of rendering ``frames`` in this process on one thread (as each pool worker does), from a
-    cProfile run. A call's own time goes to its part (LEAF_PARTS, pyarrow) or else, up the profile's call graph,
-    to the innermost step that called it (STEP_PARTS), split among callers by their share of its time."""
+    cProfile run. A call's own time goes to its part (LEAF_PARTS, or LEAF_CALLER_PARTS by the caller; pyarrow) or
+    else, up the profile's call graph, to the innermost step that called it (STEP_PARTS), split among callers by
+    their share of its time."""
     import cProfile
     import dataclasses
     import pstats
@@ -128,6 +133,15 @@ def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames:
         if func in owners:
             return owners[func]
         part = _part_of(func)
+        if part is not None and func[0] == "~" and func in stats:  # a built-in leaf: some callers own their calls
+            callers = stats[func][4]
+            total = sum(c[2] for c in callers.values()) or 1.0
+            share = {}
+            for (filename, _, name), c in callers.items():
+                mine = LEAF_CALLER_PARTS.get(f"{name}@{Path(filename).name}", part)
+                share[mine] = share.get(mine, 0.0) + c[2] / total
+            owners[func] = share or {part: 1.0}
+            return owners[func]
         if part is not None or depth > 50 or func not in stats:
             owners[func] = {part or "other": 1.0}
             return owners[func]
@@ -196,7 +210,7 @@ def main() -> None:
     if parts:
         count = min(args.breakdown, len(frames))
         total = sum(t for _, t in parts)
-        embree = sum(t for name, t in parts if name.startswith("Embree"))
+        embree = sum(t for name, t in parts if name == EMBREE)
         width = max(len(k) for k, _ in parts)
         print(f"\nwhere one frame's time goes: {count} frames on one thread, cProfile (adds ~5%)\n"
               f"{'part':<{width}} | ms/frame | share\n{'-' * width}-|----------|------")

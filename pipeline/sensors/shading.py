@@ -29,6 +29,7 @@ STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
 WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
 WET_SHININESS = 80.0
 WATER_F0 = 0.02
+SUN_MAP_RANGE_M = 100.0  # hits nearer than this test their sun shadow rays' cells (farther: a few pixel rows)
 WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
@@ -157,7 +158,12 @@ def _sun_blocked(scene: FrameScene, r: list[np.ndarray], n: list[np.ndarray], t_
     ones = np.ones_like(t_m)
     origin = [r[k] + r[3 + k] * t_m + n[k] * lift for k in range(3)]
     shadow = cv2.merge(origin + [ones * sun[k] for k in range(3)])
-    return scene.occluded_rays(shadow.reshape(-1, 6), actor_rays=scene.sun_actor_candidates(*origin, sun))
+    # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
+    static_rays = np.ones(len(t_m), bool)
+    near = np.flatnonzero(t_m < SUN_MAP_RANGE_M)
+    static_rays[near] = scene.static.sun_candidates(*(np.take(c, near) for c in origin), sun)
+    return scene.occluded_rays(shadow.reshape(-1, 6), actor_rays=scene.sun_actor_candidates(*origin, sun),
+                               static_rays=static_rays)
 
 
 def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:

@@ -17,7 +17,9 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   one's); the BVH build costs ~0.45 us per triangle, every frame.
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
-  along the sun; ~1-3% of the lit pixels of a highway or urban frame); against the static world, all of them.
+  along the sun; ~1-3% of the lit pixels of a highway or urban frame); against the static world only those from
+  hits within SUN_MAP_RANGE_M (:mod:`pipeline.sensors.shading`) whose grid cell of the static world's projection
+  along the sun lies as high as they do (:class:`pipeline.world.sunmap.SunMap`), and all from farther hits.
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
   canonical mesh is affine, so a ray transformed into the actor's unit box frame hits the cached
   canonical mesh of its class exactly where the original ray hits the placed mesh, with the same ray
@@ -38,6 +40,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
+from pipeline.world.sunmap import SunMap
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,11 @@ def _embree(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.Rayca
         o3d.core.Tensor.from_numpy(np.ascontiguousarray(triangles, dtype=np.uint32)),
     )
     return scene
+
+
+def _build_bvh(scene: o3d.t.geometry.RaycastingScene, threads: int = 0) -> None:
+    """Build the scene's BVH now (Embree builds it at the first query: a query of one ray)."""
+    scene.test_occlusions(o3d.core.Tensor(np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32)), nthreads=threads)
 
 
 _MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
@@ -215,6 +223,7 @@ class StaticScene:
 
     def __init__(self, meshes: list[Mesh]) -> None:
         self.mesh_offsets = np.cumsum([0] + [len(m) for m in meshes]).astype(np.int64)
+        self._sun_maps: dict[tuple[float, ...], SunMap] = {}  # see sun_candidates
         meshes = [m for m in meshes if len(m)]
         self.num_triangles = sum(len(m) for m in meshes)
         if meshes:
@@ -222,6 +231,7 @@ class StaticScene:
             self.triangle_material = merged.material
             self.triangle_semantic = np.concatenate([np.full(len(m), int(m.semantic), np.uint8) for m in meshes])
             self._scene = _embree(merged.vertices, merged.triangles)
+            self._vertices, self._triangles = merged.vertices, merged.triangles
             self.chunk_boxes = chunk_boxes(merged.vertices, merged.triangles)
             self.floor_z_m = float(np.min(merged.vertices[:, 2]))
         else:
@@ -229,6 +239,7 @@ class StaticScene:
             self.triangle_material = np.zeros(0, np.int32)
             self.triangle_semantic = np.zeros(0, np.uint8)
             self._scene = None
+            self._vertices, self._triangles = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
             self.chunk_boxes = (np.zeros((0, 3)), np.zeros((0, 3)))
 
     def set_triangle_materials(self, mesh_index: int, triangles: np.ndarray, material: np.ndarray | int) -> None:
@@ -256,10 +267,31 @@ class StaticScene:
             put_rows(normal, sub, sub_normal)
         return t, prim, normal
 
-    def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0) -> np.ndarray:
+    def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0, where: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """(N,) bool: the static world lies on each of the (N, 6) float32 rays within ``t_max_m``. ``where`` (N,)
+        bool, optional: test only these rays; the others are reported clear, so it must contain every ray that can
+        be blocked (e.g. :meth:`sun_candidates`)."""
         if self._scene is None:
             return np.zeros(len(rays), bool)
-        return self._scene.test_occlusions(o3d.core.Tensor.from_numpy(rays), tfar=t_max_m, nthreads=threads).numpy()
+        if where is None:
+            return self._scene.test_occlusions(o3d.core.Tensor.from_numpy(rays), tfar=t_max_m,
+                                               nthreads=threads).numpy()
+        blocked = np.zeros(len(rays), bool)
+        sub = np.flatnonzero(where)
+        if len(sub):
+            tensor = o3d.core.Tensor.from_numpy(np.take(rays, sub, axis=0))
+            blocked[sub] = self._scene.test_occlusions(tensor, tfar=t_max_m, nthreads=threads).numpy()
+        return blocked
+
+    def sun_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
+        """(M,) bool, conservative: which rays from the world points (x, y, z) (each (M,) float32) along the upward
+        unit direction ``sun`` (3,) may meet the static world (:class:`pipeline.world.sunmap.SunMap`, one per sun
+        direction, its tiles drawn as points fall in them and kept for the next frames)."""
+        key = tuple(np.asarray(sun, np.float64).tolist())
+        if key not in self._sun_maps:
+            self._sun_maps[key] = SunMap(self._vertices, self._triangles, np.asarray(sun, np.float64))
+        return self._sun_maps[key].candidates(x, y, z)
 
 
 class FrameScene:
@@ -284,8 +316,10 @@ class FrameScene:
         self.meshes = meshes
         self.active = np.ones(len(actors), bool) if active is None else np.asarray(active, bool)
         self.geometry = place_actors(actors, meshes, self.active)
-        self._actor_scene = _embree(self.geometry.vertices, self.geometry.triangles) \
-            if len(self.geometry.triangles) else None
+        self._actor_scene = None
+        if len(self.geometry.triangles):
+            self._actor_scene = _embree(self.geometry.vertices, self.geometry.triangles)
+            _build_bvh(self._actor_scene, threads)  # here rather than in the first cast: one place to time it
         mats = material_arrays()
         self._albedo = mats["albedo"]
         self._albedo_or_zero = np.concatenate([self._albedo, np.zeros((1, 3), np.float32)])
@@ -397,12 +431,13 @@ class FrameScene:
         """(N,) bool: something (static or actor) lies on each ray within ``t_max_m`` (shadow rays)."""
         return self.occluded_rays(_rays(origins, directions), t_max_m)
 
-    def occluded_rays(self, rays: np.ndarray, t_max_m: float = np.inf, actor_rays: np.ndarray | None = None
-                      ) -> np.ndarray:
+    def occluded_rays(self, rays: np.ndarray, t_max_m: float = np.inf, actor_rays: np.ndarray | None = None,
+                      static_rays: np.ndarray | None = None) -> np.ndarray:
         """:meth:`occluded` for prebuilt (N, 6) float32 rays [origin | unit direction]. ``actor_rays`` (N,) bool,
         optional: a conservative mask of the rays that may meet an actor (e.g. :meth:`sun_actor_candidates`); the
-        others are tested against the static world only."""
-        blocked = self.static.occluded(rays, t_max_m, self.threads)
+        others are tested against the static world only. ``static_rays`` likewise for the static world (e.g.
+        :meth:`StaticScene.sun_candidates`)."""
+        blocked = self.static.occluded(rays, t_max_m, self.threads, static_rays)
         if self._actor_scene is not None:
             sub = np.arange(len(rays)) if actor_rays is None else np.flatnonzero(actor_rays & ~blocked)
             if len(sub):

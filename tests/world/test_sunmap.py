@@ -1,0 +1,107 @@
+"""Which sun shadow rays may meet the static world (pipeline.world.sunmap): a closed-form wall, and random worlds
+of boxes, thin walls and floating strips against the shadow rays' real Embree occlusion test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.core.classes import SemanticClass
+from pipeline.world.materials import material_index
+from pipeline.world.mesh import Mesh
+from pipeline.world.scene import StaticScene, _rays
+from pipeline.world.sunmap import SUN_CELL_M, SUN_TILE_CELLS, SunMap
+
+CONCRETE = material_index("concrete")
+
+
+def quad(corners) -> Mesh:
+    return Mesh(np.asarray(corners, float), np.array([[0, 1, 2], [0, 2, 3]]), CONCRETE, SemanticClass.BUILDING)
+
+
+def box(lo, hi) -> Mesh:
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)], float)
+    t = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    return Mesh(v, t, CONCRETE, SemanticClass.BUILDING)
+
+
+def sun_at(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
+    az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], np.float32)
+
+
+GROUND = quad([[-100, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]])
+WALL = quad([[10, -5, 0], [10, 5, 0], [10, 5, 3], [10, -5, 3]])  # 3 m tall, in the plane x = 10
+
+
+def candidates(meshes, points, sun):
+    merged = Mesh.concatenate(meshes)
+    p = np.asarray(points, np.float32)
+    return SunMap(merged.vertices, merged.triangles, sun).candidates(p[:, 0].copy(), p[:, 1].copy(), p[:, 2].copy())
+
+
+def test_a_wall_shadows_the_ground_behind_it_and_nothing_else():
+    # The sun 45 degrees up towards +x: the wall's shadow covers 7 <= x <= 10 behind it (|y| <= 5).
+    sun = sun_at(0.0, 45.0)
+    points = [[8.0, 0.0, 1e-3], [7.2, 4.8, 1e-3],  # in the shadow
+              [5.0, 0.0, 1e-3], [8.0, 8.0, 1e-3], [12.0, 0.0, 1e-3],  # before it, beside it, past the wall
+              [8.0, 0.0, 3.5],  # above the wall's top
+              [-50.0, 30.0, 1e-3]]  # open ground: only the ground itself (at z = 0) is below
+    assert candidates([GROUND, WALL], points, sun).tolist() == [True, True, False, False, False, False, False]
+    rays = _rays(np.asarray(points, np.float32), np.tile(sun, (len(points), 1)))
+    assert StaticScene([GROUND, WALL]).occluded(rays, np.inf).tolist() == [True, True] + [False] * 5
+
+
+def test_the_sun_must_be_up():
+    with pytest.raises(ValueError, match="sun must point upwards"):
+        SunMap(WALL.vertices, WALL.triangles, np.array([0.0, 0.0, -1.0]))
+
+
+def random_world(rng: np.random.Generator) -> list[Mesh]:
+    """Ground, boxes, thin vertical walls (kerbs) and floating strips (lane paint) at random poses, spanning
+    several tiles on both sides of the origin."""
+    meshes = [GROUND]
+    for _ in range(40):
+        lo = np.r_[rng.uniform(-60, 60, 2), rng.uniform(0.0, 2.0)]
+        meshes.append(box(lo, lo + np.r_[rng.uniform(0.1, 8.0, 2), rng.uniform(0.05, 12.0)]))
+    for _ in range(40):
+        a, d = rng.uniform(-60, 60, 2), rng.normal(size=2)
+        b = a + d / np.linalg.norm(d) * rng.uniform(0.5, 40.0)
+        h = rng.choice([0.02, 0.15, 1.0])
+        if rng.random() < 0.5:  # a vertical wall h tall
+            meshes.append(quad([[*a, 0], [*b, 0], [*b, h], [*a, h]]))
+        else:  # a horizontal strip 12 cm wide, h above the ground
+            n = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a) * 0.06
+            meshes.append(quad([[*(a - n), h], [*(b - n), h], [*(b + n), h], [*(a + n), h]]))
+    return meshes
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_every_blocked_shadow_ray_is_a_candidate(seed):
+    rng = np.random.default_rng(seed)
+    meshes = random_world(rng)
+    sun = sun_at(rng.uniform(-180, 180), rng.uniform(10, 70))
+    n = 40_000
+    # Points on the ground just off it (as shading lifts them), and points anywhere up to 6 m.
+    z = np.where(np.arange(n) < n // 2, 1e-3, rng.uniform(0.0, 6.0, n))
+    points = np.column_stack([rng.uniform(-70, 70, (n, 2)), z]).astype(np.float32)
+    found = candidates(meshes, points, sun)
+    blocked = StaticScene(meshes).occluded(_rays(points, np.tile(sun, (n, 1))), np.inf)
+    assert not np.any(blocked & ~found)
+    assert np.count_nonzero(found) < 0.7 * n  # the test leaves most rays out
+    tiles = np.unique(np.floor(points[:, :2] / (SUN_TILE_CELLS * SUN_CELL_M)), axis=0)
+    assert len(tiles) >= 16 and tiles.min() < 0  # drawn tile by tile, on both sides of the origin
+
+
+def test_the_masked_static_test_equals_the_full_one():
+    rng = np.random.default_rng(7)
+    meshes = random_world(rng)
+    scene = StaticScene(meshes)
+    sun = sun_at(30.0, 25.0)
+    points = np.column_stack([rng.uniform(-70, 70, (20_000, 2)), np.full(20_000, 1e-3)]).astype(np.float32)
+    rays = _rays(points, np.tile(sun, (len(points), 1)))
+    mask = scene.sun_candidates(*(points[:, k].copy() for k in range(3)), sun)
+    assert np.array_equal(scene.occluded(rays, np.inf, where=mask), scene.occluded(rays, np.inf))
+    assert scene.occluded(rays, np.inf, where=mask).any()
