@@ -315,6 +315,8 @@ class FrameScene:
         self.actors = actors
         self.meshes = meshes
         self.active = np.ones(len(actors), bool) if active is None else np.asarray(active, bool)
+        if self.active.shape != (len(actors),):
+            raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
         self.geometry = place_actors(actors, meshes, self.active)
         self._actor_scene = None
         if len(self.geometry.triangles):

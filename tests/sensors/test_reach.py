@@ -136,3 +136,5 @@ def test_placing_some_actors_keeps_their_indices(actors_factory):
     assert len(some.triangles) == 2 * len(place_actors(actors).triangles) // 3
     with pytest.raises(ValueError, match=r"where must be \(3,\) bool"):
         place_actors(actors, where=np.array([True, False]))
+    with pytest.raises(ValueError, match=r"active must be \(3,\) bool"):
+        FrameScene(STATIC, actors, active=np.array([True, False]))
