@@ -9,7 +9,7 @@ import pytest
 from pipeline.core.classes import SemanticClass
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
-from pipeline.world.scene import StaticScene, _rays
+from pipeline.world.scene import StaticScene
 from pipeline.world.sunmap import SUN_CELL_M, SUN_TILE_CELLS, SunMap
 
 CONCRETE = material_index("concrete")
@@ -36,6 +36,11 @@ GROUND = quad([[-100, -100, 0], [100, -100, 0], [100, 100, 0], [-100, 100, 0]])
 WALL = quad([[10, -5, 0], [10, 5, 0], [10, 5, 3], [10, -5, 3]])  # 3 m tall, in the plane x = 10
 
 
+def sun_rays(points: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """(N, 6) float32 rays from the points towards the (unit) sun."""
+    return np.hstack([points, np.tile(sun, (len(points), 1))]).astype(np.float32)
+
+
 def candidates(meshes, points, sun):
     merged = Mesh.concatenate(meshes)
     p = np.asarray(points, np.float32)
@@ -50,7 +55,7 @@ def test_a_wall_shadows_the_ground_behind_it_and_nothing_else():
               [8.0, 0.0, 3.5],  # above the wall's top
               [-50.0, 30.0, 1e-3]]  # open ground: only the ground itself (at z = 0) is below
     assert candidates([GROUND, WALL], points, sun).tolist() == [True, True, False, False, False, False, False]
-    rays = _rays(np.asarray(points, np.float32), np.tile(sun, (len(points), 1)))
+    rays = sun_rays(np.asarray(points, np.float32), sun)
     assert StaticScene([GROUND, WALL]).occluded(rays, np.inf).tolist() == [True, True] + [False] * 5
 
 
@@ -88,7 +93,7 @@ def test_every_blocked_shadow_ray_is_a_candidate(seed):
     z = np.where(np.arange(n) < n // 2, 1e-3, rng.uniform(0.0, 6.0, n))
     points = np.column_stack([rng.uniform(-70, 70, (n, 2)), z]).astype(np.float32)
     found = candidates(meshes, points, sun)
-    blocked = StaticScene(meshes).occluded(_rays(points, np.tile(sun, (n, 1))), np.inf)
+    blocked = StaticScene(meshes).occluded(sun_rays(points, sun), np.inf)
     assert not np.any(blocked & ~found)
     assert np.count_nonzero(found) < 0.7 * n  # the test leaves most rays out
     tiles = np.unique(np.floor(points[:, :2] / (SUN_TILE_CELLS * SUN_CELL_M)), axis=0)
@@ -101,7 +106,7 @@ def test_the_masked_static_test_equals_the_full_one():
     scene = StaticScene(meshes)
     sun = sun_at(30.0, 25.0)
     points = np.column_stack([rng.uniform(-70, 70, (20_000, 2)), np.full(20_000, 1e-3)]).astype(np.float32)
-    rays = _rays(points, np.tile(sun, (len(points), 1)))
+    rays = sun_rays(points, sun)
     mask = scene.sun_candidates(*(points[:, k].copy() for k in range(3)), sun)
     assert np.array_equal(scene.occluded(rays, np.inf, where=mask), scene.occluded(rays, np.inf))
     assert scene.occluded(rays, np.inf, where=mask).any()
