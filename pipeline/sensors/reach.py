@@ -69,10 +69,11 @@ def actors_in_reach(
     for camera in cameras:
         cam_to_world = camera.camera_to_world(ego_pose)
         world_to_cam = cam_to_world.inverse()
-        reach |= camera.spheres_in_view(world_to_cam.apply(centre), radius, near_m=0.0)
+        centre_cam = world_to_cam.apply(centre)
+        reach |= camera.spheres_in_view(centre_cam, radius, near_m=0.0)
         if sun_shadows:
-            reach |= camera.capsules_in_view(world_to_cam.apply(centre), world_to_cam.apply(shadow_end),
-                                             radius + LIFT_MARGIN_M, near_m=0.0)
+            reach |= camera.capsules_in_view(centre_cam, world_to_cam.apply(shadow_end), radius + LIFT_MARGIN_M,
+                                             near_m=0.0)
         lights = condition.frame_lights(actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
         for k in np.flatnonzero(lights.shadows):
             reach |= np.linalg.norm(centre - lights.position_m[k], axis=1) - radius <= lights.range_m[k]

@@ -40,7 +40,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
-from pipeline.world.sunmap import SunMap
+from pipeline.world.sunmap import SunMap, along_sun, sun_slope
 
 
 @dataclass(frozen=True)
@@ -96,9 +96,16 @@ def _embree(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.Rayca
     return scene
 
 
+def _occluded(scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, t_max_m: float, threads: int,
+              rows: np.ndarray | None = None) -> np.ndarray:
+    """Embree's occlusion test of the (N, 6) float32 ``rays``, or of those at ``rows`` only ((len(rows),) bool)."""
+    picked = rays if rows is None else np.take(rays, rows, axis=0)
+    return scene.test_occlusions(o3d.core.Tensor.from_numpy(picked), tfar=t_max_m, nthreads=threads).numpy()
+
+
 def _build_bvh(scene: o3d.t.geometry.RaycastingScene, threads: int = 0) -> None:
     """Build the scene's BVH now (Embree builds it at the first query: a query of one ray)."""
-    scene.test_occlusions(o3d.core.Tensor(np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32)), nthreads=threads)
+    _occluded(scene, np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32), np.inf, threads)
 
 
 _MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
@@ -275,13 +282,11 @@ class StaticScene:
         if self._scene is None:
             return np.zeros(len(rays), bool)
         if where is None:
-            return self._scene.test_occlusions(o3d.core.Tensor.from_numpy(rays), tfar=t_max_m,
-                                               nthreads=threads).numpy()
+            return _occluded(self._scene, rays, t_max_m, threads)
         blocked = np.zeros(len(rays), bool)
         sub = np.flatnonzero(where)
         if len(sub):
-            tensor = o3d.core.Tensor.from_numpy(np.take(rays, sub, axis=0))
-            blocked[sub] = self._scene.test_occlusions(tensor, tfar=t_max_m, nthreads=threads).numpy()
+            blocked[sub] = _occluded(self._scene, rays, t_max_m, threads, sub)
         return blocked
 
     def sun_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
@@ -331,7 +336,7 @@ class FrameScene:
         self._inv_linear = np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3))
         self._center = affine[:, :, 3]
         self._top_z = float(self.geometry.vertices[:, 2].max()) if len(self.geometry.vertices) else -np.inf
-        self._footprints: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
+        self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
@@ -440,11 +445,13 @@ class FrameScene:
         others are tested against the static world only. ``static_rays`` likewise for the static world (e.g.
         :meth:`StaticScene.sun_candidates`)."""
         blocked = self.static.occluded(rays, t_max_m, self.threads, static_rays)
-        if self._actor_scene is not None:
-            sub = np.arange(len(rays)) if actor_rays is None else np.flatnonzero(actor_rays & ~blocked)
-            if len(sub):
-                tensor = o3d.core.Tensor.from_numpy(np.take(rays, sub, axis=0))
-                blocked[sub] |= self._actor_scene.test_occlusions(tensor, tfar=t_max_m, nthreads=self.threads).numpy()
+        if self._actor_scene is None:
+            return blocked
+        if actor_rays is None:
+            return blocked | _occluded(self._actor_scene, rays, t_max_m, self.threads)
+        sub = np.flatnonzero(actor_rays & ~blocked)
+        if len(sub):
+            blocked[sub] = _occluded(self._actor_scene, rays, t_max_m, self.threads, sub)
         return blocked
 
     def sun_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
@@ -457,14 +464,12 @@ class FrameScene:
         at least SHADOW_CELL_M; each box grown by a cell, far beyond rounding) and each point looks up its cell. A
         point above every actor's highest vertex is no candidate: its ray only rises.
         """
-        if not sun[2] > 0:
-            raise ValueError(f"sun must point upwards (z > 0), got {np.asarray(sun).tolist()}")
+        slope = sun_slope(sun)
         if self._actor_scene is None or not len(x):
             return np.zeros(len(x), bool)
-        slope_x, slope_y = float(sun[0] / sun[2]), float(sun[1] / sun[2])
-        lo, hi = self._sun_footprints(slope_x, slope_y)
+        lo, hi = self._sun_footprints(slope)
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
-        px, py = x - z * np.float32(slope_x), y - z * np.float32(slope_y)
+        px, py = along_sun(x, y, z, slope)
         p_lo, p_hi = np.array([px.min(), py.min()]), np.array([px.max(), py.max()])
         near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))
         if not len(near):
@@ -478,14 +483,12 @@ class FrameScene:
         j = np.minimum(((py - np.float32(p_lo[1])) * np.float32(1.0 / cell)).astype(np.int32), cols - 1)
         return np.take(grid.reshape(-1), i * cols + j) & (z <= self._top_z + CHUNK_PAD_M)
 
-    def _sun_footprints(self, slope_x: float, slope_y: float) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (slopes sun_xy / sun_z)
+    def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
         onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
-        key = (slope_x, slope_y)
+        key = tuple(slope.tolist())
         if key not in self._footprints:
-            vertices = self.geometry.vertices
-            flat = np.column_stack([vertices[:, 0] - vertices[:, 2] * slope_x,
-                                    vertices[:, 1] - vertices[:, 2] * slope_y])
+            flat = np.column_stack(along_sun(*self.geometry.vertices.T, slope))
             # Each actor's vertices are one run (place_actors): bounds per run.
             starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
             self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)

@@ -27,26 +27,39 @@ SUN_Z_PAD_M = 1e-4  # a point this little above a triangle's top still counts: f
 _FIXED_BITS = 4  # OpenCV's sub-pixel bits for polygon vertices
 
 
+def sun_slope(sun: np.ndarray) -> np.ndarray:
+    """(2,) float64 sun_xy / sun_z of an upward direction ``sun`` (3,): along the sun, a point p projects onto the
+    plane z = 0 at p_xy - p_z * slope (:func:`along_sun`)."""
+    sun = np.asarray(sun, np.float64)
+    if not sun[2] > 0:
+        raise ValueError(f"sun must point upwards (z > 0), got {sun.tolist()}")
+    return sun[:2] / sun[2]
+
+
+def along_sun(x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The projections (px, py) of the points (x, y, z) (each (M,)) along the sun onto z = 0, in their dtype."""
+    sx, sy = np.asarray(slope, x.dtype)
+    return x - z * sx, y - z * sy
+
+
 class SunMap:
     """The static world's triangles ((V, 3) world ``vertices``, (T, 3) ``triangles``) seen along the upward unit
     direction ``sun`` (3,): :meth:`candidates` tells which shadow rays may meet them (see the module docstring)."""
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, sun: np.ndarray) -> None:
-        sun = np.asarray(sun, np.float64)
-        if not sun[2] > 0:
-            raise ValueError(f"sun must point upwards (z > 0), got {sun.tolist()}")
-        self.slope = sun[:2] / sun[2]
+        self.slope = sun_slope(sun)
         vertices = np.asarray(vertices, np.float64)
         triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
-        self._flat = (vertices[:, :2] - vertices[:, 2:3] * self.slope) / SUN_CELL_M  # projections, in cells
+        # Projections, in cells.
+        self._flat = np.column_stack(along_sun(*vertices.T, self.slope)) / SUN_CELL_M
         corners = self._flat[triangles]
         self._triangles = triangles
-        self._top = vertices[triangles, 2].max(axis=1) if len(triangles) else np.zeros(0)
+        self._top = vertices[triangles, 2].max(axis=1)
         # Tiles each triangle meets (its cells' box grown by one cell, as the drawing is), listed per tile with the
         # lowest triangle first.
         t = SUN_TILE_CELLS
-        lo = np.floor((corners.min(axis=1) - 1.0) / t).astype(np.int64) if len(triangles) else np.zeros((0, 2), int)
-        hi = np.floor((corners.max(axis=1) + 1.0) / t).astype(np.int64) if len(triangles) else np.zeros((0, 2), int)
+        lo = np.floor((corners.min(axis=1) - 1.0) / t).astype(np.int64)
+        hi = np.floor((corners.max(axis=1) + 1.0) / t).astype(np.int64)
         span = hi - lo + 1
         count = span[:, 0] * span[:, 1]
         owner = np.repeat(np.arange(len(triangles)), count)
@@ -57,8 +70,7 @@ class SunMap:
         self._entry_triangle = owner[order]
         keys = np.column_stack([tile_i[order], tile_j[order]])
         new = np.r_[True, np.any(keys[1:] != keys[:-1], axis=1)] if len(keys) else np.zeros(0, bool)
-        self._tile_keys = keys[new]  # (K, 2), sorted; the same as one int64 each:
-        self._tile_codes = self._tile_keys[:, 0] * (1 << 32) + self._tile_keys[:, 1]
+        self._tile_codes = keys[new, 0] * (1 << 32) + keys[new, 1]  # the tiles (i, j) met, sorted, one int64 each
         self._tile_start = np.r_[np.flatnonzero(new), len(keys)]
         self._slot: dict[tuple[int, int], int] = {}
         self._tiles = np.full((16, t, t), -np.inf, np.float32)  # tiles drawn so far in slots 0 .. _drawn - 1
@@ -69,11 +81,11 @@ class SunMap:
         a static triangle; the others cannot."""
         if not len(x):
             return np.zeros(0, bool)
-        slope = self.slope.astype(np.float32)
         scale = np.float32(1.0 / SUN_CELL_M)
+        px, py = along_sun(x, y, z, self.slope)
         # int32 cells and shifts (the tile side is a power of two): several times faster than int64 division.
-        cx = np.floor((x - z * slope[0]) * scale).astype(np.int32)
-        cy = np.floor((y - z * slope[1]) * scale).astype(np.int32)
+        cx = np.floor(px * scale).astype(np.int32)
+        cy = np.floor(py * scale).astype(np.int32)
         shift, t = SUN_TILE_CELLS.bit_length() - 1, SUN_TILE_CELLS
         ti, tj = cx >> shift, cy >> shift
         i0, j0 = int(ti.min()), int(tj.min())
