@@ -62,6 +62,7 @@ bench: setup-dev
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_render_core.py
 	$(BIN)/python bench/bench_render.py
+	$(BIN)/python bench/bench_png.py
 	$(BIN)/python bench/bench_export.py
 	$(BIN)/python bench/bench_coco_eval.py
 	$(BIN)/python bench/bench_kitti_eval.py

@@ -82,14 +82,14 @@ POST = "post effects + tone map"
 RAYS = "camera rays, hit attributes, depth"
 SCENE = "frame scene (actors in reach, placed)"
 # Where one frame's CPU time goes (--breakdown): built-in calls that are a part wherever they run ...
-LEAF_PARTS = {"cast_rays": EMBREE, "test_occlusions": EMBREE, "imwrite": PNG}
+LEAF_PARTS = {"cast_rays": EMBREE, "test_occlusions": EMBREE}
 LEAF_CALLER_PARTS = {"_build_bvh@scene.py": BVH}  # ... or the part of the pipeline function that called them
 # ... and the pipeline functions that own the rest of the time (numpy, OpenCV, pandas) they call.
 STEP_PARTS = {
     "shade": "shading (sun, sky, lights, wet road)", "apply_post": POST, "to_srgb8": POST, "camera_labels": GT,
     "project_actors": GT, "_camera_rows": GT, "_lidar_rows": GT, "_label_table": GT,
     "render_lidar": "LiDAR model (noise, drop-out, intensity)", "__init__@scene.py": SCENE,
-    "actors_in_reach": SCENE,
+    "actors_in_reach": SCENE, "write_png": PNG,
     "_write_camera": "images converted for writing", "_write_points": PARQUET, "write_parquet": PARQUET,
     "render_camera": RAYS, "cast_rays@scene.py": RAYS, "render_shard": "trajectories, signals, other",
 }
@@ -97,7 +97,7 @@ STEP_PARTS = {
 
 def _part_of(func: tuple[str, int, str]) -> str | None:
     filename, _, name = func
-    if filename == "~":  # a built-in: "<built-in method open3d.pybind.t.geometry.cast_rays>", "<imwrite>"
+    if filename == "~":  # a built-in: "<built-in method open3d.pybind.t.geometry.cast_rays>"
         return LEAF_PARTS.get(name.split()[-1].strip("<>").split(".")[-1])
     if "pyarrow" in filename:
         return PARQUET
