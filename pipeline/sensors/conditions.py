@@ -16,6 +16,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from pipeline.core.config import ConditionConfig, load_config
@@ -76,7 +77,10 @@ class Condition:
         beta = KOSCHMIEDER / self.fog_visibility_m
         transmittance = np.where(hit, np.exp(-beta * np.where(hit, distance_m, 0.0)), 0.0).astype(np.float32)
         fog = np.asarray(self.fog_rgb, np.float32) * self.lighting.exposure
-        return radiance * transmittance[:, None] + fog * (1.0 - transmittance[:, None])
+        # Per channel on (N,) arrays: numpy broadcasts over a trailing axis of 3 several times slower.
+        channels = cv2.split(np.ascontiguousarray(radiance, np.float32).reshape(-1, 1, 3))
+        haze = 1.0 - transmittance
+        return cv2.merge([c.reshape(-1) * transmittance + fog[k] * haze for k, c in enumerate(channels)]).reshape(-1, 3)
 
     def noisy(self, radiance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Shot + read noise (no grain) on radiance of any shape, drawn from ``rng`` (see

@@ -33,12 +33,22 @@ FLARE_GHOSTS = ((0.55, 0.05, (0.6, 0.8, 1.0)), (1.3, 0.03, (1.0, 0.7, 0.4)), (1.
 
 @functools.lru_cache(maxsize=8)
 def vignette_gain(height: int, width: int, strength: float) -> np.ndarray:
-    """(H, W, 1) float32 gain 1 - strength * (r / r_corner)^2 (pixel centres; exactly 1 - strength at corners)."""
+    """(H, W, 3) float32 gain 1 - strength * (r / r_corner)^2 (pixel centres; exactly 1 - strength at corners), the
+    same in each channel: numpy multiplies equal shapes ~8x faster than it broadcasts an (H, W, 1) array."""
     y = (np.arange(height, dtype=np.float64) + 0.5 - 0.5 * height) / (0.5 * height)
     x = (np.arange(width, dtype=np.float64) + 0.5 - 0.5 * width) / (0.5 * width)
     aspect = width / height
     r2 = ((x[None, :] * aspect) ** 2 + y[:, None] ** 2) / (aspect ** 2 + 1.0)
-    return (1.0 - strength * r2).astype(np.float32)[:, :, None]
+    gain = per_channel((1.0 - strength * r2).astype(np.float32))
+    gain.flags.writeable = False  # cached and shared
+    return gain
+
+
+def per_channel(a: np.ndarray) -> np.ndarray:
+    """(..., 3) float32: ``a`` (any shape) repeated in 3 channels, so that a pixel-wise product or sum with an image
+    runs on equal shapes (OpenCV's merge: ~10x faster than numpy's repeat)."""
+    a = np.ascontiguousarray(a, np.float32)
+    return cv2.merge([a.reshape(-1, 1)] * 3).reshape(*a.shape, 3)
 
 
 def vignette(image: np.ndarray, strength: float) -> np.ndarray:
@@ -71,7 +81,7 @@ def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np
     if cfg.grain_std > 0:
         grain = cv2.GaussianBlur(standard_normal(image.shape[:2], rng), (0, 0), cfg.grain_size_px)
         grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
-        out += grain[:, :, None]
+        out += per_channel(grain)
     return out
 
 
@@ -111,7 +121,8 @@ def bloom(image: np.ndarray, threshold: float, strength: float, sigma_px: float)
     if strength == 0:
         return image
     h, w = image.shape[:2]
-    excess = np.maximum(image - np.float32(threshold), 0.0)
+    # The part above the threshold: OpenCV's threshold to zero is ~3x faster than numpy's maximum.
+    excess = cv2.threshold(image - np.float32(threshold), 0.0, 0.0, cv2.THRESH_TOZERO)[1]
     small = cv2.resize(excess, (max(w // 4, 1), max(h // 4, 1)), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), max(sigma_px / 4.0, 0.5)) + cv2.GaussianBlur(
         small, (0, 0), max(sigma_px, 0.5)) * np.float32(0.5)
@@ -170,7 +181,7 @@ def rain_streaks(image: np.ndarray, cfg: RainConfig, sky_level: float, rng: np.r
     kernel[np.round(k // 2 + t * np.cos(a)).astype(int), np.round(k // 2 + t * np.sin(a)).astype(int)] = 1.0
     layer = cv2.filter2D(layer, -1, kernel / kernel.sum())
     scale = np.float32(cfg.streak_brightness * cfg.intensity * sky_level * 3.0)
-    return image + (layer * scale)[:, :, None]
+    return image + per_channel(layer * scale)
 
 
 def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
@@ -183,7 +194,7 @@ def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.nd
     mask = np.zeros((h, w), np.float32)
     for (cx, cy), r in zip(centres, radii, strict=True):  # one draw per drop (tens), pixels vectorised
         cv2.circle(mask, (int(cx), int(cy)), int(r), (1.0,), -1, cv2.LINE_AA)
-    mask = cv2.GaussianBlur(mask, (0, 0), 2.0)[:, :, None]
+    mask = per_channel(cv2.GaussianBlur(mask, (0, 0), 2.0))
     blurred = cv2.GaussianBlur(image, (0, 0), 0.02 * w) * np.float32(1.1)
     return image * (1.0 - mask) + blurred * mask
 
