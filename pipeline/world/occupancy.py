@@ -53,19 +53,27 @@ class Grid:
         if not len(tri):
             return raster
         span = int(_MAX_EDGE_CELLS) + 2
+        off = np.arange(span)
         lo = np.floor((tri.min(axis=1) - (self.x0, self.y0)) / self.cell_m).astype(np.int64)
         for chunk in range(0, len(tri), 20_000):
             t, base = tri[chunk : chunk + 20_000], lo[chunk : chunk + 20_000]
-            off = np.stack(np.meshgrid(np.arange(span), np.arange(span), indexing="xy"), -1).reshape(-1, 2)
-            cols, rows = base[:, None, 0] + off[None, :, 0], base[:, None, 1] + off[None, :, 1]
+            # Candidate cells: a span x span window from each triangle's lowest corner. A cell centre's x depends
+            # only on its column and y only on its row, so each edge function is a (T, span) term of the rows
+            # minus a (T, span) term of the columns, broadcast: the same float operations per cell as evaluating
+            # it cell by cell, at a fraction of the passes over (T, span, span) arrays.
+            cols, rows = base[:, 0, None] + off, base[:, 1, None] + off  # (T, span) each
             px = self.x0 + (cols + 0.5) * self.cell_m
             py = self.y0 + (rows + 0.5) * self.cell_m
-            inside = np.ones(px.shape, dtype=bool)
-            orient = np.sign(_edge(t[:, 0], t[:, 1], t[:, 2]))[:, None]
+            orient = np.sign(_edge(t[:, 0], t[:, 1], t[:, 2]))[:, None, None]
+            inside = np.ones((len(t), span, span), dtype=bool)  # [triangle, row, column]
             for a, b in ((0, 1), (1, 2), (2, 0)):
-                inside &= orient * _edge_pts(t[:, a], t[:, b], px, py) >= -1e-9
-            ok = inside & (rows >= 0) & (rows < self.shape[0]) & (cols >= 0) & (cols < self.shape[1])
-            raster[rows[ok], cols[ok]] = True
+                dx, dy = (t[:, b, 0] - t[:, a, 0])[:, None], (t[:, b, 1] - t[:, a, 1])[:, None]
+                edge = (dx * (py - t[:, a, 1, None]))[:, :, None] - (dy * (px - t[:, a, 0, None]))[:, None, :]
+                inside &= orient * edge >= -1e-9
+            inside &= ((rows >= 0) & (rows < self.shape[0]))[:, :, None]
+            inside &= ((cols >= 0) & (cols < self.shape[1]))[:, None, :]
+            k, i, j = np.nonzero(inside)
+            raster[rows[k, i], cols[k, j]] = True
         return raster
 
     def mark_convex(self, poly_xy: np.ndarray, raster: np.ndarray) -> None:
@@ -101,11 +109,6 @@ class Grid:
 
 def _edge(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-
-
-def _edge_pts(a: np.ndarray, b: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    dx, dy = b[:, None, 0] - a[:, None, 0], b[:, None, 1] - a[:, None, 1]
-    return dx * (py - a[:, None, 1]) - dy * (px - a[:, None, 0])
 
 
 def _split_large(tri: np.ndarray, max_edge_m: float) -> np.ndarray:

@@ -17,3 +17,33 @@ def test_dilate_matches_the_distance_transform(cell_m, radius_m):
     grid = Grid(0.0, 0.0, cell_m, raster.shape)
     expected = ndimage.distance_transform_edt(~raster) * cell_m <= radius_m
     np.testing.assert_array_equal(grid.dilate(raster, radius_m), expected)
+
+
+def _centres_in_triangle(grid: Grid, tri: np.ndarray) -> np.ndarray:
+    """(rows, cols) bool: cells whose centre lies in the triangle (3, 2) or on its border (every cell's centre
+    against the three edges)."""
+    rows, cols = grid.shape
+    px, py = np.meshgrid(grid.x0 + (np.arange(cols) + 0.5) * grid.cell_m,
+                         grid.y0 + (np.arange(rows) + 0.5) * grid.cell_m)
+    side = [(b[0] - a[0]) * (py - a[1]) - (b[1] - a[1]) * (px - a[0]) for a, b in ((tri[0], tri[1]), (tri[1], tri[2]),
+                                                                                     (tri[2], tri[0]))]
+    return ((side[0] >= 0) & (side[1] >= 0) & (side[2] >= 0)) | ((side[0] <= 0) & (side[1] <= 0) & (side[2] <= 0))
+
+
+def test_rasterise_marks_exactly_the_cell_centres_inside():
+    """Against a cell-by-cell test of every triangle over the whole grid: small and large triangles (split inside
+    rasterise), either orientation, slivers, and triangles partly or wholly off the grid."""
+    rng = np.random.default_rng(11)
+    grid = Grid(-3.0, 2.0, 0.5, (70, 90))  # x in [-3, 42), y in [2, 37)
+    centre = rng.uniform([-10.0, -5.0], [50.0, 45.0], (300, 1, 2))
+    size = rng.choice([0.3, 2.0, 8.0, 30.0], (300, 1, 1))
+    tris = centre + size * rng.uniform(-1.0, 1.0, (300, 3, 2))
+    tris[:20, 2] = tris[:20, 0] + 1e-3 * (tris[:20, 1] - tris[:20, 0])  # slivers
+    expected = np.zeros(grid.shape, bool)
+    for tri in tris:
+        expected |= _centres_in_triangle(grid, tri)
+    assert expected.sum() > 1000 and not expected.all()
+    np.testing.assert_array_equal(grid.rasterise(tris), expected)
+    one = np.zeros(grid.shape, bool)
+    grid.rasterise(tris[50:51], one)  # into a given raster, one triangle
+    np.testing.assert_array_equal(one, _centres_in_triangle(grid, tris[50]))
