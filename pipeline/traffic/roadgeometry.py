@@ -297,6 +297,11 @@ def load_road_geometry(roads_dir: Path) -> RoadGeometry:
         raise FileNotFoundError(f"{roads_dir}: road geometry incomplete, missing {', '.join(missing)}")
     tables = [pq.read_table(roads_dir / f"{n}.parquet").to_pandas() for n in ("lanes", "junctions", "traffic_lights")]
     for frame in tables:
+        # Python strings, not pandas' Arrow-backed ones: the world build selects and reads these tables lane by lane,
+        # and Arrow strings made that ~15% slower (urban world: 3.8-4.1 -> 3.2-3.4 s).
+        for col in frame.columns:
+            if pd.api.types.is_string_dtype(frame[col].dtype) and frame[col].dtype != object:
+                frame[col] = frame[col].astype(object)
         for col in ("shape_x", "shape_y", "shape_z"):
             if col in frame:
                 frame[col] = [np.asarray(v, dtype=np.float64) for v in frame[col]]
