@@ -47,6 +47,8 @@ def software_versions() -> dict[str, str | None]:
         "open3d": _version("open3d-cpu") or _version("open3d"),
         "numpy": _version("numpy"),
         "pyarrow": _version("pyarrow"),
+        "opencv": _version("opencv-python-headless") or _version("opencv-python"),  # post effects, image noise
+        "isal": _version("isal"),  # the bytes of the records' PNG files (pipeline.core.png)
     }
 
 
