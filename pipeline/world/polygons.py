@@ -72,20 +72,30 @@ def triangulate_ring(ring: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=np.int32)
 
 
+_LEFT_TURN = np.array([-1.0, 1.0])  # (x, y) reversed and scaled by this: (-y, x), the left normal
+
+
 def polyline_normals(points: np.ndarray, max_miter: float = 3.0) -> np.ndarray:
     """Left unit normals scaled for a mitred offset at each vertex of a polyline (n, >=2) -> (n, 2).
 
     Offsetting a vertex by ``d * normal`` keeps every segment's offset line at distance ``d``; the miter
     scale is clamped to ``max_miter`` at sharp turns.
     """
-    xy = points[:, :2]
-    seg = np.diff(xy, axis=0)
-    seg = seg / np.maximum(np.linalg.norm(seg, axis=1, keepdims=True), _EPS)
-    seg_n = np.stack([-seg[:, 1], seg[:, 0]], axis=1)
-    vert = np.concatenate([seg_n[:1], seg_n[:-1] + seg_n[1:], seg_n[-1:]])
-    vert /= np.maximum(np.linalg.norm(vert, axis=1, keepdims=True), _EPS)
-    cos_half = np.concatenate([[1.0], np.einsum("ij,ij->i", vert[1:-1], seg_n[1:]), [1.0]])
-    return vert / np.clip(cos_half, 1.0 / max_miter, None)[:, None]
+    # Called thousands of times per world on short lines: few numpy calls (the norms as numpy.linalg.norm computes
+    # them, without its overhead).
+    xy = np.asarray(points, dtype=np.float64)[:, :2]
+    if len(xy) < 2:
+        raise ValueError(f"a polyline needs at least 2 points, got {len(xy)}")
+    seg = xy[1:] - xy[:-1]
+    seg /= np.maximum(np.sqrt(np.add.reduce(seg * seg, axis=1, keepdims=True)), _EPS)
+    seg_n = seg[:, ::-1] * _LEFT_TURN
+    vert = np.empty((len(xy), 2))
+    vert[0], vert[-1] = seg_n[0], seg_n[-1]
+    np.add(seg_n[:-1], seg_n[1:], out=vert[1:-1])
+    vert /= np.maximum(np.sqrt(np.add.reduce(vert * vert, axis=1, keepdims=True)), _EPS)
+    cos_half = np.ones((len(xy), 1))
+    cos_half[1:-1, 0] = np.einsum("ij,ij->i", vert[1:-1], seg_n[1:])
+    return vert / np.clip(cos_half, 1.0 / max_miter, None)
 
 
 def offset_polyline(points: np.ndarray, offset_m: float | np.ndarray) -> np.ndarray:
