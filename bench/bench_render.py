@@ -162,6 +162,31 @@ def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames:
     return sorted(parts.items(), key=lambda kv: -kv[1])
 
 
+STARTUP_SCRIPT = """
+import sys, time
+from pathlib import Path
+start = time.process_time()
+from pipeline.stages.render import WORKER_MODULES
+for name in WORKER_MODULES:
+    __import__(name)
+imported = time.process_time()
+from pipeline.world.static import build_static_world
+build_static_world(Path(sys.argv[1]) / "roads", seed=1)
+print(imported - start, time.process_time() - imported)
+"""
+
+
+def startup_seconds(sim: Path) -> tuple[float, float]:
+    """CPU seconds a render pays before its frames, measured in a fresh process: a worker's imports (the
+    forkserver's, once per render) and the static world build (the main process's, its first in the process)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", STARTUP_SCRIPT, str(sim)], check=True, capture_output=True, text=True)
+    imports_s, world_s = (float(v) for v in out.stdout.split())
+    return imports_s, world_s
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=100)
@@ -190,6 +215,7 @@ def main() -> None:
         frames = select_frames(pd.read_parquet(sim / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
                                args.frames)
         bare_s, bare_cpu_s = bare_seconds(sim, frames, rig, condition)
+        imports_s, world_s = startup_seconds(sim) if args.breakdown > 0 else (0.0, 0.0)
         # Consecutive frames from the middle of the run, as a worker renders them (its caches warm, e.g. the sun map's
         # tiles).
         middle = max(0, (len(frames) - args.breakdown) // 2)
@@ -224,6 +250,12 @@ def main() -> None:
         print(f"{'total':<{width}} | {1000 * total / count:8.1f} |\n"
               f"frames/s on {cores} cores at this total: {cores * count / total:.1f}; "
               f"with everything but the Embree casts free: {cores * count / embree:.1f}")
+        # Once per render, on top of the frames: the worker's imports run on one core while the main process builds
+        # the static world on the other, then both render.
+        per_frame = total / count
+        print(f"start-up, once per render (fresh process, CPU): worker imports {imports_s:.2f} s, static world "
+              f"build {world_s:.2f} s; {n} frames at the total above plus start-up on {cores} cores: "
+              f"{cores * n / (n * per_frame + imports_s + world_s):.1f} frames/s")
 
 
 if __name__ == "__main__":
