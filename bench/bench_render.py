@@ -170,8 +170,9 @@ from pipeline.stages.render import WORKER_MODULES
 for name in WORKER_MODULES:
     __import__(name)
 imported = time.process_time()
+from pipeline.stages.render import _check_sim
 from pipeline.world.static import build_static_world
-build_static_world(Path(sys.argv[1]) / "roads", seed=1)
+build_static_world(Path(sys.argv[1]) / "roads", seed=int(_check_sim(Path(sys.argv[1]))["seed"]))
 print(imported - start, time.process_time() - imported)
 """
 

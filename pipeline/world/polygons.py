@@ -98,10 +98,12 @@ def polyline_normals(points: np.ndarray, max_miter: float = 3.0) -> np.ndarray:
     return vert / np.clip(cos_half, 1.0 / max_miter, None)
 
 
-def offset_polyline(points: np.ndarray, offset_m: float | np.ndarray) -> np.ndarray:
-    """Polyline (n, 3) shifted sideways by ``offset_m`` (positive = left of travel); z unchanged."""
+def offset_polyline(points: np.ndarray, offset_m: float | np.ndarray, normals: np.ndarray | None = None
+                    ) -> np.ndarray:
+    """Polyline (n, 3) shifted sideways by ``offset_m`` (positive = left of travel); z unchanged. ``normals``:
+    :func:`polyline_normals` of ``points`` when the caller already has them (several offsets of one line)."""
     out = np.array(points, dtype=np.float64)
-    out[:, :2] += polyline_normals(points) * np.reshape(offset_m, (-1, 1))
+    out[:, :2] += (polyline_normals(points) if normals is None else normals) * np.reshape(offset_m, (-1, 1))
     return out
 
 

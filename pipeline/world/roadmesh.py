@@ -57,12 +57,9 @@ def highway_edges(lanes: pd.DataFrame) -> set[str]:
 
 
 def _strip(points: np.ndarray, half_left: float, half_right: float, dz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Surface between offsets +half_left and -half_right of a centre line, raised by dz (as
-    :func:`offset_polyline` offsets each side, from normals computed once)."""
-    normals = polyline_normals(points)
-    left, right = np.array(points, dtype=np.float64), np.array(points, dtype=np.float64)
-    left[:, :2] += normals * np.float64(half_left)
-    right[:, :2] += normals * -np.float64(half_right)
+    """Surface between offsets +half_left and -half_right of a centre line, raised by dz."""
+    normals = polyline_normals(points)  # one set for both sides
+    left, right = offset_polyline(points, half_left, normals), offset_polyline(points, -half_right, normals)
     left[:, 2] += dz
     right[:, 2] += dz
     return ribbon(left, right)
