@@ -39,7 +39,7 @@ from pipeline.world.static import build_static_world
 
 def cpu_seconds() -> float:
     """CPU seconds of this process and its descendants so far, finished ones included (those reaped by a live
-    process count in its children's times: the pool's workers in the forkserver's)."""
+    process count in its children's times: a pool's workers forked from a forkserver in the server's)."""
     import psutil
 
     me = psutil.Process()
@@ -178,8 +178,9 @@ print(imported - start, time.process_time() - imported)
 
 
 def startup_seconds(sim: Path) -> tuple[float, float]:
-    """CPU seconds a render pays before its frames, measured in a fresh process: a worker's imports (the
-    forkserver's, once per render) and the static world build (the main process's, its first in the process)."""
+    """CPU seconds a render pays before its frames, measured in a fresh process: the renderer's imports (a
+    `roadsynth render` process's, before the stage starts; its workers fork from it) and the static world build
+    (the main process's, before the workers start)."""
     import subprocess
     import sys
 
@@ -251,12 +252,13 @@ def main() -> None:
         print(f"{'total':<{width}} | {1000 * total / count:8.1f} |\n"
               f"frames/s on {cores} cores at this total: {cores * count / total:.1f}; "
               f"with everything but the Embree casts free: {cores * count / embree:.1f}")
-        # Once per render, on top of the frames: the worker's imports run on one core while the main process builds
-        # the static world on the other, then both render.
-        per_frame = total / count
-        print(f"start-up, once per render (fresh process, CPU): worker imports {imports_s:.2f} s, static world "
-              f"build {world_s:.2f} s; {n} frames at the total above plus start-up on {cores} cores: "
-              f"{cores * n / (n * per_frame + imports_s + world_s):.1f} frames/s")
+        # Once per render, before the frames: the process imports the renderer, builds the static world, then forks
+        # the workers.
+        frames_s = n * total / count / cores
+        print(f"start-up, once per render (fresh process, CPU): imports {imports_s:.2f} s, static world build "
+              f"{world_s:.2f} s; {n} frames at the total above on {cores} cores after the world build: "
+              f"{n / (world_s + frames_s):.1f} frames/s, and after the imports too: "
+              f"{n / (imports_s + world_s + frames_s):.1f} frames/s")
 
 
 if __name__ == "__main__":

@@ -14,12 +14,15 @@ import argparse
 import collections
 import concurrent.futures as cf
 import hashlib
+import importlib
 import json
 import logging
 import multiprocessing
 import os
 import pickle
 import shutil
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +36,7 @@ from pipeline.core.tables import read_parquet, write_parquet
 from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
 from pipeline.stages.render_frames import ShardJob, render_shard
 from pipeline.stages.rig import build_sensors, camera_info, lidar_info
+from pipeline.world.scene import embree_started
 
 log = logging.getLogger(__name__)
 
@@ -148,14 +152,14 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=1 if workers > 1 else 0)
             for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
-    context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # starts now: overlaps the world build
+    context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # a forkserver starts now (see there)
     _static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
     if resumed:
         log.info("resuming: %d of %d shards already rendered", resumed, len(shards))
-    with tqdm(total=len(selection), unit="frame", desc=f"render {condition.name}", disable=not progress) as bar:
-        bar.update(len(selection) - sum(len(j.frames) for j in jobs))
-        _run(jobs, workers, bar, context)
+    initial = len(selection) - sum(len(j.frames) for j in jobs)
+    _run(jobs, workers, context, lambda: tqdm(total=len(selection), initial=initial, unit="frame",
+                                              desc=f"render {condition.name}", disable=not progress))
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed
     return summary
@@ -164,12 +168,19 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
 def _pool_context() -> multiprocessing.context.BaseContext:
     """The process pool's start method.
 
-    Never plain fork: Embree's thread pool does not survive a fork of a process that has cast rays. Where the
-    platform has it, workers fork from a server process that has imported the renderer once and never casts
-    (forkserver; started here, so that its imports run while this process builds the static world): that saves
-    each worker the ~3 s of CPU of importing open3d, pandas and the pipeline. Elsewhere workers spawn.
+    A worker needs the renderer's modules imported: ~2 s of CPU (open3d, pandas, pyarrow, the pipeline). Plain
+    fork gives it this process's for nothing, but Embree's worker threads do not survive a fork of a process that
+    has started them. So on Linux workers fork from this process while it has made no Embree scene yet (the case
+    of a `roadsynth render` process; :func:`_run` forks them before this process renders). Otherwise they fork
+    from a server process that imports the renderer once and never casts (forkserver; started here, so that its
+    imports run while this process builds the static world), or, where the platform has neither, spawn.
     """
-    if "forkserver" not in multiprocessing.get_all_start_methods():
+    methods = multiprocessing.get_all_start_methods()
+    if sys.platform.startswith("linux") and "fork" in methods and not embree_started():
+        for module in WORKER_MODULES:  # imported once here, for this process's own shards and every child
+            importlib.import_module(module)
+        return multiprocessing.get_context("fork")
+    if "forkserver" not in methods:
         return multiprocessing.get_context("spawn")
     from multiprocessing import forkserver
 
@@ -179,27 +190,37 @@ def _pool_context() -> multiprocessing.context.BaseContext:
     return context
 
 
-def _run(jobs: list[ShardJob], workers: int, bar: tqdm, context: multiprocessing.context.BaseContext | None) -> None:
-    """Render the shards: here, or with ``context`` in a pool of ``workers - 1`` processes plus this process, which
-    has everything imported and so renders while the pool starts up (in a thread; the main thread only hands out
-    shards). Each worker holds one shard at a time, so all finish within about one shard of each other."""
+def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.BaseContext | None,
+         progress: Callable[[], tqdm]) -> None:
+    """Render the shards, with a progress bar from ``progress``: here, or with ``context`` in a pool of
+    ``workers - 1`` processes plus this process, which has everything imported and so renders while the pool
+    starts up (in a thread; the main thread only hands out shards). Each worker holds one shard at a time, so all
+    finish within about one shard of each other.
+
+    The pool gets its first shards before this process starts any thread (the progress bar's monitor, its own
+    rendering): a fork context forks every child at the first submit, and a fork must not copy a process
+    mid-work in another thread.
+    """
     if context is None:
-        for job in jobs:
-            bar.update(render_shard(job))
+        with progress() as bar:
+            for job in jobs:
+                bar.update(render_shard(job))
         return
     queue = collections.deque(jobs)
     children = min(workers, len(jobs)) - 1
-    with cf.ThreadPoolExecutor(1) as here, cf.ProcessPoolExecutor(children, mp_context=context) as pool:
-        idle: list[cf.Executor] = [pool] * children + [here]
-        busy: dict[cf.Future, cf.Executor] = {}
-        while queue or busy:
-            while queue and idle:
-                executor = idle.pop()
-                busy[executor.submit(render_shard, queue.popleft())] = executor
-            done, _ = cf.wait(busy, return_when=cf.FIRST_COMPLETED)
-            for future in done:
-                idle.append(busy.pop(future))
-                bar.update(future.result())
+    with cf.ProcessPoolExecutor(children, mp_context=context) as pool:
+        busy: dict[cf.Future, cf.Executor] = {pool.submit(render_shard, queue.popleft()): pool
+                                              for _ in range(children)}
+        with progress() as bar, cf.ThreadPoolExecutor(1) as here:
+            idle: list[cf.Executor] = [here]
+            while queue or busy:
+                while queue and idle:
+                    executor = idle.pop()
+                    busy[executor.submit(render_shard, queue.popleft())] = executor
+                done, _ = cf.wait(busy, return_when=cf.FIRST_COMPLETED)
+                for future in done:
+                    idle.append(busy.pop(future))
+                    bar.update(future.result())
 
 
 def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConfig, condition: ConditionConfig,

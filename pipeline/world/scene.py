@@ -87,7 +87,18 @@ def _rays(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
     return rays
 
 
+_embree_started = False  # see embree_started
+
+
+def embree_started() -> bool:
+    """Whether this process has made an Embree scene (and so may run Embree's worker threads, which a fork of the
+    process would lose: a child must then not cast)."""
+    return _embree_started
+
+
 def _embree(vertices: np.ndarray, triangles: np.ndarray) -> o3d.t.geometry.RaycastingScene:
+    global _embree_started
+    _embree_started = True
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor.from_numpy(np.ascontiguousarray(vertices, dtype=np.float32)),

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -11,7 +13,7 @@ import pytest
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.core.record import DatasetRecord, RecordError
-from pipeline.stages.render import render
+from pipeline.stages.render import _pool_context, render
 from tests.conftest import tree_hashes
 from tests.stages.conftest import kill_render_after
 
@@ -99,9 +101,34 @@ def test_world_and_sensor_boxes_agree(record_dir):
 
 
 def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_dir, tmp_path):
+    # This process has cast rays (record_dir), so the workers fork from a server process, not from here.
+    assert _pool_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
     again = tmp_path / "again"
     render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
     assert tree_hashes(again, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
+
+
+_FRESH_RENDER = """
+import sys
+from pathlib import Path
+from pipeline.core.config import ConditionConfig, RigConfig, load_config
+from pipeline.stages.render import _pool_context, render
+method = _pool_context().get_start_method()
+if method != "fork":
+    sys.exit(f"a process that has not cast rays should fork its workers, not {method}")
+render(Path(sys.argv[1]), load_config(ConditionConfig, "noon", "conditions")[0],
+       load_config(RigConfig, "default", "rigs")[0], Path(sys.argv[2]), frames=int(sys.argv[3]), workers=2,
+       shard_size=2, progress=False)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers fork from the render process on Linux only")
+def test_workers_forked_from_a_fresh_render_process_give_the_same_bytes(dense_highway_run, record_dir, tmp_path):
+    out = tmp_path / "forked"
+    proc = subprocess.run([sys.executable, "-c", _FRESH_RENDER, str(dense_highway_run), str(out), str(FRAMES)],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert tree_hashes(out, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
 
 
 def test_an_interrupted_render_resumes_with_the_shards_done(dense_highway_run, rig, noon, record_dir, tmp_path,
