@@ -49,6 +49,7 @@ def software_versions() -> dict[str, str | None]:
         "pyarrow": _version("pyarrow"),
         "opencv": _version("opencv-python-headless") or _version("opencv-python"),  # post effects, image noise
         "isal": _version("isal"),  # the bytes of the records' PNG files (pipeline.core.png)
+        "numba": _version("numba"),  # compiles the render's per-pixel passes (pipeline.core.jit)
     }
 
 

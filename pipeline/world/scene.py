@@ -38,6 +38,7 @@ import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
+from pipeline.world.hit_attributes import resolve_hits
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.sunmap import SunMap, along_sun, sun_slope
@@ -120,6 +121,7 @@ def _build_bvh(scene: o3d.t.geometry.RaycastingScene, threads: int = 0) -> None:
 
 
 _MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
+_NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.uint32), np.zeros((0, 3), np.float32))  # a cast of no ray
 
 
 def _cast(
@@ -339,9 +341,9 @@ class FrameScene:
             self._actor_scene = _embree(self.geometry.vertices, self.geometry.triangles)
             _build_bvh(self._actor_scene, threads)  # here rather than in the first cast: one place to time it
         mats = material_arrays()
-        self._albedo = mats["albedo"]
-        self._albedo_or_zero = np.concatenate([self._albedo, np.zeros((1, 3), np.float32)])
+        self._albedo = np.ascontiguousarray(mats["albedo"], np.float32)
         self._paint = material_index("paint")
+        self._actor_color = np.ascontiguousarray(actors.color_rgb, np.float32)
         # Precompute the inverse placement of each actor: p_unit = A^-1 (p - centre).
         affine = unit_to_world(actors.boxes)
         self._inv_linear = np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3))
@@ -364,44 +366,21 @@ class FrameScene:
         :attr:`StaticScene.chunk_boxes`).
         """
         n = len(rays)
+        rays = np.ascontiguousarray(rays, np.float32)
         t, prim, normal = self.static.cast(rays, self.threads, static_rays)
-        hit = t < np.inf
-        instance_id = np.zeros(n, np.int32)
-        actor_index = np.zeros(n, np.int32)
-        actor_hit_idx = np.zeros(0, np.int64)
+        sub, t_actor, prim_actor, normal_actor = np.zeros(0, np.int64), *_NO_HITS
         if self._actor_scene is not None:
             sub = np.arange(n) if actor_rays is None else np.flatnonzero(actor_rays)
             if len(sub):
-                ta, pa, na = _cast(self._actor_scene, np.take(rays, sub, axis=0), self.threads)
-                closer = ta < t[sub]
-                actor_hit_idx = sub[closer]
-                t[actor_hit_idx] = ta[closer]
-                normal[actor_hit_idx] = na[closer]
-                actor = self.geometry.triangle_actor[pa[closer]]
-                actor_index[actor_hit_idx] = actor
-                instance_id[actor_hit_idx] = self.actors.track_id[actor]
-                actor_prim = pa[closer]
-        static_hit = hit.copy()
-        static_hit[actor_hit_idx] = False
-        hit[actor_hit_idx] = True
-        static_idx = np.flatnonzero(static_hit)
-        static_prim = prim[static_idx]
-
-        semantic = np.zeros(n, np.uint8)
-        material = np.zeros(n, np.int32)
-        semantic[static_idx] = self.static.triangle_semantic[static_prim]
-        material[static_idx] = self.static.triangle_material[static_prim]
-        if len(actor_hit_idx):
-            semantic[actor_hit_idx] = self.geometry.triangle_semantic[actor_prim]
-            material[actor_hit_idx] = self.geometry.triangle_material[actor_prim]
-        # Albedo by material; the extra last table row (zeros) serves the misses.
-        color = np.take(self._albedo_or_zero, np.where(hit, material, len(self._albedo)), axis=0)
-        if len(actor_hit_idx):
-            painted = actor_hit_idx[material[actor_hit_idx] == self._paint]
-            color[painted] = np.take(self.actors.color_rgb, actor_index[painted], axis=0)
-        # Embree's normals follow the winding (0 on a miss); turn them towards the ray's origin.
-        facing_away = np.flatnonzero(rowdot(normal, rays[:, 3:]) > 0)
-        normal[facing_away] = -normal[facing_away]
+                t_actor, prim_actor, normal_actor = _cast(self._actor_scene, np.take(rays, sub, axis=0), self.threads)
+        hit, instance_id, actor_index = np.zeros(n, bool), np.zeros(n, np.int32), np.zeros(n, np.int32)
+        semantic, material, color = np.zeros(n, np.uint8), np.zeros(n, np.int32), np.zeros((n, 3), np.float32)
+        geometry, ints = self.geometry, (lambda a: np.ascontiguousarray(a, np.int32))
+        resolve_hits(rays, t, prim, normal, self.static.triangle_semantic, self.static.triangle_material,
+                     self._albedo, sub, t_actor, prim_actor, normal_actor, ints(geometry.triangle_actor),
+                     np.ascontiguousarray(geometry.triangle_semantic, np.uint8), ints(geometry.triangle_material),
+                     ints(self.actors.track_id), self._actor_color, self._paint,
+                     hit, instance_id, actor_index, semantic, material, color)
         return Hits(t, hit, instance_id, actor_index, semantic, material, normal, color)
 
     def cast_alone(

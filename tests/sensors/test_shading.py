@@ -19,6 +19,19 @@ def test_tone_map_is_srgb_per_channel():
     assert to_srgb8(np.array([[-1.0, 10.0, 0.0031308]], np.float32)).tolist() == [[0, 255, 10]]
 
 
+def test_tone_map_follows_the_srgb_curve_with_its_shoulder_everywhere():
+    x = np.concatenate([np.linspace(0.0, 4.5, 20001), [np.nan, np.inf, -np.inf]]).astype(np.float32)
+    soft = np.where(x > 0.8, 0.8 + 0.2 * np.tanh((np.minimum(x, 4.0) - 0.8) / 0.2), x)
+    srgb = np.where(soft <= 0.0031308, 12.92 * soft, 1.055 * np.power(np.maximum(soft, 0.0031308), 1 / 2.4) - 0.055)
+    expected = np.nan_to_num(np.clip(255.0 * srgb, 0.0, 255.0), nan=0.0, neginf=0.0)
+    got = to_srgb8(np.repeat(x[:, None], 3, axis=1))
+    assert np.all(got == got[:, :1])  # channel by channel, the same curve
+    # The table's steps are 4 / 65535 wide: at most one 8-bit level from the exact curve, and monotone.
+    assert np.max(np.abs(got[:, 0].astype(float) - expected)) <= 1.0
+    assert np.all(np.diff(got[:20001, 0].astype(int)) >= 0)
+    assert got[-3:, 0].tolist() == [0, 255, 0]  # NaN, +inf, -inf
+
+
 def test_sun_shadow_and_sky(box_meshes, actors_factory, wall):
     # Wall x = 10 facing the origin; the sun 10 deg high behind the camera (towards -x) lights it with
     # n.l = cos 10 deg. A thin box at x = 7, y in [2, 4], z in [-1, 1] shades the wall around (10, 3, 0).

@@ -1,0 +1,30 @@
+"""Compiled loops (numba) for the render's per-pixel passes that numpy can only do as many passes.
+
+numpy runs one operation over a whole array at a time: a pass that reads a hit's material, picks its colour and
+turns its normal needs a dozen temporaries of the image's size, and at 800x600 rays those temporaries, not the
+arithmetic, are most of the time. A kernel here does such a pass in one loop over the rays.
+
+Conventions:
+
+- A kernel is compiled for the explicit signatures it declares, when its module is imported: a process pool's
+  workers, forked after the import, never compile. Numba caches the machine code on disk (beside the module, or
+  under ``NUMBA_CACHE_DIR``), so only the first import after an install or an edit compiles (about a second per
+  kernel); later imports load it.
+- No fast-math: IEEE arithmetic in the order written, float32 where the numpy code it replaces was float32
+  (numba makes a Python float literal float64: write ``np.float32(0.5)``). A kernel gives the bytes of the numpy
+  code it replaced, and the same bytes on any x86-64 processor.
+- Each kernel is a plain function of arrays, documented like any other, and tested against numpy written
+  independently in the tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numba
+
+
+def kernel(*signatures: str) -> Callable[[Callable], Callable]:
+    """Decorator: compile a function of arrays now, for ``signatures`` (numba's strings, e.g.
+    ``"uint8[::1](float32[::1])"``), without the GIL, cached on disk."""
+    return numba.njit(list(signatures), cache=True, nogil=True, error_model="numpy", boundscheck=False)

@@ -1,0 +1,68 @@
+"""What a ray hit, from the raw casts against the static world and the actors: one compiled pass over the rays.
+
+:meth:`pipeline.world.scene.FrameScene.cast_rays` casts every ray against the static world and some against the
+frame's actors; :func:`resolve_hits` keeps the nearer hit of each ray and reads the hit triangle's semantic class,
+material and albedo (an actor's paint: its own colour), and turns the normal towards the ray's origin. In numpy
+this took a dozen image-sized temporaries (~6 ms per 480k camera rays); compiled (:mod:`pipeline.core.jit`), one
+pass over the rays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.core.jit import kernel
+
+
+@kernel("void(float32[:, ::1], float32[::1], uint32[::1], float32[:, ::1], uint8[::1], int32[::1], float32[:, ::1], "
+        "int64[::1], float32[::1], uint32[::1], float32[:, ::1], int32[::1], uint8[::1], int32[::1], int32[::1], "
+        "float32[:, ::1], int64, "
+        "bool_[::1], int32[::1], int32[::1], uint8[::1], int32[::1], float32[:, ::1])")
+def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo,
+                 sub, t_actor, prim_actor, normal_actor, triangle_actor, actor_semantic, actor_material, track_id,
+                 actor_color, paint,
+                 hit, instance_id, actor_index, semantic, material, color):
+    """Merge the casts of N rays and fill their attributes, in place.
+
+    Args:
+        rays: (N, 6) float32 [origin | unit direction].
+        t, prim, normal: the static cast, (N,) float32 (inf = miss), (N,) uint32 triangle, (N, 3) float32 normal
+            (Embree's winding; 0 on a miss). On return: the nearer of the two casts, normals facing the origin.
+        static_semantic, static_material: (T,) uint8 and int32, per static triangle.
+        albedo: (M, 3) float32 linear albedo per material.
+        sub: (K,) int64 the rays cast against the actors, and t_actor, prim_actor, normal_actor their cast as above.
+        triangle_actor, actor_semantic, actor_material: (U,) int32, uint8, int32, per actor triangle: the actor
+            (position in the frame's actors), its class and material.
+        track_id: (A,) int32 per actor; actor_color: (A, 3) float32 linear colour, which replaces the albedo of
+            material ``paint``.
+        hit, instance_id, actor_index, semantic, material, color: outputs, (N,) bool, int32, int32, uint8, int32
+            and (N, 3) float32 arrays of zeros (False): written where a ray hit (instance id and actor index where
+            it hit an actor), left as they are elsewhere.
+    """
+    for i in range(t.size):
+        if t[i] < np.inf:
+            hit[i] = True
+            m = static_material[prim[i]]
+            semantic[i] = static_semantic[prim[i]]
+            material[i] = m
+            for k in range(3):
+                color[i, k] = albedo[m, k]
+    for j in range(sub.size):
+        i = sub[j]
+        if t_actor[j] < t[i]:
+            p = prim_actor[j]
+            a = triangle_actor[p]
+            m = actor_material[p]
+            t[i] = t_actor[j]
+            hit[i] = True
+            instance_id[i] = track_id[a]
+            actor_index[i] = a
+            semantic[i] = actor_semantic[p]
+            material[i] = m
+            for k in range(3):
+                normal[i, k] = normal_actor[j, k]
+                color[i, k] = actor_color[a, k] if m == paint else albedo[m, k]
+    for i in range(t.size):
+        if normal[i, 0] * rays[i, 3] + normal[i, 1] * rays[i, 4] + normal[i, 2] * rays[i, 5] > 0:
+            for k in range(3):
+                normal[i, k] = -normal[i, k]
