@@ -13,6 +13,8 @@ Conventions:
 - No fast-math: IEEE arithmetic in the order written, float32 where the numpy code it replaces was float32
   (numba makes a Python float literal float64: write ``np.float32(0.5)``). A kernel gives the bytes of the numpy
   code it replaced, and the same bytes on any x86-64 processor.
+- The signatures take C-contiguous, writeable arrays: pass inputs through :func:`as_input` (a read-only array,
+  e.g. one that Arrow owns, is a type of its own to numba). Outputs are allocated by the caller or the kernel.
 - Each kernel is a plain function of arrays, documented like any other, and tested against numpy written
   independently in the tests.
 """
@@ -22,9 +24,16 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numba
+import numpy as np
 
 
 def kernel(*signatures: str) -> Callable[[Callable], Callable]:
     """Decorator: compile a function of arrays now, for ``signatures`` (numba's strings, e.g.
     ``"uint8[::1](float32[::1])"``), without the GIL, cached on disk."""
     return numba.njit(list(signatures), cache=True, nogil=True, error_model="numpy", boundscheck=False)
+
+
+def as_input(a: np.ndarray, dtype: np.dtype | type) -> np.ndarray:
+    """``a`` as a C-contiguous, writeable array of ``dtype``, copied only where it is not one already (a kernel's
+    input: the kernels never write their inputs)."""
+    return np.require(a, dtype, ("C", "W"))

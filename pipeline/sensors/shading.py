@@ -15,13 +15,13 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from pipeline.core.jit import kernel
+from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.lights import SpotLights, light_radiance
+from pipeline.sensors.sunlight import sky_and_sun, sun_rays
 from pipeline.world.materials import material_arrays, material_index
-from pipeline.world.scene import FrameScene, Hits, rowdot, take_columns
+from pipeline.world.scene import FrameScene, Hits, rowdot
 
 BRAKE_LIGHT_RGB = np.array([2.0, 0.08, 0.05], np.float32)
 TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
@@ -97,41 +97,26 @@ def shade(
 
     radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
-    sky. Whole-array maths runs per channel on contiguous 1D arrays split and merged by OpenCV: numpy
-    broadcasting and fancy indexing over strided (N, 3) views are several times slower.
+    sky. The sun's and the sky's terms are compiled passes over the rays (:mod:`pipeline.sensors.sunlight`); the
+    few glowing hits, the spot lights and the wet sheen add theirs with numpy.
     """
     mats = _materials()
     wet = None
     if lighting.wetness > 0:
         wet, hits, mats = _wet(hits, mats, lighting.wetness)
     sun = lighting.sun_direction
-    sun_rgb = np.asarray(lighting.sun_rgb, np.float32)
-    ambient = np.asarray(lighting.ambient_rgb, np.float32)
     mat = hits.material
-    n_dot_l = cv2.transform(hits.normal.reshape(-1, 1, 3), sun.reshape(1, 3)).reshape(-1)
-    lit = np.flatnonzero(n_dot_l > 0.0)
-    # Columns of the sunlit hits, gathered once for the shadow rays and the highlights.
-    r, n = take_columns(rays, lit), take_columns(hits.normal, lit)
+    rays = as_input(rays, np.float32)
+    normal, t_m = as_input(hits.normal, np.float32), as_input(hits.t_m, np.float32)
+    n_dot_l, lit, shadow = sun_rays(rays, normal, t_m, sun)
     unshadowed = np.ones(len(lit), bool)
     if lighting.shadows and lighting.sun_elevation_deg > 0 and len(lit):
-        unshadowed = ~_sun_blocked(scene, r, n, hits.t_m[lit], sun)
-        n_dot_l[lit[~unshadowed]] = 0.0
-    direct = np.maximum(n_dot_l, 0.0)
-    spec = np.zeros(len(rays), np.float32)
-    shiny = unshadowed & (mats["specular"][mat[lit]] > 0)
-    if shiny.any():
-        half = [sun[k] - r[3 + k][shiny] for k in range(3)]
-        n = [c[shiny] for c in n]
-        n_dot_h = (n[0] * half[0] + n[1] * half[1] + n[2] * half[2]) / (
-            np.sqrt(half[0] * half[0] + half[1] * half[1] + half[2] * half[2]) + 1e-12)
-        m = mat[lit[shiny]]
-        spec[lit[shiny]] = mats["specular"][m] * np.clip(n_dot_h, 0.0, 1.0) ** mats["shininess"][m]
-    albedo = cv2.split(hits.color.reshape(-1, 1, 3))
-    channels = [albedo[k].reshape(-1) * (ambient[k] + sun_rgb[k] * direct) + sun_rgb[k] * spec for k in range(3)]
-    miss = np.flatnonzero(~hits.hit)  # albedo, direct light and highlights are 0 there: the sky replaces them
-    for channel, sky_k in zip(channels, _sky_channels(rays[miss, 5], lighting), strict=True):
-        channel[miss] = sky_k  # 1D: fancy indexing of (N, 3) rows is ~10x slower
-    out = cv2.merge(channels).reshape(-1, 3)
+        unshadowed = ~_sun_blocked(scene, shadow, t_m[lit], sun)
+    rgb = [np.asarray(c, np.float32) for c in (lighting.sun_rgb, lighting.ambient_rgb, lighting.sky_zenith_rgb,
+                                                lighting.sky_horizon_rgb)]
+    out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
+                      as_input(hits.color, np.float32), n_dot_l, lit, unshadowed, mats["specular"],
+                      mats["shininess"], sun, *rgb)
     glowing = np.flatnonzero(mats["glows"][mat] & hits.hit)
     out[glowing] += np.take(mats["emissive"], mat[glowing], axis=0)
     on_actor = hits.instance_id[glowing] > 0
@@ -151,20 +136,15 @@ def shade(
     return out
 
 
-def _sun_blocked(scene: FrameScene, r: list[np.ndarray], n: list[np.ndarray], t_m: np.ndarray,
-                 sun: np.ndarray) -> np.ndarray:
-    """(M,) bool: shadow rays from M hits towards the sun are blocked. ``r``: the rays' 6 columns, ``n``: the hit
-    normals' 3 columns, ``t_m``: the hit distances (all (M,) float32)."""
-    lift = 1e-3 + 1e-4 * t_m  # off the surface, against self-intersection
-    ones = np.ones_like(t_m)
-    origin = [r[k] + r[3 + k] * t_m + n[k] * lift for k in range(3)]
-    shadow = cv2.merge(origin + [ones * sun[k] for k in range(3)])
+def _sun_blocked(scene: FrameScene, shadow: np.ndarray, t_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
+    """(M,) bool: the (M, 6) float32 ``shadow`` rays towards the sun (from :func:`sunlight.sun_rays`) from hits
+    at distances ``t_m`` ((M,) float32) are blocked."""
+    origin = [np.ascontiguousarray(shadow[:, k]) for k in range(3)]
     # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
     static_rays = np.ones(len(t_m), bool)
     near = np.flatnonzero(t_m < SUN_MAP_RANGE_M)
     static_rays[near] = scene.static.sun_candidates(*(np.take(c, near) for c in origin), sun)
-    return scene.occluded_rays(shadow.reshape(-1, 6), actor_rays=scene.sun_actor_candidates(*origin, sun),
-                               static_rays=static_rays)
+    return scene.occluded_rays(shadow, actor_rays=scene.sun_actor_candidates(*origin, sun), static_rays=static_rays)
 
 
 def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:
@@ -211,7 +191,7 @@ _LUT_SCALE = (len(_LUT) - 1) / 4.0
 def to_srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear RGB (any shape (..., 3)) to 8-bit sRGB with a soft shoulder above 0.8 (values above 4 clip, NaN
     is 0), through a 65536-entry lookup table (finer than one 8-bit step everywhere)."""
-    x = np.ascontiguousarray(linear, np.float32)
+    x = as_input(linear, np.float32)
     return _lookup(x.reshape(-1), _LUT, np.float32(_LUT_SCALE)).reshape(x.shape)
 
 

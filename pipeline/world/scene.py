@@ -37,6 +37,7 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
+from pipeline.core.jit import as_input
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits
 from pipeline.world.materials import material_arrays, material_index
@@ -341,9 +342,9 @@ class FrameScene:
             self._actor_scene = _embree(self.geometry.vertices, self.geometry.triangles)
             _build_bvh(self._actor_scene, threads)  # here rather than in the first cast: one place to time it
         mats = material_arrays()
-        self._albedo = np.ascontiguousarray(mats["albedo"], np.float32)
+        self._albedo = as_input(mats["albedo"], np.float32)
         self._paint = material_index("paint")
-        self._actor_color = np.ascontiguousarray(actors.color_rgb, np.float32)
+        self._actor_color = as_input(actors.color_rgb, np.float32)
         # Precompute the inverse placement of each actor: p_unit = A^-1 (p - centre).
         affine = unit_to_world(actors.boxes)
         self._inv_linear = np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3))
@@ -366,7 +367,7 @@ class FrameScene:
         :attr:`StaticScene.chunk_boxes`).
         """
         n = len(rays)
-        rays = np.ascontiguousarray(rays, np.float32)
+        rays = as_input(rays, np.float32)
         t, prim, normal = self.static.cast(rays, self.threads, static_rays)
         sub, t_actor, prim_actor, normal_actor = np.zeros(0, np.int64), *_NO_HITS
         if self._actor_scene is not None:
@@ -375,11 +376,12 @@ class FrameScene:
                 t_actor, prim_actor, normal_actor = _cast(self._actor_scene, np.take(rays, sub, axis=0), self.threads)
         hit, instance_id, actor_index = np.zeros(n, bool), np.zeros(n, np.int32), np.zeros(n, np.int32)
         semantic, material, color = np.zeros(n, np.uint8), np.zeros(n, np.int32), np.zeros((n, 3), np.float32)
-        geometry, ints = self.geometry, (lambda a: np.ascontiguousarray(a, np.int32))
-        resolve_hits(rays, t, prim, normal, self.static.triangle_semantic, self.static.triangle_material,
-                     self._albedo, sub, t_actor, prim_actor, normal_actor, ints(geometry.triangle_actor),
-                     np.ascontiguousarray(geometry.triangle_semantic, np.uint8), ints(geometry.triangle_material),
-                     ints(self.actors.track_id), self._actor_color, self._paint,
+        geometry, static = self.geometry, self.static
+        resolve_hits(rays, t, prim, normal, as_input(static.triangle_semantic, np.uint8),
+                     as_input(static.triangle_material, np.int32), self._albedo, sub, t_actor, prim_actor,
+                     normal_actor, as_input(geometry.triangle_actor, np.int32),
+                     as_input(geometry.triangle_semantic, np.uint8), as_input(geometry.triangle_material, np.int32),
+                     as_input(self.actors.track_id, np.int32), self._actor_color, self._paint,
                      hit, instance_id, actor_index, semantic, material, color)
         return Hits(t, hit, instance_id, actor_index, semantic, material, normal, color)
 

@@ -1,0 +1,66 @@
+"""The compiled sun and sky passes in closed form: which hits face the sun, where their shadow rays start, and the
+radiance of lit, shadowed, glossy and missed rays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+
+SUN = np.array([0.0, 0.6, 0.8], np.float32)
+SUN_RGB, AMBIENT = np.array([2.0, 1.5, 1.0], np.float32), np.array([0.5, 0.25, 0.125], np.float32)
+ZENITH, HORIZON = np.array([0.1, 0.2, 0.6], np.float32), np.array([0.7, 0.8, 0.9], np.float32)
+
+
+def _rays(directions):
+    d = np.asarray(directions, np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.concatenate([np.tile(np.float32([1.0, 2.0, 3.0]), (len(d), 1)), d], axis=1)
+
+
+def test_hits_facing_the_sun_get_shadow_rays_from_just_above_the_hit():
+    rays = _rays([[1, 0, -1], [1, 0, -1], [0, 1, 0], [0, 0, 1]])
+    normal = np.float32([[0, 0, 1], [0, 0, -1], [0, -1, 0], [0, 0, 0]])  # up; down; towards y-; a miss
+    t = np.float32([10.0, 10.0, 20.0, np.inf])
+    n_dot_l, lit, shadow = sun_rays(rays, normal, t, SUN)
+    np.testing.assert_allclose(n_dot_l, [0.8, -0.8, -0.6, 0.0], atol=1e-7)
+    assert lit.tolist() == [0]
+    hit_point = rays[0, :3] + 10.0 * rays[0, 3:]
+    np.testing.assert_allclose(shadow[0, :3], hit_point + (1e-3 + 1e-4 * 10.0) * normal[0], atol=1e-6)
+    np.testing.assert_array_equal(shadow[0, 3:], SUN)
+
+
+def _shade(rays, hit, normal, material, color, unshadowed, specular, shininess):
+    n_dot_l, lit, _ = sun_rays(rays, normal, np.full(len(rays), 5.0, np.float32), SUN)
+    return sky_and_sun(rays, np.asarray(hit), normal, np.asarray(material, np.int32), np.asarray(color, np.float32),
+                       n_dot_l, lit, np.asarray(unshadowed)[: len(lit)], np.asarray(specular, np.float32),
+                       np.asarray(shininess, np.float32), SUN, SUN_RGB, AMBIENT, ZENITH, HORIZON)
+
+
+def test_lambert_shadow_highlight_and_sky():
+    # Ray 0 looks straight down at ground whose normal points at the sun: n.l = 1. Ray 1 the same, shadowed. Ray 2
+    # looks at flat ground (normal +z) along the sun's mirror image, so the half-vector is +z: n.h = 1, a full
+    # highlight, and n.l = 0.8. Rays 3 and 4 miss, looking straight up and along the horizon.
+    rays = _rays([[0, 0, -1], [0, 0, -1], [0, 0.6, -0.8], [0, 0, 1], [1, 0, 0]])
+    normal = np.float32([SUN, SUN, [0, 0, 1], [0, 0, 0], [0, 0, 0]])
+    color = np.float32([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.2, 0.2, 0.2], [0, 0, 0], [0, 0, 0]])
+    out = _shade(rays, [True, True, True, False, False], normal, [0, 0, 1, 0, 0], color,
+                 unshadowed=[True, False, True], specular=[0.0, 0.5], shininess=[1.0, 40.0])
+    np.testing.assert_allclose(out[0], 0.5 * (AMBIENT + SUN_RGB), rtol=1e-6)
+    np.testing.assert_allclose(out[1], 0.5 * AMBIENT, rtol=1e-6)
+    np.testing.assert_allclose(out[2], 0.2 * (AMBIENT + SUN_RGB * 0.8) + SUN_RGB * 0.5, rtol=1e-5)
+    np.testing.assert_allclose(out[3], ZENITH, rtol=1e-6)
+    np.testing.assert_allclose(out[4], HORIZON, rtol=1e-6)
+
+
+@pytest.mark.parametrize("shininess", [1.0, 10.0, 80.0])
+def test_highlight_falls_off_as_n_dot_h_to_the_shininess(shininess):
+    rays = _rays([[0, 0, -1]])
+    tilt = np.radians(20.0)  # the normal 20 deg off the half-vector of the sun and the straight-down view
+    half = (SUN + np.float32([0, 0, 1])) / np.linalg.norm(SUN + np.float32([0, 0, 1]))
+    axis = np.cross(half, [1.0, 0.0, 0.0])
+    axis /= np.linalg.norm(axis)
+    normal = (half * np.cos(tilt) + np.cross(axis, half) * np.sin(tilt)).astype(np.float32)[None]
+    out = _shade(rays, [True], normal, [1], [[0.0, 0.0, 0.0]], [True], [0.0, 0.5], [1.0, shininess])
+    np.testing.assert_allclose(out[0], SUN_RGB * 0.5 * np.cos(tilt) ** shininess, rtol=1e-4)
