@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
+from pipeline.core.jit import as_input, kernel
 
 MOTION_BLUR_SAMPLES = 16
 FLARE_SOURCES = 4
@@ -72,17 +73,24 @@ def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndar
 
 def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np.random.Generator) -> np.ndarray:
     """Shot + read noise and grain at exposure gain ``gain`` (see the module docstring)."""
-    variance = np.maximum(image, 0.0)  # in place from here: each full-image temporary costs a pass over memory
-    variance *= np.float32(gain * cfg.shot)
-    variance += np.float32((gain * cfg.read_std) ** 2)
+    image = as_input(image, np.float32)
     out = standard_normal(image.shape, rng)
-    out *= cv2.sqrt(variance)
-    out += image
+    _add_noise(image.reshape(-1), out.reshape(-1), np.float32(gain * cfg.shot), np.float32((gain * cfg.read_std) ** 2))
     if cfg.grain_std > 0:
         grain = cv2.GaussianBlur(standard_normal(image.shape[:2], rng), (0, 0), cfg.grain_size_px)
         grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
         out += per_channel(grain)
     return out
+
+
+@kernel("void(float32[::1], float32[::1], float32, float32)")
+def _add_noise(image, noise, shot_scale, read_variance):
+    """``noise = image + noise * sqrt(shot_scale * max(image, 0) + read_variance)`` in place: (N,) float32 image and
+    standard normal draws (one pass; in numpy, six over the image)."""
+    for i in range(image.size):
+        x = image[i]
+        variance = (x if x > 0 else np.float32(0)) * shot_scale + read_variance
+        noise[i] = noise[i] * np.sqrt(variance) + x
 
 
 def motion_flow(points_cam: np.ndarray, shift_cam: np.ndarray, fx: float, fy: float) -> np.ndarray:

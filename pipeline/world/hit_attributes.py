@@ -1,10 +1,10 @@
-"""What a ray hit, from the raw casts against the static world and the actors: one compiled pass over the rays.
+"""What a ray hit, from the raw casts against the static world and the actors: compiled passes over the rays.
 
 :meth:`pipeline.world.scene.FrameScene.cast_rays` casts every ray against the static world and some against the
 frame's actors; :func:`resolve_hits` keeps the nearer hit of each ray and reads the hit triangle's semantic class,
 material and albedo (an actor's paint: its own colour), and turns the normal towards the ray's origin. In numpy
 this took a dozen image-sized temporaries (~6 ms per 480k camera rays); compiled (:mod:`pipeline.core.jit`), one
-pass over the rays.
+pass over the rays. :func:`spread_cast` puts a cast of some of the rays back in place among all of them.
 """
 
 from __future__ import annotations
@@ -66,3 +66,20 @@ def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo
         if normal[i, 0] * rays[i, 3] + normal[i, 1] * rays[i, 4] + normal[i, 2] * rays[i, 5] > 0:
             for k in range(3):
                 normal[i, k] = -normal[i, k]
+
+
+@kernel("Tuple((float32[::1], uint32[::1], float32[:, ::1]))(int64, int64[::1], float32[::1], uint32[::1], "
+        "float32[:, ::1])")
+def spread_cast(n, rows, t, prim, normal):
+    """A cast of the rays ``rows`` ((K,) int64 of N) among all N: t (N,) float32 (inf elsewhere), prim (N,) uint32
+    (Embree's invalid id, 2^32 - 1, elsewhere) and normal (N, 3) float32 (0 elsewhere), from the K rows' own."""
+    t_all = np.full(n, np.inf, np.float32)
+    prim_all = np.full(n, np.uint32(0xFFFFFFFF), np.uint32)
+    normal_all = np.zeros((n, 3), np.float32)
+    for j in range(rows.size):
+        i = rows[j]
+        t_all[i] = t[j]
+        prim_all[i] = prim[j]
+        for k in range(3):
+            normal_all[i, k] = normal[j, k]
+    return t_all, prim_all, normal_all

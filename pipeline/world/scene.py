@@ -39,7 +39,7 @@ import open3d as o3d
 from pipeline.core.classes import ObjectClass
 from pipeline.core.jit import as_input
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
-from pipeline.world.hit_attributes import resolve_hits
+from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.sunmap import SunMap, along_sun, sun_slope
@@ -144,15 +144,6 @@ def take_columns(a: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
     if not len(rows):
         return [np.zeros(0, a.dtype) for _ in range(a.shape[1])]
     return [c.reshape(-1) for c in cv2.split(np.take(a, rows, axis=0).reshape(-1, 1, a.shape[1]))]
-
-
-def put_rows(a: np.ndarray, rows: np.ndarray, values: np.ndarray) -> None:
-    """``a[rows] = values`` for a C-contiguous (N, C) array ``a`` and (M, C) ``values``: one 1D scatter of C-item
-    records, ~2.5x faster than numpy's assignment of rows."""
-    if not a.flags.c_contiguous:
-        raise ValueError("put_rows needs a C-contiguous array")
-    record = np.dtype((np.void, a.dtype.itemsize * a.shape[1]))
-    a.view(record).reshape(-1)[rows] = np.ascontiguousarray(values, a.dtype).view(record).reshape(-1)
 
 
 def make_rays(origin: np.ndarray, directions: np.ndarray, rotation: np.ndarray) -> np.ndarray:
@@ -281,12 +272,9 @@ class StaticScene:
         n = len(rays)
         if self._scene is not None and (where is None or np.count_nonzero(where) > SUBSET_MAX * n):
             return _cast(self._scene, rays, threads)  # gathering and scattering would cost more than they save
-        t, prim, normal = np.full(n, np.inf, np.float32), np.full(n, _MISS, np.uint32), np.zeros((n, 3), np.float32)
-        sub = np.flatnonzero(where) if self._scene is not None else ()  # here ``where`` is given when there is a scene
-        if len(sub):
-            t[sub], prim[sub], sub_normal = _cast(self._scene, np.take(rays, sub, axis=0), threads)
-            put_rows(normal, sub, sub_normal)
-        return t, prim, normal
+        sub = np.flatnonzero(where) if self._scene is not None else np.zeros(0, np.int64)
+        hits = _cast(self._scene, np.take(rays, sub, axis=0), threads) if len(sub) else _NO_HITS
+        return spread_cast(n, sub, *hits)
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0, where: np.ndarray | None = None
                  ) -> np.ndarray:

@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
-from pipeline.sensors.post import apply_post, bloom, motion_blur, motion_flow, rain_streaks, sensor_noise, vignette
+from pipeline.sensors.post import (
+    apply_post,
+    bloom,
+    motion_blur,
+    motion_flow,
+    rain_streaks,
+    sensor_noise,
+    standard_normal,
+    vignette,
+)
 
 H, W = 600, 800
 
@@ -32,6 +41,16 @@ def test_noise_follows_the_shot_plus_read_model():
         expected = np.sqrt(gain * cfg.shot * level + (gain * cfg.read_std) ** 2)
         assert noisy.std() == pytest.approx(expected, rel=0.02)
         assert noisy.mean() == pytest.approx(level, abs=3 * expected / 400)
+
+
+def test_each_pixel_gets_its_own_sigma_times_one_draw():
+    rng = np.random.default_rng(4)
+    image = (rng.random((30, 40, 3)) * 1.2 - 0.2).astype(np.float32)  # some below 0: read noise only there
+    cfg = SensorNoiseConfig(shot=0.01, read_std=0.02, grain_std=0.0)
+    noisy = sensor_noise(image, cfg, 2.0, np.random.default_rng(5))
+    draws = standard_normal(image.shape, np.random.default_rng(5))  # the same draws: the same generator state
+    sigma = np.sqrt(2.0 * 0.01 * np.maximum(image.astype(np.float64), 0.0) + (2.0 * 0.02) ** 2)
+    np.testing.assert_allclose(noisy, image + draws * sigma, rtol=1e-5, atol=1e-6)
 
 
 def test_noise_grows_at_night():

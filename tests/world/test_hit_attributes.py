@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.world.hit_attributes import resolve_hits
+from pipeline.world.hit_attributes import resolve_hits, spread_cast
 
 PAINT = 2
 
@@ -82,3 +82,17 @@ def test_no_actor_rays_and_no_hits():
     actor["prim_actor"], actor["normal_actor"] = actor["prim_actor"][:0], actor["normal_actor"][:0]
     t_out, normal_out, out = _resolve(rays, t, prim, normal, static, actor)
     assert np.all(np.isinf(t_out)) and not out["hit"].any() and not normal_out.any() and not out["color"].any()
+
+
+def test_a_cast_of_some_rays_spreads_back_among_all():
+    rows = np.array([4, 0, 7], np.int64)
+    t = np.float32([1.5, 2.5, np.inf])
+    prim = np.array([3, 9, np.iinfo(np.uint32).max], np.uint32)
+    normal = np.float32([[0, 0, 1], [1, 0, 0], [0, 0, 0]])
+    t_all, prim_all, normal_all = spread_cast(8, rows, t, prim, normal)
+    assert t_all.tolist() == [2.5, np.inf, np.inf, np.inf, 1.5, np.inf, np.inf, np.inf]
+    assert prim_all.tolist() == [9] + [2**32 - 1] * 3 + [3] + [2**32 - 1] * 3
+    np.testing.assert_array_equal(normal_all[[4, 0]], normal[:2])
+    assert not np.delete(normal_all, [4, 0], axis=0).any()
+    empty = spread_cast(3, np.zeros(0, np.int64), t[:0], prim[:0], normal[:0])
+    assert np.isinf(empty[0]).all() and (empty[1] == 2**32 - 1).all() and empty[2].shape == (3, 3)

@@ -173,18 +173,3 @@ def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
     assert by_actors.any() and not (by_actors & ~cand).any()
     np.testing.assert_array_equal(scene.occluded_rays(rays, actor_rays=cand), scene.occluded_rays(rays))
     assert cand.mean() < 0.5
-
-
-def test_put_rows_equals_row_assignment():
-    from pipeline.world.scene import put_rows
-
-    rng = np.random.default_rng(0)
-    a = rng.random((50, 3), dtype=np.float32)
-    expected = a.copy()
-    rows = rng.choice(50, 20, replace=False)
-    values = rng.random((20, 3)).astype(np.float32)
-    expected[rows] = values
-    put_rows(a, rows, values)
-    np.testing.assert_array_equal(a, expected)
-    with pytest.raises(ValueError, match="contiguous"):
-        put_rows(np.zeros((6, 4), np.float32)[:, :3], rows[:2] % 6, values[:2])
