@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.core.geometry import Transform
+from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
@@ -93,9 +94,7 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     uv, _ = camera.project(np.where(keep[:, None], pts, [[0.0, 0.0, 1.0]]))
     uv, own = uv[keep], own[keep]
     box = np.full((k, 4), np.nan)
-    lo, hi = np.full((k, 2), np.inf), np.full((k, 2), -np.inf)
-    np.minimum.at(lo, own, uv)
-    np.maximum.at(hi, own, uv)
+    lo, hi = _group_bounds(as_input(own, np.int64), as_input(uv, np.float64), k)
     valid = np.isfinite(lo[:, 0])
     box[valid] = np.column_stack([lo[valid], hi[valid]])
     return AmodalBoxes(box, valid)
@@ -139,23 +138,44 @@ class CameraLabels:
         return len(self.actor_index)
 
 
-def _tight_boxes(instance: np.ndarray, k: int) -> np.ndarray:
-    """(K, 4) float64 tight boxes of dense ids 1..K in an (H, W) image (0 = none); NaN where absent."""
-    h, w = instance.shape
-    idx = np.flatnonzero(instance)
-    ids = instance.reshape(-1)[idx].astype(np.int64) - 1
-    rows, cols = np.divmod(idx, w)
-    row_seen = np.zeros((k, h), bool)
-    col_seen = np.zeros((k, w), bool)
-    row_seen[ids, rows] = True
-    col_seen[ids, cols] = True
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(int64[::1], float64[:, ::1], int64)")
+def _group_bounds(group, points, k):
+    """Per group 0..k-1, the element-wise min and max of its (M, 2) float64 ``points`` ((M,) int64 ``group``):
+    (k, 2) lo and hi, inf and -inf for an empty group, NaN where a point had NaN (as numpy's minimum / maximum)."""
+    lo = np.full((k, 2), np.inf)
+    hi = np.full((k, 2), -np.inf)
+    for j in range(group.size):
+        g = group[j]
+        for c in range(2):
+            v = points[j, c]
+            if not np.isnan(lo[g, c]) and not lo[g, c] <= v:
+                lo[g, c] = v
+            if not np.isnan(hi[g, c]) and not hi[g, c] >= v:
+                hi[g, c] = v
+    return lo, hi
+
+
+@kernel("Tuple((int64[::1], float64[:, ::1]))(int32[:, ::1], int64)")
+def _pixel_boxes(instance, k):
+    """Pixel counts (k,) int64 and tight boxes (k, 4) float64 (x1, y1, x2, y2: the pixels' outer edges; NaN
+    where absent) of dense ids 1..k in an (H, W) int32 image (0 = none), in one pass over it."""
+    count = np.zeros(k, np.int64)
     box = np.full((k, 4), np.nan)
-    any_px = row_seen.any(axis=1)
-    box[any_px, 0] = col_seen[any_px].argmax(axis=1)
-    box[any_px, 1] = row_seen[any_px].argmax(axis=1)
-    box[any_px, 2] = w - col_seen[any_px, ::-1].argmax(axis=1)
-    box[any_px, 3] = h - row_seen[any_px, ::-1].argmax(axis=1)
-    return box
+    for y in range(instance.shape[0]):
+        for x in range(instance.shape[1]):
+            i = instance[y, x] - 1
+            if i < 0:
+                continue
+            if i >= k:
+                raise ValueError("an id in the image is above k")
+            if count[i] == 0:
+                box[i, 0], box[i, 1], box[i, 2], box[i, 3] = x, y, x + 1, y + 1
+            else:
+                box[i, 0] = min(box[i, 0], x)
+                box[i, 2] = max(box[i, 2], x + 1)
+                box[i, 3] = y + 1  # rows come in order
+            count[i] += 1
+    return count, box
 
 
 def _grid_pairs(x0: np.ndarray, y0: np.ndarray, nx: np.ndarray, ny: np.ndarray, stride: np.ndarray) -> tuple:
@@ -176,8 +196,7 @@ def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, am
     """
     w, h, k = camera.width, camera.height, len(scene.actors)
     flat = actor_image.reshape(-1)
-    visible_px = np.bincount(flat, minlength=k + 1)[1:]
-    tight = _tight_boxes(actor_image, k)
+    visible_px, tight = _pixel_boxes(as_input(actor_image, np.int32), k)
     valid = amodal.valid | (visible_px > 0)
     box = np.where(np.isnan(amodal.box), tight, amodal.box)
     box = np.column_stack([np.fmin(box[:, :2], tight[:, :2]), np.fmax(box[:, 2:], tight[:, 2:])])

@@ -23,14 +23,14 @@ import functools
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 
 from pipeline.core.config.sensors import LidarConditionConfig
 from pipeline.core.config.sensors import LidarConfig as LidarSpec
 from pipeline.core.geometry import Transform
+from pipeline.core.jit import as_input, kernel
 from pipeline.world.materials import material_arrays
-from pipeline.world.scene import FrameScene, make_rays, rectangles_mask, rowdot
+from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 
 def _spec_default(name: str) -> Any:
@@ -190,28 +190,86 @@ def render_lidar(
     hits = scene.cast_rays(rays, actor_rays=lidar.actor_ray_mask(scene, to_world))
     noise = rng.standard_normal(n, dtype=np.float32) * np.float32(cfg.range_noise_std_m)
     drop = rng.random(n) < cfg.dropout_prob if cfg.dropout_prob else np.zeros(n, bool)
-    keep = np.flatnonzero(hits.hit & (hits.t_m >= cfg.range_min_m) & (hits.t_m <= cfg.range_max_m) & ~drop)
-    t = hits.t_m[keep]
-    cos_inc = np.abs(rowdot(np.take(hits.normal, keep, axis=0), np.take(rays, keep, axis=0)[:, 3:]))
-    reflectivity = material_arrays()["reflectivity"][hits.material[keep]]
-    intensity = reflectivity * cos_inc * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
+    keep, t, reflected = _returns(as_input(hits.hit, bool), as_input(hits.t_m, np.float32), as_input(hits.normal,
+                                  np.float32), as_input(rays, np.float32), as_input(hits.material, np.int32),
+                                  as_input(material_arrays()["reflectivity"], np.float32), drop,
+                                  np.float32(cfg.range_min_m), np.float32(cfg.range_max_m))
+    intensity = reflected * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
     if effects.min_intensity > 0:  # returns too weak to detect are lost
         strong = intensity >= effects.min_intensity
         keep, t, intensity = keep[strong], t[strong], intensity[strong]
-    column, ring = np.divmod(keep, cfg.channels)
-    instance = hits.instance_id[keep]
-    on_actor = instance > 0
-    ranges = np.repeat(np.maximum(t + noise[keep], 0)[:, None], 3, 1)
-    # cv2.multiply returns None for empty inputs (a sweep that sees nothing, e.g. in thick fog).
-    points = cv2.multiply(np.take(dirs_l, keep, axis=0), ranges) if len(keep) else np.zeros((0, 3), np.float32)
+    points, ring, column, time_offset, instance, semantic, per_actor = _points(
+        keep, t, noise, as_input(dirs_l, np.float32), as_input(hits.instance_id, np.int32),
+        as_input(hits.semantic, np.uint8), as_input(hits.actor_index, np.int32), cfg.channels,
+        float(cfg.columns * cfg.rotation_hz), len(scene.actors))
     return LidarSweep(
         points_m=points,
         intensity=intensity.astype(np.float32),
-        ring=ring.astype(np.uint8),
-        column=column.astype(np.uint16),
-        time_offset_s=(column / (cfg.columns * cfg.rotation_hz)).astype(np.float32),
+        ring=ring,
+        column=column,
+        time_offset_s=time_offset,
         instance_id=instance,
-        semantic=hits.semantic[keep],
-        points_per_actor=np.bincount(hits.actor_index[keep][on_actor], minlength=len(scene.actors)),
+        semantic=semantic,
+        points_per_actor=per_actor,
         range_max_m=float(cfg.range_max_m),
     )
+
+
+@kernel("Tuple((int64[::1], float32[::1], float32[::1]))(bool_[::1], float32[::1], float32[:, ::1], float32[:, ::1], "
+        "int32[::1], float32[::1], bool_[::1], float32, float32)")
+def _returns(hit, t_m, normal, rays, material, reflectivity, drop, range_min_m, range_max_m):
+    """The beams that return a point: hit within [range_min_m, range_max_m] and not dropped. Returns their indices
+    (K,) int64, ranges (K,) float32 and reflectivity x |cos incidence| (K,) float32 (the intensity before
+    attenuation), from the sweep's (N,) hits (``rays`` (N, 6) float32 [origin | unit direction], ``normal`` (N, 3)
+    float32) and the (M,) float32 reflectivity per material."""
+    n = t_m.size
+    count = 0
+    for i in range(n):
+        if hit[i] and t_m[i] >= range_min_m and t_m[i] <= range_max_m and not drop[i]:
+            count += 1
+    keep = np.empty(count, np.int64)
+    t = np.empty(count, np.float32)
+    reflected = np.empty(count, np.float32)
+    j = 0
+    for i in range(n):
+        if hit[i] and t_m[i] >= range_min_m and t_m[i] <= range_max_m and not drop[i]:
+            cos_inc = abs(normal[i, 0] * rays[i, 3] + normal[i, 1] * rays[i, 4] + normal[i, 2] * rays[i, 5])
+            keep[j] = i
+            t[j] = t_m[i]
+            reflected[j] = reflectivity[material[i]] * cos_inc
+            j += 1
+    return keep, t, reflected
+
+
+@kernel("Tuple((float32[:, ::1], uint8[::1], uint16[::1], float32[::1], int32[::1], uint8[::1], int64[::1]))("
+        "int64[::1], float32[::1], float32[::1], float32[:, ::1], int32[::1], uint8[::1], int32[::1], int64, float64, "
+        "int64)")
+def _points(keep, t, noise, directions, instance_id, semantic, actor_index, channels, columns_per_s, actors):
+    """The sweep's points from its K returns (beam indices ``keep``, column-major over ``channels`` rings; true
+    ranges ``t``): each along its beam's (N, 3) float32 unit direction at max(range + noise[beam], 0); ring, column
+    and firing time (column / ``columns_per_s``); the beam's instance id and class; and points per actor (of
+    ``actors``; ``actor_index`` is valid where the instance id is > 0)."""
+    k = keep.size
+    points = np.empty((k, 3), np.float32)
+    ring = np.empty(k, np.uint8)
+    column = np.empty(k, np.uint16)
+    time_offset = np.empty(k, np.float32)
+    instance = np.empty(k, np.int32)
+    sem = np.empty(k, np.uint8)
+    per_actor = np.zeros(actors, np.int64)
+    for j in range(k):
+        i = keep[j]
+        r = t[j] + noise[i]
+        if not r > 0:
+            r = np.float32(0)
+        for c in range(3):
+            points[j, c] = directions[i, c] * r
+        col = i // channels
+        ring[j] = i - col * channels
+        column[j] = col
+        time_offset[j] = col / columns_per_s
+        instance[j] = instance_id[i]
+        sem[j] = semantic[i]
+        if instance_id[i] > 0:
+            per_actor[actor_index[i]] += 1
+    return points, ring, column, time_offset, instance, sem, per_actor

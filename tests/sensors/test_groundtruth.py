@@ -177,3 +177,36 @@ def test_empty_world_is_all_sky_and_has_no_labels():
                           EGO)
     assert len(frame.labels) == 0 and not frame.depth_valid.any() and not frame.instance_id.any()
     assert (frame.rgb[0, :, 2] > frame.rgb[0, :, 0]).all()  # blue sky
+
+
+def test_pixel_counts_and_tight_boxes_of_an_id_image():
+    from pipeline.sensors.groundtruth import _pixel_boxes
+
+    image = np.zeros((6, 8), np.int32)
+    image[1:3, 2:5] = 1  # a 2 x 3 block: box (2, 1, 5, 3)
+    image[5, 7] = 3  # one corner pixel
+    image[0, 0] = image[4, 6] = 3  # id 3 spans the image: box (0, 0, 8, 6)
+    count, box = _pixel_boxes(image, 4)
+    assert count.tolist() == [6, 0, 3, 0]
+    np.testing.assert_array_equal(box[0], [2, 1, 5, 3])
+    np.testing.assert_array_equal(box[2], [0, 0, 8, 6])
+    assert np.isnan(box[[1, 3]]).all()
+    with pytest.raises(ValueError, match="above k"):
+        _pixel_boxes(image, 2)
+
+
+def test_group_bounds_are_numpys_minimum_and_maximum_at():
+    from pipeline.sensors.groundtruth import _group_bounds
+
+    rng = np.random.default_rng(3)
+    group = rng.integers(0, 6, 500)
+    group[group == 4] = 5  # group 4 empty
+    points = rng.normal(size=(500, 2)) * 100
+    points[7] = [np.nan, 1.0]
+    lo, hi = np.full((6, 2), np.inf), np.full((6, 2), -np.inf)
+    np.minimum.at(lo, group, points)
+    np.maximum.at(hi, group, points)
+    got_lo, got_hi = _group_bounds(group.astype(np.int64), points, 6)
+    np.testing.assert_array_equal(got_lo, lo)
+    np.testing.assert_array_equal(got_hi, hi)
+    assert np.isnan(got_lo[group[7], 0]) and np.isinf(got_lo[4]).all()

@@ -118,3 +118,32 @@ def _no_actors():
     from pipeline.world.actors import Actors
 
     return Actors.empty()
+
+
+def test_returns_and_points_of_hand_made_beams():
+    from pipeline.sensors.lidar import _points, _returns
+
+    # 6 beams, 2 rings x 3 columns (column-major): a hit head-on at 10 m; a miss; a hit too near; a dropped hit;
+    # a hit at 60 deg incidence on an actor; a hit beyond the range.
+    d = np.float32([[1, 0, 0]] * 6)
+    rays = np.concatenate([np.zeros((6, 3), np.float32), d], axis=1)
+    hit = np.array([True, False, True, True, True, True])
+    t = np.float32([10.0, np.inf, 0.1, 20.0, 30.0, 500.0])
+    c60 = np.cos(np.radians(60.0))
+    normal = np.float32([[-1, 0, 0], [0, 0, 0], [-1, 0, 0], [-1, 0, 0], [-c60, np.sin(np.radians(60.0)), 0],
+                         [-1, 0, 0]])
+    material = np.int32([0, 0, 0, 0, 1, 0])
+    keep, t_kept, reflected = _returns(hit, t, normal, rays, material, np.float32([0.5, 0.8]),
+                                       np.array([False, False, False, True, False, False]), np.float32(0.5),
+                                       np.float32(120.0))
+    assert keep.tolist() == [0, 4]
+    np.testing.assert_allclose(t_kept, [10.0, 30.0])
+    np.testing.assert_allclose(reflected, [0.5, 0.8 * c60], rtol=1e-6)
+    noise = np.float32([0.25, 0, 0, 0, -31.0, 0])  # the second return's noisy range clamps at 0
+    points, ring, column, time_s, instance, semantic, per_actor = _points(
+        keep, t_kept, noise, d, np.int32([0, 0, 0, 0, 7, 0]), np.uint8([1, 0, 0, 0, 13, 0]),
+        np.int32([0, 0, 0, 0, 2, 0]), 2, 30.0, 3)
+    np.testing.assert_allclose(points, [[10.25, 0, 0], [0, 0, 0]])
+    assert ring.tolist() == [0, 0] and column.tolist() == [0, 2]
+    np.testing.assert_allclose(time_s, [0.0, 2 / 30.0])
+    assert instance.tolist() == [0, 7] and semantic.tolist() == [1, 13] and per_actor.tolist() == [0, 0, 1]
