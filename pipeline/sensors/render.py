@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from pipeline.core.geometry import Transform
+from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
@@ -83,9 +84,10 @@ def render_camera(
     static_rays = camera.boxes_pixel_mask(cam_to_world, *scene.static.chunk_boxes)
     hits = scene.cast_rays(rays, actor_rays=actor_rays, static_rays=static_rays)
 
-    actor_image = np.where(hits.instance_id > 0, hits.actor_index + 1, 0).astype(np.int32).reshape(h, w)
-    labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image)
-    depth = np.where(hits.hit, hits.t_m * dirs_cam[:, 2], 0.0).astype(np.float32)
+    actor_image, depth = _actor_image_and_depth(as_input(hits.instance_id, np.int32), as_input(hits.actor_index,
+                                                np.int32), as_input(hits.hit, bool), as_input(hits.t_m, np.float32),
+                                                as_input(dirs_cam, np.float32))
+    labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image.reshape(h, w))
 
     lights = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
     samples = camera.sample_directions
@@ -165,3 +167,18 @@ def _sky_level(condition: Condition) -> float:
     else:
         level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), lighting).mean())
     return level * lighting.exposure
+
+
+@kernel("Tuple((int32[::1], float32[::1]))(int32[::1], int32[::1], bool_[::1], float32[::1], float32[:, ::1])")
+def _actor_image_and_depth(instance_id, actor_index, hit, t_m, directions):
+    """Per pixel-centre ray: the hit actor's dense index + 1 (0: no actor) and the z-depth t * d_z (0: no hit),
+    from the (N,) hits and the (N, 3) float32 unit ray directions in the optical frame."""
+    n = hit.size
+    actor_image = np.zeros(n, np.int32)
+    depth = np.zeros(n, np.float32)
+    for i in range(n):
+        if instance_id[i] > 0:
+            actor_image[i] = actor_index[i] + 1
+        if hit[i]:
+            depth[i] = t_m[i] * directions[i, 2]
+    return actor_image, depth

@@ -22,6 +22,7 @@ import pyarrow as pa
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ConditionConfig, RigConfig
 from pipeline.core.geometry import Boxes3D, Transform, wrap_angle
+from pipeline.core.jit import as_input, kernel
 from pipeline.core.png import write_png
 from pipeline.core.record import DEPTH_SCALE, FRAME_COLUMNS, LABEL_COLUMNS, POINT_COLUMNS, camera_path, lidar_path
 from pipeline.core.tables import read_parquet, write_parquet, write_sweep
@@ -280,11 +281,22 @@ def render_shard(job: ShardJob) -> int:
 def _write_camera(root: Path, name: str, frame: int, cam) -> None:
     if cam.instance_id.max(initial=0) > np.iinfo(np.uint16).max:
         raise ValueError(f"track id {cam.instance_id.max()} does not fit the uint16 instance image")
-    depth = np.where(cam.depth_valid, np.clip(np.rint(cam.depth_m * DEPTH_SCALE), 1, 65535), 0).astype(np.uint16)
+    depth = _depth_png(as_input(cam.depth_m, np.float32), as_input(cam.depth_valid, bool), np.float32(DEPTH_SCALE))
     images = {"rgb": cam.rgb, "instance": cam.instance_id.astype(np.uint16),
               "semantic": cam.semantic.astype(np.uint8), "depth": depth}
     for kind, image in images.items():
         _write_png(camera_path(root, name, kind, frame), image, kind)
+
+
+@kernel("uint16[:, ::1](float32[:, ::1], bool_[:, ::1], float32)")
+def _depth_png(depth_m, valid, scale):
+    """The depth PNG's (H, W) uint16 values: round(depth * scale) clipped to [1, 65535] where valid, 0 elsewhere."""
+    out = np.zeros(depth_m.shape, np.uint16)
+    for y in range(depth_m.shape[0]):
+        for x in range(depth_m.shape[1]):
+            if valid[y, x]:
+                out[y, x] = min(max(np.rint(depth_m[y, x] * scale), np.float32(1)), np.float32(65535))
+    return out
 
 
 def _write_points(path: Path, sweep) -> None:
