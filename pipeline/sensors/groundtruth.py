@@ -71,7 +71,7 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     left_out = np.flatnonzero(in_view & ~scene.active)
     if len(left_out):
         raise ValueError(f"camera {camera.config.name!r} sees actors {scene.actors.track_id[left_out].tolist()} (track "
-                         "ids) that the frame scene left out of its Embree scene (FrameScene active); pass a mask "
+                         "ids) that the frame scene left out (FrameScene active); pass a mask "
                          "from pipeline.sensors.reach.actors_in_reach with this camera")
     verts = world_to_cam.apply(geo.vertices)
     tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)

@@ -1,9 +1,10 @@
-"""Which actors the rays of one frame can reach: the ones the frame's Embree scene needs.
+"""Which actors the rays of one frame can reach: the only ones the frame scene places and tests rays against.
 
-Building the actors' Embree scene costs ~0.45 us of CPU per triangle, every frame: ~17 ms for the ~130 vehicles
-of a highway run, ~30 ms for the ~220 of an urban one, where most of them are behind buildings and far from the
-ego. :func:`actors_in_reach` is a conservative test of each actor's bounding sphere (the sphere around its 3D
-box: a class's canonical mesh lies inside the unit box) against every way a ray of the frame can meet it:
+Every actor costs its placed mesh (for its amodal box) and a test per ray that may meet it (see
+:mod:`pipeline.world.actor_casts`), for the ~130 vehicles of a highway run or the ~220 of an urban one, where
+most of them are behind buildings and far from the ego. :func:`actors_in_reach` is a conservative test of each
+actor's bounding sphere (the sphere around its 3D box: a class's canonical mesh lies inside the unit box) against
+every way a ray of the frame can meet it:
 
 - a LiDAR beam: the sphere comes within the LiDAR's range under the condition (farther returns are dropped);
 - a camera ray (primary or anti-aliasing sample): the sphere meets the camera's frustum, from its optical
@@ -14,7 +15,7 @@ box: a class's canonical mesh lies inside the unit box) against every way a ray 
 - a shadow ray towards a spot light that casts shadows (street lamps at night): such a ray is shorter than the
   light's range, so the sphere comes within that range of the light.
 
-:class:`pipeline.world.scene.FrameScene` leaves the other actors out of its Embree scene (``active``); they
+:class:`pipeline.world.scene.FrameScene` leaves the other actors out (``active``); they
 keep their labels, which come from their boxes, and :func:`pipeline.sensors.groundtruth.project_actors` refuses
 an actor a camera sees that was left out.
 """

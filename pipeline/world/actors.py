@@ -109,7 +109,7 @@ class ActorMeshes:
             (use :func:`normalise_to_unit_box`), so that placed meshes fill their 3D boxes.
 
     Attributes:
-        scene_cache: per-class acceleration structures, owned by the renderer (pipeline.world.scene).
+        scene_cache: per-class Embree scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
     def __init__(self, overrides: dict[ObjectClass, Mesh] | None = None) -> None:

@@ -19,7 +19,7 @@ from pipeline.core.jit import kernel
         "float32[:, ::1], int64, "
         "bool_[::1], int32[::1], int32[::1], uint8[::1], int32[::1], float32[:, ::1])")
 def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo,
-                 sub, t_actor, prim_actor, normal_actor, triangle_actor, actor_semantic, actor_material, track_id,
+                 sub, t_actor, prim_actor, normal_actor, hit_actor, actor_semantic, actor_material, track_id,
                  actor_color, paint,
                  hit, instance_id, actor_index, semantic, material, color):
     """Merge the casts of N rays and fill their attributes, in place.
@@ -30,9 +30,9 @@ def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo
             (Embree's winding; 0 on a miss). On return: the nearer of the two casts, normals facing the origin.
         static_semantic, static_material: (T,) uint8 and int32, per static triangle.
         albedo: (M, 3) float32 linear albedo per material.
-        sub: (K,) int64 the rays cast against the actors, and t_actor, prim_actor, normal_actor their cast as above.
-        triangle_actor, actor_semantic, actor_material: (U,) int32, uint8, int32, per actor triangle: the actor
-            (position in the frame's actors), its class and material.
+        sub: (K,) int64 the rays cast against the actors, and t_actor, prim_actor, normal_actor their cast as above
+            (the normal in the world frame), hit_actor (K,) int32 the actor hit (position in the frame's actors).
+        actor_semantic, actor_material: (U,) uint8 and int32 per actor triangle (as numbered in ``prim_actor``).
         track_id: (A,) int32 per actor; actor_color: (A, 3) float32 linear colour, which replaces the albedo of
             material ``paint``.
         hit, instance_id, actor_index, semantic, material, color: outputs, (N,) bool, int32, int32, uint8, int32
@@ -51,7 +51,7 @@ def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo
         i = sub[j]
         if t_actor[j] < t[i]:
             p = prim_actor[j]
-            a = triangle_actor[p]
+            a = hit_actor[j]
             m = actor_material[p]
             t[i] = t_actor[j]
             hit[i] = True

@@ -4,17 +4,19 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
 
 - The static world is one Embree scene built once per run (:class:`StaticScene`); rebuilding a merged
   static+actor BVH every frame costs far more than casting twice.
-- All actors of a frame are merged into ONE Embree geometry (:class:`FrameScene`) with per-triangle
-  actor index, material and semantic arrays; a ray's result is the nearer of the two casts. Callers may
-  pass a conservative mask of the rays that can reach an actor at all (from projected boxes) to skip the
-  actor cast for the rest.
+- The actors get no Embree scene of their own (:class:`FrameScene`): an actor is its class's canonical mesh
+  under an affine map, so a ray meets it where the ray mapped into the actor's unit box frame meets the canonical
+  mesh, whose scene is built once per class and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
+  actor) pairs by an exact test against each unit box, then one cast per class present). Building a BVH over the
+  placed actors instead cost ~0.5 us per triangle, every frame: ~11 ms of a highway frame, more than its actor
+  rays. A ray's result is the nearer of the static and the actor hit. Callers may pass a conservative mask of
+  the rays that can reach an actor at all (from projected boxes) to skip the actor test for the rest.
 - The static world is also cut into chunks (:attr:`StaticScene.chunk_boxes`: axis-aligned boxes around nearby
   triangles, tall geometry in 20 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
-- Only the actors that some ray of the frame can reach are placed and built into its Embree scene (``active``,
-  from :func:`pipeline.sensors.reach.actors_in_reach`: ~15% of an urban frame's actors, ~65% of a highway
-  one's); the BVH build costs ~0.45 us per triangle, every frame.
+- Only the actors that some ray of the frame can reach are placed and tested (``active``, from
+  :func:`pipeline.sensors.reach.actors_in_reach`: ~15% of an urban frame's actors, ~65% of a highway one's).
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
   along the sun; ~1-3% of the lit pixels of a highway or urban frame); against the static world only those from
@@ -38,6 +40,7 @@ import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.jit import as_input
+from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
@@ -116,11 +119,7 @@ def _occluded(scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, t_max_m: 
     return scene.test_occlusions(o3d.core.Tensor.from_numpy(picked), tfar=t_max_m, nthreads=threads).numpy()
 
 
-def _build_bvh(scene: o3d.t.geometry.RaycastingScene, threads: int = 0) -> None:
-    """Build the scene's BVH now (Embree builds it at the first query: a query of one ray)."""
-    _occluded(scene, np.array([[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]], np.float32), np.inf, threads)
-
-
+_CLASSES = list(ObjectClass)  # an actor's class code is a position in this list (Actors.class_codes)
 _MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
 _NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.uint32), np.zeros((0, 3), np.float32))  # a cast of no ray
 
@@ -186,6 +185,28 @@ def _canonical_scene(meshes: ActorMeshes, object_class: ObjectClass) -> o3d.t.ge
         mesh = meshes[object_class]
         meshes.scene_cache[object_class] = _embree(mesh.vertices, mesh.triangles)
     return meshes.scene_cache[object_class]
+
+
+@dataclass(frozen=True)
+class _ClassTables:
+    """Every class's canonical triangles numbered in one sequence (class by class, in ObjectClass order):
+    offsets (C,) the first number of each class, semantic (T,) uint8 and material (T,) int32 per triangle."""
+
+    offsets: np.ndarray
+    semantic: np.ndarray
+    material: np.ndarray
+
+
+def _class_tables(meshes: ActorMeshes) -> _ClassTables:
+    """The :class:`_ClassTables` of ``meshes``, cached on them."""
+    if "tables" not in meshes.scene_cache:
+        parts = [meshes[c] for c in ObjectClass]
+        counts = np.array([len(m.triangles) for m in parts], np.int64)
+        meshes.scene_cache["tables"] = _ClassTables(
+            np.concatenate([[0], np.cumsum(counts)[:-1]]),
+            np.concatenate([np.full(len(m.triangles), int(m.semantic), np.uint8) for m in parts]),
+            np.concatenate([np.asarray(m.material, np.int32) for m in parts]))
+    return meshes.scene_cache["tables"]
 
 
 # Chunks of the static world (StaticScene.chunk_boxes): only how tight the camera's skip test is depends on them.
@@ -307,8 +328,9 @@ class FrameScene:
     ``meshes`` chooses the canonical mesh per class (the built-in procedural ones by default); ``threads``
     caps Embree's threads per cast (0 = all cores; use 1 per worker in a process pool to avoid
     oversubscription). ``active`` (A,) bool, optional: the actors that rays may reach (a conservative mask, e.g.
-    :func:`pipeline.sensors.reach.actors_in_reach`); only they are placed and built into the Embree scene
-    (``geometry``), which every cast uses. The others stay in ``actors`` and :meth:`cast_alone` still sees them.
+    :func:`pipeline.sensors.reach.actors_in_reach`); only they are placed (``geometry``) and met by the rays of
+    :meth:`cast_rays` and :meth:`occluded_rays`. The others stay in ``actors`` and :meth:`cast_alone` still sees
+    them.
     """
 
     def __init__(
@@ -325,18 +347,19 @@ class FrameScene:
         if self.active.shape != (len(actors),):
             raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
         self.geometry = place_actors(actors, meshes, self.active)
-        self._actor_scene = None
-        if len(self.geometry.triangles):
-            self._actor_scene = _embree(self.geometry.vertices, self.geometry.triangles)
-            _build_bvh(self._actor_scene, threads)  # here rather than in the first cast: one place to time it
+        self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its class's canonical mesh)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
         self._paint = material_index("paint")
         self._actor_color = as_input(actors.color_rgb, np.float32)
         # Precompute the inverse placement of each actor: p_unit = A^-1 (p - centre).
         affine = unit_to_world(actors.boxes)
-        self._inv_linear = np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3))
-        self._center = affine[:, :, 3]
+        self._inv_linear = as_input(np.linalg.inv(affine[:, :, :3]) if len(actors) else np.zeros((0, 3, 3)),
+                                    np.float64)
+        self._center = as_input(affine[:, :, 3], np.float64)
+        # Holds the unit box grown by BOX_MARGIN: half its diagonal, grown, and a little more for rounding.
+        self._radius = as_input(0.5 * np.linalg.norm(actors.boxes.size, axis=1) * (1.0 + 2.0 * BOX_MARGIN) + 1e-6,
+                                np.float64)
         self._top_z = float(self.geometry.vertices[:, 2].max()) if len(self.geometry.vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
 
@@ -357,18 +380,16 @@ class FrameScene:
         n = len(rays)
         rays = as_input(rays, np.float32)
         t, prim, normal = self.static.cast(rays, self.threads, static_rays)
-        sub, t_actor, prim_actor, normal_actor = np.zeros(0, np.int64), *_NO_HITS
-        if self._actor_scene is not None:
+        sub = np.zeros(0, np.int64)
+        if len(self._placed):
             sub = np.arange(n) if actor_rays is None else np.flatnonzero(actor_rays)
-            if len(sub):
-                t_actor, prim_actor, normal_actor = _cast(self._actor_scene, np.take(rays, sub, axis=0), self.threads)
+        t_actor, prim_actor, normal_actor, hit_actor = self._cast_actors(rays, sub)
         hit, instance_id, actor_index = np.zeros(n, bool), np.zeros(n, np.int32), np.zeros(n, np.int32)
         semantic, material, color = np.zeros(n, np.uint8), np.zeros(n, np.int32), np.zeros((n, 3), np.float32)
-        geometry, static = self.geometry, self.static
+        static, tables = self.static, _class_tables(self.meshes)
         resolve_hits(rays, t, prim, normal, as_input(static.triangle_semantic, np.uint8),
                      as_input(static.triangle_material, np.int32), self._albedo, sub, t_actor, prim_actor,
-                     normal_actor, as_input(geometry.triangle_actor, np.int32),
-                     as_input(geometry.triangle_semantic, np.uint8), as_input(geometry.triangle_material, np.int32),
+                     normal_actor, hit_actor, tables.semantic, tables.material,
                      as_input(self.actors.track_id, np.int32), self._actor_color, self._paint,
                      hit, instance_id, actor_index, semantic, material, color)
         return Hits(t, hit, instance_id, actor_index, semantic, material, normal, color)
@@ -425,14 +446,40 @@ class FrameScene:
         others are tested against the static world only. ``static_rays`` likewise for the static world (e.g.
         :meth:`StaticScene.sun_candidates`)."""
         blocked = self.static.occluded(rays, t_max_m, self.threads, static_rays)
-        if self._actor_scene is None:
+        if not len(self._placed):
             return blocked
-        if actor_rays is None:
-            return blocked | _occluded(self._actor_scene, rays, t_max_m, self.threads)
-        sub = np.flatnonzero(actor_rays & ~blocked)
-        if len(sub):
-            blocked[sub] = _occluded(self._actor_scene, rays, t_max_m, self.threads, sub)
+        sub = np.flatnonzero(~blocked if actor_rays is None else actor_rays & ~blocked)
+        pair_row, pair_actor, local = actor_pairs(as_input(rays, np.float32), sub, self._placed, self._inv_linear,
+                                                  self._center, self._radius)
+        hit_pair = np.zeros(len(pair_row), bool)
+        for code, sel in self._pairs_by_class(pair_actor):
+            # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
+            hit_pair[sel] = _occluded(_canonical_scene(self.meshes, _CLASSES[code]), local, t_max_m, self.threads,
+                                      sel)
+        blocked[sub[pair_row[hit_pair]]] = True
         return blocked
+
+    def _pairs_by_class(self, pair_actor: np.ndarray):
+        """(class code, the pairs of that class (int64 positions)) for each class among ``pair_actor``."""
+        codes = self.actors.class_codes[pair_actor]
+        for code in np.unique(codes):
+            yield int(code), np.flatnonzero(codes == code)
+
+    def _cast_actors(self, rays: np.ndarray, sub: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays``: t (K,) float32 (inf = none),
+        triangle (K,) uint32 (numbered as in :func:`_class_tables`), world normal (K, 3) float32 and actor (K,)
+        int32 (see :mod:`pipeline.world.actor_casts`)."""
+        pair_row, pair_actor, local = actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
+                                                  self._radius)
+        t = np.full(len(pair_row), np.inf, np.float32)
+        prim = np.zeros(len(pair_row), np.uint32)
+        normal = np.zeros((len(pair_row), 3), np.float32)
+        offsets = _class_tables(self.meshes).offsets
+        for code, sel in self._pairs_by_class(pair_actor):
+            scene = _canonical_scene(self.meshes, _CLASSES[code])
+            t[sel], class_prim, normal[sel] = _cast(scene, np.take(local, sel, axis=0), self.threads)
+            prim[sel] = class_prim + np.uint32(offsets[code])  # hits only are read
+        return nearest_actor_hits(len(sub), pair_row, pair_actor, t, prim, normal, self._inv_linear)
 
     def sun_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
         """(M,) bool, conservative: which rays from the world points (x, y, z) (each (M,) float32) along the upward
@@ -445,7 +492,7 @@ class FrameScene:
         point above every actor's highest vertex is no candidate: its ray only rises.
         """
         slope = sun_slope(sun)
-        if self._actor_scene is None or not len(x):
+        if not len(self._placed) or not len(x):
             return np.zeros(len(x), bool)
         lo, hi = self._sun_footprints(slope)
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.

@@ -22,7 +22,7 @@ def _inputs(rng: np.random.Generator, n: int = 2000, triangles: int = 50, actor_
         "sub": sub, "t_actor": t_actor,
         "prim_actor": rng.integers(0, actor_triangles, len(sub)).astype(np.uint32),
         "normal_actor": rng.normal(size=(len(sub), 3)).astype(np.float32),
-        "triangle_actor": rng.integers(0, actors, actor_triangles).astype(np.int32),
+        "hit_actor": rng.integers(0, actors, len(sub)).astype(np.int32),
         "actor_semantic": rng.integers(1, 20, actor_triangles).astype(np.uint8),
         "actor_material": rng.integers(0, 6, actor_triangles).astype(np.int32),  # 6 materials, PAINT among them
         "track_id": rng.permutation(np.arange(100, 100 + actors)).astype(np.int32),
@@ -40,7 +40,7 @@ def _resolve(rays, t, prim, normal, static, actor):
            "semantic": np.zeros(n, np.uint8), "material": np.zeros(n, np.int32), "color": np.zeros((n, 3), np.float32)}
     t, normal = t.copy(), normal.copy()
     resolve_hits(rays, t, prim, normal, static["static_semantic"], static["static_material"], static["albedo"],
-                 actor["sub"], actor["t_actor"], actor["prim_actor"], actor["normal_actor"], actor["triangle_actor"],
+                 actor["sub"], actor["t_actor"], actor["prim_actor"], actor["normal_actor"], actor["hit_actor"],
                  actor["actor_semantic"], actor["actor_material"], actor["track_id"], actor["actor_color"], PAINT,
                  out["hit"], out["instance_id"], out["actor_index"], out["semantic"], out["material"], out["color"])
     return t, normal, out
@@ -54,7 +54,7 @@ def test_each_ray_keeps_its_nearer_hit_with_that_triangles_attributes():
         j = actor_at.get(i)
         if j is not None and actor["t_actor"][j] < t[i]:  # the actor is nearer (or the static cast missed)
             p = actor["prim_actor"][j]
-            a = actor["triangle_actor"][p]
+            a = actor["hit_actor"][j]
             m = actor["actor_material"][p]
             expected = (actor["t_actor"][j], True, actor["track_id"][a], a, actor["actor_semantic"][p], m,
                         actor["actor_color"][a] if m == PAINT else static["albedo"][m], actor["normal_actor"][j])
@@ -80,6 +80,7 @@ def test_no_actor_rays_and_no_hits():
     normal[:] = 0.0
     actor["sub"], actor["t_actor"] = actor["sub"][:0], actor["t_actor"][:0]
     actor["prim_actor"], actor["normal_actor"] = actor["prim_actor"][:0], actor["normal_actor"][:0]
+    actor["hit_actor"] = actor["hit_actor"][:0]
     t_out, normal_out, out = _resolve(rays, t, prim, normal, static, actor)
     assert np.all(np.isinf(t_out)) and not out["hit"].any() and not normal_out.any() and not out["color"].any()
 

@@ -1,0 +1,84 @@
+"""Actors as their class's canonical mesh under an affine map: candidate pairs against a brute-force slab test,
+the nearest hit and its world normal in closed form, and shadow segments through actors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.core.classes import ObjectClass
+from pipeline.core.geometry import Boxes3D
+from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits
+from pipeline.world.actors import Actors, unit_to_world
+from pipeline.world.scene import FrameScene, StaticScene
+
+
+def _boxes(rng: np.random.Generator, n: int) -> Boxes3D:
+    return Boxes3D(rng.uniform(-20, 20, (n, 3)), rng.uniform(0.5, 12.0, (n, 3)), rng.uniform(-np.pi, np.pi, n))
+
+
+def _slab_pairs(rays: np.ndarray, affine: np.ndarray) -> set[tuple[int, int]]:
+    """Every (ray, actor) whose ray, mapped into the actor's unit frame, meets [-0.5 - m, 0.5 + m]^3 at t >= 0."""
+    pairs = set()
+    half = 0.5 + BOX_MARGIN
+    for a, m in enumerate(affine):
+        inv = np.linalg.inv(m[:, :3])
+        o = (rays[:, :3].astype(np.float64) - m[:, 3]) @ inv.T
+        d = rays[:, 3:].astype(np.float64) @ inv.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (-half - o) / d, (half - o) / d
+        t_in = np.where(d == 0, np.where(np.abs(o) <= half, -np.inf, np.inf), np.minimum(t0, t1)).max(axis=1)
+        t_out = np.where(d == 0, np.where(np.abs(o) <= half, np.inf, -np.inf), np.maximum(t0, t1)).min(axis=1)
+        pairs |= {(int(i), a) for i in np.flatnonzero((t_in <= t_out) & (t_out >= 0))}
+    return pairs
+
+
+@pytest.mark.parametrize("length", [1.0, 0.05, 30.0])  # unit directions, and segments (shadow rays to a lamp)
+def test_pairs_are_every_ray_that_meets_a_box(length):
+    rng = np.random.default_rng(int(length * 100))
+    boxes = _boxes(rng, 25)
+    affine = unit_to_world(boxes)
+    d = rng.normal(size=(4000, 3))
+    d *= length / np.linalg.norm(d, axis=1, keepdims=True)
+    origins = np.concatenate([rng.uniform(-30, 30, (3000, 3)), np.repeat(boxes.center[:5], 200, axis=0)])  # some
+    rays = np.concatenate([origins, d], axis=1).astype(np.float32)  # inside a box; rays sharing an origin
+    radius = 0.5 * np.linalg.norm(boxes.size, axis=1) * (1 + 2 * BOX_MARGIN) + 1e-6
+    rows = np.arange(0, 4000, 2)  # every other ray
+    pair_row, pair_actor, local = actor_pairs(rays, rows, np.arange(25), np.ascontiguousarray(
+        np.linalg.inv(affine[:, :, :3])), np.ascontiguousarray(affine[:, :, 3]), radius)
+    meets = _slab_pairs(rays, affine)
+    expected = {(j, a) for j, i in enumerate(rows) for a in range(25) if (int(i), a) in meets}
+    assert set(zip(pair_row.tolist(), pair_actor.tolist(), strict=True)) == expected
+    assert len(expected) > 100
+    assert np.all(np.diff(pair_row) >= 0)  # ordered by row
+    for p in range(0, len(pair_row), 37):  # the unit-frame ray maps back to the world ray
+        m = affine[pair_actor[p]]
+        np.testing.assert_allclose(m[:, :3] @ local[p, :3] + m[:, 3], rays[rows[pair_row[p]], :3], atol=1e-3)
+        np.testing.assert_allclose(m[:, :3] @ local[p, 3:], rays[rows[pair_row[p]], 3:], rtol=1e-5, atol=1e-6)
+
+
+def test_nearest_hit_wins_and_normals_map_by_the_inverse_transpose():
+    # Actor 0: a 4 x 2 x 1 box turned 90 deg: its unit-frame +x face (normal (1, 0, 0)) faces world +y.
+    affine = unit_to_world(Boxes3D([[0.0, 0.0, 0.0], [0.0, 10.0, 0.0]], [[4.0, 2.0, 1.0], [1.0, 1.0, 1.0]],
+                                   [np.pi / 2, 0.0]))
+    inv = np.ascontiguousarray(np.linalg.inv(affine[:, :, :3]))
+    # Rows 0 and 1 have two pairs each; row 2 one pair that missed.
+    t, prim, normal, actor = nearest_actor_hits(
+        3, np.array([0, 0, 1, 1, 2]), np.array([1, 0, 0, 1, 1]), np.float32([9.0, 7.5, 2.0, 3.0, np.inf]),
+        np.uint32([11, 12, 13, 14, 15]),
+        np.float32([[0, 0, 1], [1, 0, 0], [0.6, 0.8, 0], [0, 1, 0], [0, 0, 0]]), inv)
+    assert t.tolist() == [7.5, 2.0, np.inf] and prim.tolist()[:2] == [12, 13] and actor.tolist()[:2] == [0, 0]
+    np.testing.assert_allclose(normal[0], [0, 1, 0], atol=1e-7)
+    # (0.6, 0.8, 0) in the unit frame: A^-T scales by 1/size (1/4, 1/2), then turns 90 deg: (-0.4, 0.15) normalised.
+    np.testing.assert_allclose(normal[1], np.array([-0.4, 0.15, 0.0]) / np.hypot(0.4, 0.15), atol=1e-6)
+    assert not normal[2].any()
+
+
+def test_shadow_segments_through_and_beside_an_actor():
+    car = Actors([5], [ObjectClass.CAR], Boxes3D([[10.0, 0.0, 0.75]], [[4.5, 1.8, 1.5]], [0.3]), [[0.5, 0.5, 0.5]])
+    scene = FrameScene(StaticScene([]), car, threads=1)
+    origins = np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 0.5], [0.0, 5.0, 0.5]])
+    lamps = np.array([[20.0, 0.0, 0.5], [5.0, 0.0, 0.5], [20.0, 5.0, 0.5]])  # through; short of it; beside it
+    rays = np.concatenate([origins, lamps - origins], axis=1).astype(np.float32)  # segments: t in [0, 1]
+    assert scene.occluded_rays(rays, 1.0).tolist() == [True, False, False]
+    assert scene.occluded_rays(rays, 1.0, actor_rays=np.array([True, True, True])).tolist() == [True, False, False]
