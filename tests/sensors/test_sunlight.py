@@ -64,3 +64,15 @@ def test_highlight_falls_off_as_n_dot_h_to_the_shininess(shininess):
     normal = (half * np.cos(tilt) + np.cross(axis, half) * np.sin(tilt)).astype(np.float32)[None]
     out = _shade(rays, [True], normal, [1], [[0.0, 0.0, 0.0]], [True], [0.0, 0.5], [1.0, shininess])
     np.testing.assert_allclose(out[0], SUN_RGB * 0.5 * np.cos(tilt) ** shininess, rtol=1e-4)
+
+
+@pytest.mark.parametrize("exponent", [1.0, 16.0, 48.0, 96.0, 1024.0, 2.5, 2000.0])
+def test_power_is_within_a_few_ulps_of_the_exact_power(exponent):
+    from pipeline.sensors.sunlight import _power
+
+    x = np.linspace(0.0, 1.0, 1001).astype(np.float32)
+    got = np.array([_power(v, np.float32(exponent)) for v in x], np.float64)
+    exact = x.astype(np.float64) ** exponent
+    tiny = exact < 1e-30  # float32 underflow: both ~0
+    np.testing.assert_allclose(got[~tiny], exact[~tiny], rtol=4e-5 if exponent <= 1024 else 1e-6)
+    assert np.all(got[tiny] < 1e-30) and got[0] == 0.0 and got[-1] == 1.0
