@@ -119,7 +119,7 @@ class ActorMeshes:
             if not (np.all(lo == -0.5) and np.all(hi == 0.5)):
                 raise ValueError(f"mesh for {object_class!s} must span exactly [-0.5, 0.5]^3, got {lo} .. {hi}")
             self._meshes[ObjectClass(object_class)] = mesh
-        self.scene_cache: dict[ObjectClass, object] = {}
+        self.scene_cache: dict[object, object] = {}  # ObjectClass -> Embree scene; "tables" -> triangle tables
 
     def __getitem__(self, object_class: ObjectClass) -> Mesh:
         return self._meshes[ObjectClass(object_class)]
