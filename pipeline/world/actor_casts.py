@@ -21,6 +21,28 @@ from pipeline.core.jit import kernel
 BOX_MARGIN = 1e-3  # the slab test's box is the unit box grown by this much (unit-frame units) on every side
 
 
+@kernel("void(float64[:, ::1], float64, float64, float64, float64, float64, float64, float32[::1])")
+def _unit_ray(inv, v0, v1, v2, d0, d1, d2, out):
+    """A world ray in an actor's unit frame, into ``out`` (6,) float32: origin A^-1 (o - c) from v = c - o, and
+    direction A^-1 d (not normalised, so t stays in world metres); ``inv`` (3, 3) float64 is A^-1."""
+    for k in range(3):
+        out[k] = np.float32(-(inv[k, 0] * v0 + inv[k, 1] * v1 + inv[k, 2] * v2))
+        out[3 + k] = np.float32(inv[k, 0] * d0 + inv[k, 1] * d1 + inv[k, 2] * d2)
+
+
+@kernel("float32[:, ::1](float32[:, ::1], int64[::1], float64[:, :, ::1], float64[:, ::1])")
+def unit_frame_rays(rays, actor, inv_linear, centre):
+    """(N, 6) float32: each of the (N, 6) float32 world ``rays`` in the unit frame of its ``actor`` ((N,) int64),
+    as :func:`actor_pairs` maps them (A^-1 per actor ``inv_linear`` (A, 3, 3), c ``centre`` (A, 3))."""
+    out = np.empty((rays.shape[0], 6), np.float32)
+    for i in range(rays.shape[0]):
+        a = actor[i]
+        _unit_ray(inv_linear[a], centre[a, 0] - np.float64(rays[i, 0]), centre[a, 1] - np.float64(rays[i, 1]),
+                  centre[a, 2] - np.float64(rays[i, 2]), np.float64(rays[i, 3]), np.float64(rays[i, 4]),
+                  np.float64(rays[i, 5]), out[i])
+    return out
+
+
 @kernel("boolean(float32[::1])")
 def _meets_unit_box(ray):
     """Whether the ray [origin | direction] (float32, unit frame) meets the grown unit box at some t >= 0."""
@@ -102,12 +124,7 @@ def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
             if (along * along > r[b] * r[b] * dd and along < 0) or (v[3, b] - r[b] * r[b]) * dd > along * along:
                 continue
             a = actors[b]
-            v0, v1, v2 = v[0, b], v[1, b], v[2, b]
-            for k in range(3):
-                local[k] = np.float32(-(inv_linear[a, k, 0] * v0 + inv_linear[a, k, 1] * v1
-                                        + inv_linear[a, k, 2] * v2))
-                local[3 + k] = np.float32(inv_linear[a, k, 0] * d0 + inv_linear[a, k, 1] * d1
-                                          + inv_linear[a, k, 2] * d2)
+            _unit_ray(inv_linear[a], v[0, b], v[1, b], v[2, b], d0, d1, d2, local)
             if not _meets_unit_box(local):
                 continue
             if count == pair_row.size:

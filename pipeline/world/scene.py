@@ -40,7 +40,7 @@ import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.jit import as_input
-from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits
+from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits, unit_frame_rays
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
@@ -120,7 +120,6 @@ def _occluded(scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, t_max_m: 
 
 
 _CLASSES = list(ObjectClass)  # an actor's class code is a position in this list (Actors.class_codes)
-_MISS = np.iinfo(np.uint32).max  # Embree's invalid primitive id, what Open3D reports for a miss
 _NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.uint32), np.zeros((0, 3), np.float32))  # a cast of no ray
 
 
@@ -416,23 +415,11 @@ class FrameScene:
         if len(actor_index) and (actor_index.min() < 0 or actor_index.max() >= len(self.actors)):
             raise ValueError(f"actor_index out of range for {len(self.actors)} actors")
         t = np.full(len(rays), np.inf, np.float32)
-        codes = self.actors.class_codes[actor_index]
-        inv_all = self._inv_linear.reshape(-1, 9)
-        for code, object_class in enumerate(ObjectClass):
-            sel = np.flatnonzero(codes == code)
-            if not len(sel):
-                continue
-            # Per ray p_unit = A^-1 (p - centre), d_unit = A^-1 d; column by column (vectorised over rays).
-            inv = np.take(inv_all, actor_index[sel], axis=0)
-            r = np.take(rays, sel, axis=0).astype(np.float64)
-            o = r[:, :3] - np.take(self._center, actor_index[sel], axis=0)
-            local = np.empty((len(sel), 6), np.float32)
-            for i in range(3):
-                local[:, i] = inv[:, 3 * i] * o[:, 0] + inv[:, 3 * i + 1] * o[:, 1] + inv[:, 3 * i + 2] * o[:, 2]
-                local[:, 3 + i] = inv[:, 3 * i] * r[:, 3] + inv[:, 3 * i + 1] * r[:, 4] + inv[:, 3 * i + 2] * r[:, 5]
+        local = unit_frame_rays(as_input(rays, np.float32), actor_index, self._inv_linear, self._center)
+        for code, sel in self._pairs_by_class(actor_index):
             # Directions stay non-unit in the unit box frame, so t is still in world metres.
-            scene = _canonical_scene(self.meshes, object_class)
-            t[sel] = scene.cast_rays(o3d.core.Tensor.from_numpy(local), nthreads=self.threads)["t_hit"].numpy()
+            t[sel] = _cast(_canonical_scene(self.meshes, _CLASSES[code]), np.take(local, sel, axis=0),
+                           self.threads)[0]
         return np.isfinite(t), t
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max_m: float = np.inf) -> np.ndarray:
@@ -460,7 +447,8 @@ class FrameScene:
         return blocked
 
     def _pairs_by_class(self, pair_actor: np.ndarray):
-        """(class code, the pairs of that class (int64 positions)) for each class among ``pair_actor``."""
+        """(class code, the positions (int64) of that class's entries) for each class among the actors
+        ``pair_actor``."""
         codes = self.actors.class_codes[pair_actor]
         for code in np.unique(codes):
             yield int(code), np.flatnonzero(codes == code)
