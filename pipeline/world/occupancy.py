@@ -9,10 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
+from pipeline.core.jit import kernel
+
 _MAX_EDGE_CELLS = 8.0  # triangles are split until every edge spans at most this many cells
+_SPAN = int(_MAX_EDGE_CELLS) + 2  # cells per axis that such a triangle's centres can lie in, from its lowest corner's
 
 
 @dataclass
@@ -47,33 +49,16 @@ class Grid:
         return out
 
     def rasterise(self, tri_xy: np.ndarray, raster: np.ndarray | None = None) -> np.ndarray:
-        """Mark cells whose centres lie in any triangle (T, 3, 2); returns the (rows, cols) bool raster."""
-        raster = np.zeros(self.shape, dtype=bool) if raster is None else raster
+        """Mark cells whose centres lie in any triangle (T, 3, 2); returns the (rows, cols) bool raster (``raster``
+        itself, marked in place, when given: C-contiguous bool of the grid's shape). Zero-area triangles mark
+        nothing."""
+        if raster is None:
+            raster = np.zeros(self.shape, dtype=bool)
+        elif raster.shape != self.shape or raster.dtype != bool or not raster.flags.c_contiguous:
+            raise ValueError(f"raster must be C-contiguous bool of shape {self.shape}, got {raster.dtype} "
+                             f"{raster.shape}")
         tri = _split_large(np.asarray(tri_xy, dtype=np.float64)[..., :2], _MAX_EDGE_CELLS * self.cell_m)
-        if not len(tri):
-            return raster
-        span = int(_MAX_EDGE_CELLS) + 2
-        off = np.arange(span)
-        lo = np.floor((tri.min(axis=1) - (self.x0, self.y0)) / self.cell_m).astype(np.int64)
-        for chunk in range(0, len(tri), 20_000):
-            t, base = tri[chunk : chunk + 20_000], lo[chunk : chunk + 20_000]
-            # Candidate cells: a span x span window from each triangle's lowest corner. A cell centre's x depends
-            # only on its column and y only on its row, so each edge function is a (T, span) term of the rows
-            # minus a (T, span) term of the columns, broadcast: the same float operations per cell as evaluating
-            # it cell by cell, at a fraction of the passes over (T, span, span) arrays.
-            cols, rows = base[:, 0, None] + off, base[:, 1, None] + off  # (T, span) each
-            px = self.x0 + (cols + 0.5) * self.cell_m
-            py = self.y0 + (rows + 0.5) * self.cell_m
-            orient = np.sign(_edge(t[:, 0], t[:, 1], t[:, 2]))[:, None, None]
-            inside = np.ones((len(t), span, span), dtype=bool)  # [triangle, row, column]
-            for a, b in ((0, 1), (1, 2), (2, 0)):
-                dx, dy = (t[:, b, 0] - t[:, a, 0])[:, None], (t[:, b, 1] - t[:, a, 1])[:, None]
-                edge = (dx * (py - t[:, a, 1, None]))[:, :, None] - (dy * (px - t[:, a, 0, None]))[:, None, :]
-                inside &= orient * edge >= -1e-9
-            inside &= ((rows >= 0) & (rows < self.shape[0]))[:, :, None]
-            inside &= ((cols >= 0) & (cols < self.shape[1]))[:, None, :]
-            k, i, j = np.nonzero(inside)
-            raster[rows[k, i], cols[k, j]] = True
+        _mark_triangles(np.ascontiguousarray(tri), float(self.x0), float(self.y0), float(self.cell_m), raster)
         return raster
 
     def mark_convex(self, poly_xy: np.ndarray, raster: np.ndarray) -> None:
@@ -93,22 +78,56 @@ class Grid:
         inside = (side >= -1e-9).all(axis=0) | (side <= 1e-9).all(axis=0)
         raster[r0 : r1 + 1, c0 : c1 + 1] |= inside
 
-    def dilate(self, raster: np.ndarray, radius_m: float) -> np.ndarray:
-        """Cells within ``radius_m`` of a marked cell (Euclidean, exact on the cell centres).
+    def near(self, raster: np.ndarray, xy: np.ndarray, radius_m: float, outside: bool = False) -> np.ndarray:
+        """(n,) bool: a marked cell lies within ``radius_m`` of the cell of each point (n, >=2) (Euclidean, between
+        cell centres); ``outside`` for points off the grid. Cells off the grid count as unmarked.
 
-        A dilation by the disk of cell offsets (i, j) with (i^2 + j^2) * cell^2 <= radius^2 marks exactly
-        the cells a Euclidean distance transform would, at a fraction of its cost on large rasters.
+        The same as looking the points up in ``raster`` dilated by the disk of cell offsets (i, j) with
+        (i^2 + j^2) * cell^2 <= radius^2 (exactly the cells a Euclidean distance transform would mark), but it
+        visits only the points' disks: the world's rasters have ~16M cells, and the props query a few thousand.
         """
-        if radius_m <= 0:
-            return raster.copy()
-        r = int(np.floor(radius_m / self.cell_m + 1e-9))
-        offsets = np.arange(-r, r + 1)
-        disk = ((offsets[:, None] ** 2 + offsets[None, :] ** 2) * self.cell_m**2 <= radius_m**2 + 1e-9)
-        return cv2.dilate(raster.astype(np.uint8), disk.astype(np.uint8), borderValue=0).astype(bool)
+        r = int(np.floor(max(radius_m, 0.0) / self.cell_m + 1e-9))
+        i, j = np.mgrid[-r:r + 1, -r:r + 1].reshape(2, -1)
+        disk = (i**2 + j**2) * self.cell_m**2 <= radius_m**2 + 1e-9
+        i, j = i[disk], j[disk]
+        row, col, ok = self.cells(xy)
+        out = np.full(len(xy), outside, dtype=bool)
+        rows, cols = row[ok, None] + i, col[ok, None] + j  # (m, offsets)
+        inside = (rows >= 0) & (rows < self.shape[0]) & (cols >= 0) & (cols < self.shape[1])
+        out[ok] = (raster[np.where(inside, rows, 0), np.where(inside, cols, 0)] & inside).any(axis=1)
+        return out
 
 
-def _edge(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+@kernel("void(float64[:, :, ::1], float64, float64, float64, bool_[:, ::1])")
+def _mark_triangles(tri, x0, y0, cell_m, raster):
+    """Mark, in the (rows, cols) bool ``raster`` of cells ``cell_m`` wide from (x0, y0), the cells whose centre lies
+    in one of the (T, 3, 2) float64 triangles (or within 1e-9 of its edge functions), each spanning at most
+    _MAX_EDGE_CELLS cells per axis (:func:`_split_large`): only the span x span cells from its lowest corner's are
+    tested. Zero-area and non-finite triangles mark nothing."""
+    rows, cols = raster.shape
+    span = _SPAN
+    for k in range(tri.shape[0]):
+        ax, ay, bx, by, cx, cy = tri[k, 0, 0], tri[k, 0, 1], tri[k, 1, 0], tri[k, 1, 1], tri[k, 2, 0], tri[k, 2, 1]
+        area2 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if area2 == 0 or not np.isfinite(area2):
+            continue
+        orient = 1.0 if area2 > 0 else -1.0
+        c0 = np.int64(np.floor((min(ax, bx, cx) - x0) / cell_m))
+        r0 = np.int64(np.floor((min(ay, by, cy) - y0) / cell_m))
+        for i in range(span):
+            r = r0 + i
+            if r < 0 or r >= rows:
+                continue
+            py = y0 + (r + 0.5) * cell_m
+            for j in range(span):
+                c = c0 + j
+                if c < 0 or c >= cols:
+                    continue
+                px = x0 + (c + 0.5) * cell_m
+                if (orient * ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) >= -1e-9
+                        and orient * ((cx - bx) * (py - by) - (cy - by) * (px - bx)) >= -1e-9
+                        and orient * ((ax - cx) * (py - cy) - (ay - cy) * (px - cx)) >= -1e-9):
+                    raster[r, c] = True
 
 
 def _split_large(tri: np.ndarray, max_edge_m: float) -> np.ndarray:

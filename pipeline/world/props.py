@@ -48,7 +48,6 @@ class PropPlacer:
                  junctions: np.ndarray, highway: set[str], rng: np.random.Generator) -> None:
         self.geo, self.grid, self.rng, self.highway = geometry, grid, rng, highway
         self.paved, self.driving, self.junctions = paved, driving, junctions
-        self.clear_2m = ~grid.dilate(paved, 2.0)
         self.taken = np.zeros(grid.shape, dtype=bool)
         self.parts = {name: PartBuilder(cls) for name, cls in (
             ("building", SemanticClass.BUILDING), ("vegetation", SemanticClass.VEGETATION),
@@ -59,8 +58,9 @@ class PropPlacer:
 
     def free(self, xy: np.ndarray, clearance_m: float = 0.0) -> np.ndarray:
         """(n,) bool: points not on pavement (``clearance_m`` 0 or 2) and not taken by another prop."""
-        clear = self.grid.lookup(self.clear_2m if clearance_m >= 2.0 else ~self.paved, xy)
-        return clear & ~self.grid.lookup(self.taken, xy, outside=True)
+        paved = self.grid.near(self.paved, xy, 2.0, outside=True) if clearance_m >= 2.0 else \
+            self.grid.lookup(self.paved, xy, outside=True)
+        return ~paved & ~self.grid.lookup(self.taken, xy, outside=True)
 
     def take(self, corners: np.ndarray) -> None:
         """Mark convex quads (N, 4, >=2) as taken."""
@@ -161,7 +161,6 @@ class PropPlacer:
 
     def _street_trees(self) -> None:
         spots, zs = [], []
-        clear = ~self.grid.dilate(self.paved, 0.7)
         for edge, lanes in self.edges.items():
             if edge in self.highway:
                 continue
@@ -171,7 +170,7 @@ class PropPlacer:
             s = np.arange(self.rng.uniform(3.0, 9.0), length - 3.0, self.rng.uniform(10.0, 18.0))
             if len(s):
                 pos, _ = interpolate(line, s)
-                ok = self.grid.lookup(clear, pos) & self.free(pos)
+                ok = ~self.grid.near(self.paved, pos, 0.7, outside=True) & self.free(pos)
                 spots.append(pos[ok, :2])
                 zs.append(pos[ok, 2])
         if spots:
@@ -182,8 +181,7 @@ class PropPlacer:
         x1, y1 = x0 + self.grid.shape[1] * self.grid.cell_m, y0 + self.grid.shape[0] * self.grid.cell_m
         n = min(max_trees, int((x1 - x0) * (y1 - y0) / area_per_tree_m2))
         xy = self.rng.uniform((x0, y0), (x1, y1), (n, 2))
-        far = ~self.grid.dilate(self.paved, 4.0)
-        ok = self.grid.lookup(far, xy) & ~self.grid.lookup(self.grid.dilate(self.taken, 2.0), xy, outside=True)
+        ok = ~self.grid.near(self.paved, xy, 4.0, outside=True) & ~self.grid.near(self.taken, xy, 2.0, outside=True)
         self._trees(xy[ok], np.zeros(int(ok.sum())))
 
     # -- street lamps and barriers -----------------------------------------------------------------
@@ -220,8 +218,6 @@ class PropPlacer:
         return head - [0.0, 0.0, 0.1]
 
     def _barriers(self) -> None:
-        blocked = self.grid.dilate(self.driving, 0.35)
-        near_junction = self.grid.dilate(self.junctions, 1.0)
         ends = {(lanes.iloc[0].from_junction, lanes.iloc[0].to_junction) for lanes in self.edges.values()}
         for edge, lanes in self.edges.items():
             carriage = lanes[lanes.kind.isin(CARRIAGEWAY_KINDS)]
@@ -229,13 +225,13 @@ class PropPlacer:
                 continue
             for row, side in ((carriage.iloc[-1], 1.0), (carriage.iloc[0], -1.0)):
                 line = resample(offset_polyline(lane_points(row), side * (row.width_m / 2 + 0.6)), 1.0)
-                self._barrier_runs(line, ~self.grid.lookup(blocked, line), _BARRIER_PROFILE)
+                self._barrier_runs(line, ~self.grid.near(self.driving, line, 0.35), _BARRIER_PROFILE)
             row = carriage.iloc[-1]
             reverse = (row.to_junction, row.from_junction)
             if reverse in ends and reverse < (row.from_junction, row.to_junction):  # drawn once per pair
                 line = resample(offset_polyline(lane_points(row), row.width_m / 2), 1.0)
                 on_median = self.grid.lookup(self.driving, offset_polyline(line, 0.5))  # opposite lanes there
-                self._barrier_runs(line, on_median & ~self.grid.lookup(near_junction, line), _MEDIAN_PROFILE)
+                self._barrier_runs(line, on_median & ~self.grid.near(self.junctions, line, 1.0), _MEDIAN_PROFILE)
 
     def _barrier_runs(self, line: np.ndarray, ok: np.ndarray, profile: tuple) -> None:
         """Barriers along the runs of at least 3 consecutive ``ok`` points of ``line`` (1 m apart)."""

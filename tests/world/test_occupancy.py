@@ -1,4 +1,5 @@
-"""Grid dilation equals the Euclidean distance transform it replaces (exact on cell centres)."""
+"""Grid queries: the disk test equals the Euclidean distance transform it replaces (exact on cell centres), and
+rasterisation marks exactly the cell centres inside the triangles."""
 
 from __future__ import annotations
 
@@ -10,13 +11,24 @@ from pipeline.world.occupancy import Grid
 
 
 @pytest.mark.parametrize(("cell_m", "radius_m"), [(0.5, 0.35), (0.5, 0.7), (0.5, 2.0), (0.25, 4.0), (0.4, 1.0)])
-def test_dilate_matches_the_distance_transform(cell_m, radius_m):
+def test_near_matches_the_distance_transform(cell_m, radius_m):
+    """At a point anywhere in every cell of the grid, against the distance from the cell's centre to the nearest
+    marked centre (scipy's exact transform); off the grid, the ``outside`` value."""
     rng = np.random.default_rng(3)
     raster = rng.random((120, 90)) < 0.01
     raster[0, 5] = raster[-1, -1] = True  # marks on the border
-    grid = Grid(0.0, 0.0, cell_m, raster.shape)
+    grid = Grid(-2.0, 1.0, cell_m, raster.shape)
     expected = ndimage.distance_transform_edt(~raster) * cell_m <= radius_m
-    np.testing.assert_array_equal(grid.dilate(raster, radius_m), expected)
+    rows, cols = np.mgrid[0:120, 0:90].reshape(2, -1)
+    xy = np.column_stack([grid.x0 + (cols + rng.uniform(0.01, 0.99, len(cols))) * cell_m,
+                          grid.y0 + (rows + rng.uniform(0.01, 0.99, len(rows))) * cell_m])
+    near = grid.near(raster, xy, radius_m)
+    assert 0 < near.sum() < len(near)
+    np.testing.assert_array_equal(near, expected.reshape(-1))
+    off = np.array([[grid.x0 - 0.1, 3.0], [0.0, grid.y0 - 0.1], [grid.x0 + 90 * cell_m + 0.01, 3.0],
+                    [0.0, grid.y0 + 120 * cell_m + 0.01]])
+    assert not grid.near(raster, off, radius_m).any()
+    assert grid.near(raster, off, radius_m, outside=True).all()
 
 
 def _centres_in_triangle(grid: Grid, tri: np.ndarray) -> np.ndarray:
