@@ -33,9 +33,9 @@ from tqdm import tqdm
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
-from pipeline.core.tables import read_parquet, read_parquet_files, write_parquet
+from pipeline.core.tables import read_ipc_files, read_parquet, write_parquet
 from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
-from pipeline.stages.render_frames import ShardJob, render_shard, reuse_freed_memory
+from pipeline.stages.render_frames import SHARD_FORMAT, ShardJob, render_shard, reuse_freed_memory
 from pipeline.stages.rig import build_sensors, camera_info, lidar_info
 from pipeline.world.scene import embree_started
 
@@ -105,7 +105,8 @@ def _job_key(sim_meta: dict, sim_dir: Path, rig: RigConfig, condition: Condition
     digest = hashlib.sha256((sim_dir / "trajectories.parquet").read_bytes()).hexdigest()
     return config_hash({"sim": sim_meta["config_hash"], "seed": sim_meta["seed"], "trajectories": digest,
                         "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),
-                        "frames": frames, "schema": SCHEMA_VERSION, "roadsynth": software_versions()["roadsynth"]})
+                        "frames": frames, "schema": SCHEMA_VERSION, "shards": SHARD_FORMAT,
+                        "roadsynth": software_versions()["roadsynth"]})
 
 
 def _prepare_work(work: Path, key: str) -> None:
@@ -252,8 +253,8 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
               seed: int, selection: list[int], num_shards: int) -> dict[str, object]:
     record = work / "record"
     shards = work / "shards"
-    frames = read_parquet_files([shards / f"frames-{i:05d}.parquet" for i in range(num_shards)])
-    labels = read_parquet_files([shards / f"labels-{i:05d}.parquet" for i in range(num_shards)])
+    frames = read_ipc_files([shards / f"frames-{i:05d}.arrow" for i in range(num_shards)])
+    labels = read_ipc_files([shards / f"labels-{i:05d}.arrow" for i in range(num_shards)])
     frames = frames.sort_values("frame").reset_index(drop=True).astype(FRAME_COLUMNS)
     if frames["frame"].tolist() != selection:
         raise RuntimeError(f"{work}: the shards hold frames {frames['frame'].tolist()}, not the {len(selection)} "

@@ -25,7 +25,7 @@ from pipeline.core.geometry import Boxes3D, Transform, wrap_angle
 from pipeline.core.jit import as_input, kernel
 from pipeline.core.png import write_png
 from pipeline.core.record import DEPTH_SCALE, FRAME_COLUMNS, LABEL_COLUMNS, POINT_COLUMNS, camera_path, lidar_path
-from pipeline.core.tables import read_parquet, write_parquet, write_sweep
+from pipeline.core.tables import read_parquet, write_ipc, write_sweep
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
@@ -185,10 +185,38 @@ def _lidar_rows(frame: int, name: str, lidar, sweep, cols: dict[str, np.ndarray]
     return out
 
 
-def _label_table(parts: list[dict[str, np.ndarray]]) -> pd.DataFrame:
-    """One typed table (LABEL_COLUMNS) from the label columns of several sensors and frames."""
-    columns = {k: np.concatenate([p[k] for p in parts]) if parts else np.zeros(0) for k in LABEL_COLUMNS}
-    return pd.DataFrame(columns).astype(LABEL_COLUMNS)
+def _shard_type(dtype: str) -> pa.DataType:
+    """A shard table's Arrow type for a record column's pandas ``dtype``: strings as strings, the nullable Float64
+    and Int64 as float64 with NaN for null (pixel counts are far below 2^53), the others as they are. The render's
+    finalize types the record's tables from these once (pandas' astype), not each shard."""
+    if dtype == "str":
+        return pa.string()
+    if dtype in ("Float64", "Int64"):
+        return pa.float64()
+    return pa.from_numpy_dtype(np.dtype(dtype))
+
+
+SHARD_FORMAT = 2  # of the shard tables: 2, Arrow IPC files of these schemas (1: typed Parquet)
+SHARD_LABELS = pa.schema([(c, _shard_type(t)) for c, t in LABEL_COLUMNS.items()])
+SHARD_FRAMES = pa.schema([(c, _shard_type(t)) for c, t in FRAME_COLUMNS.items()])
+
+
+def _shard_table(columns: dict[str, np.ndarray | list], schema: pa.Schema) -> pa.Table:
+    """The Arrow table of ``schema`` from its columns (arrays or lists, converted to each column's type)."""
+    arrays = []
+    for field in schema:
+        values = columns[field.name]
+        if pa.types.is_string(field.type):
+            arrays.append(pa.array(np.asarray(values, object), field.type))
+        else:
+            arrays.append(pa.array(np.asarray(values, field.type.to_pandas_dtype())))
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _label_table(parts: list[dict[str, np.ndarray]]) -> pa.Table:
+    """One shard table (SHARD_LABELS) from the label columns of several sensors and frames."""
+    return _shard_table({k: np.concatenate([p[k] for p in parts]) if parts else [] for k in LABEL_COLUMNS},
+                        SHARD_LABELS)
 
 
 @dataclass
@@ -273,11 +301,10 @@ def render_shard(job: ShardJob) -> int:
             label_parts.append(_camera_rows(frame, camera.config.name, cam, others, lidar_points))
         frame_rows.append((frame, float(ego["time_s"]), int(ego["track_id"]), ego["x_m"], ego["y_m"], ego["z_m"],
                            ego["yaw_rad"], ego["speed_mps"]))
-    frames = pd.DataFrame(frame_rows, columns=list(FRAME_COLUMNS)).astype(FRAME_COLUMNS)
-    labels = _label_table(label_parts)
+    frames = _shard_table({c: [row[i] for row in frame_rows] for i, c in enumerate(FRAME_COLUMNS)}, SHARD_FRAMES)
     job.shard_dir.mkdir(parents=True, exist_ok=True)
-    write_parquet(frames, job.shard_dir / f"frames-{job.index:05d}.parquet")
-    write_parquet(labels, job.shard_dir / f"labels-{job.index:05d}.parquet")
+    write_ipc(frames, job.shard_dir / f"frames-{job.index:05d}.arrow")
+    write_ipc(_label_table(label_parts), job.shard_dir / f"labels-{job.index:05d}.arrow")
     (job.shard_dir / f"done-{job.index:05d}").write_text(" ".join(map(str, job.frames)) + "\n")
     return len(job.frames)
 
