@@ -139,11 +139,11 @@ def shade(
 def _sun_blocked(scene: FrameScene, shadow: np.ndarray, t_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
     """(M,) bool: the (M, 6) float32 ``shadow`` rays towards the sun (from :func:`sunlight.sun_rays`) from hits
     at distances ``t_m`` ((M,) float32) are blocked."""
-    origin = [np.ascontiguousarray(shadow[:, k]) for k in range(3)]
+    origin = [shadow[:, k] for k in range(3)]  # views: the tests below read them in place
     # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
     static_rays = np.ones(len(t_m), bool)
     near = np.flatnonzero(t_m < SUN_MAP_RANGE_M)
-    static_rays[near] = scene.static.sun_candidates(*(np.take(c, near) for c in origin), sun)
+    static_rays[near] = scene.static.sun_candidates(*origin, sun, rows=near)
     return scene.occluded_rays(shadow, actor_rays=scene.sun_actor_candidates(*origin, sun), static_rays=static_rays)
 
 

@@ -39,13 +39,13 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
-from pipeline.core.jit import as_input
+from pipeline.core.jit import as_input, kernel
 from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits, unit_frame_rays
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
-from pipeline.world.sunmap import SunMap, along_sun, sun_slope
+from pipeline.world.sunmap import SunMap, along_sun, points_input, sun_slope
 
 
 @dataclass(frozen=True)
@@ -311,14 +311,16 @@ class StaticScene:
             blocked[sub] = _occluded(self._scene, rays, t_max_m, threads, sub)
         return blocked
 
-    def sun_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:
-        """(M,) bool, conservative: which rays from the world points (x, y, z) (each (M,) float32) along the upward
+    def sun_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray,
+                       rows: np.ndarray | None = None) -> np.ndarray:
+        """(M,) bool, conservative: which rays from the world points (x, y, z) (each (N,) float32) along the upward
         unit direction ``sun`` (3,) may meet the static world (:class:`pipeline.world.sunmap.SunMap`, one per sun
-        direction, its tiles drawn as points fall in them and kept for the next frames)."""
+        direction, its tiles drawn as points fall in them and kept for the next frames); of the points ``rows``
+        ((M,) int64) only, if given."""
         key = tuple(np.asarray(sun, np.float64).tolist())
         if key not in self._sun_maps:
             self._sun_maps[key] = SunMap(self._vertices, self._triangles, np.asarray(sun, np.float64))
-        return self._sun_maps[key].candidates(x, y, z)
+        return self._sun_maps[key].candidates(x, y, z, rows)
 
 
 class FrameScene:
@@ -484,8 +486,9 @@ class FrameScene:
             return np.zeros(len(x), bool)
         lo, hi = self._sun_footprints(slope)
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
-        px, py = along_sun(x, y, z, slope)
-        p_lo, p_hi = np.array([px.min(), py.min()]), np.array([px.max(), py.max()])
+        x, y, z = (points_input(c) for c in (x, y, z))
+        sx, sy = np.asarray(slope, np.float32)
+        p_lo, p_hi = np.split(_projection_bounds(x, y, z, sx, sy).astype(np.float64), 2)
         near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))
         if not len(near):
             return np.zeros(len(x), bool)
@@ -494,9 +497,8 @@ class FrameScene:
         # Cell (i, j) covers [p_lo + (i, j) * cell, p_lo + (i + 1, j + 1) * cell).
         grid = rectangles_mask(rows, cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
                                np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
-        i = np.minimum(((px - np.float32(p_lo[0])) * np.float32(1.0 / cell)).astype(np.int32), rows - 1)
-        j = np.minimum(((py - np.float32(p_lo[1])) * np.float32(1.0 / cell)).astype(np.int32), cols - 1)
-        return np.take(grid.reshape(-1), i * cols + j) & (z <= self._top_z + CHUNK_PAD_M)
+        return _in_marked_cells(x, y, z, sx, sy, np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell),
+                                grid, np.float32(self._top_z + CHUNK_PAD_M))
 
     def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
@@ -508,3 +510,35 @@ class FrameScene:
             starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
             self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
         return self._footprints[key]
+
+
+@kernel("float32[::1](float32[:], float32[:], float32[:], float32, float32)")
+def _projection_bounds(x, y, z, sx, sy):
+    """[min px, min py, max px, max py] (float32) of the points (x, y, z) projected along the sun (slope (sx,
+    sy)) onto z = 0 (:func:`pipeline.world.sunmap.along_sun`, in float32)."""
+    out = np.empty(4, np.float32)
+    out[0] = out[1] = np.inf
+    out[2] = out[3] = -np.inf
+    for i in range(x.size):
+        px = x[i] - z[i] * sx
+        py = y[i] - z[i] * sy
+        out[0] = min(out[0], px)
+        out[1] = min(out[1], py)
+        out[2] = max(out[2], px)
+        out[3] = max(out[3], py)
+    return out
+
+
+@kernel("bool_[::1](float32[:], float32[:], float32[:], float32, float32, float32, float32, float32, bool_[:, ::1], "
+        "float32)")
+def _in_marked_cells(x, y, z, sx, sy, x0, y0, scale, grid, top_z):
+    """(N,) bool: the point's projection along the sun (slope (sx, sy)) falls in a marked cell of ``grid`` (cells
+    ``1 / scale`` wide from (x0, y0), the projections' lower bounds; the last row and column take what rounding
+    puts past them) and the point lies no higher than ``top_z``."""
+    rows, cols = grid.shape
+    out = np.empty(x.size, np.bool_)
+    for k in range(x.size):
+        i = min(np.int64(np.int32((x[k] - z[k] * sx - x0) * scale)), rows - 1)
+        j = min(np.int64(np.int32((y[k] - z[k] * sy - y0) * scale)), cols - 1)
+        out[k] = grid[i, j] and z[k] <= top_z
+    return out

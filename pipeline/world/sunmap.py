@@ -21,6 +21,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from pipeline.core.jit import kernel
+
 SUN_CELL_M = 0.25  # grid cell; only how many rays the test lets through depends on it
 SUN_TILE_CELLS = 128  # cells per tile side (32 m)
 SUN_Z_PAD_M = 1e-4  # a point this little above a triangle's top still counts: far above float32 rounding
@@ -76,31 +78,27 @@ class SunMap:
         self._tiles = np.full((16, t, t), -np.inf, np.float32)  # tiles drawn so far in slots 0 .. _drawn - 1
         self._drawn = 0
 
-    def candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """(M,) bool: which rays towards the sun from the points (x, y, z) (each (M,) float32, world metres) may meet
-        a static triangle; the others cannot."""
-        if not len(x):
+    def candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """(M,) bool: which rays towards the sun from the points (x, y, z) may meet a static triangle; the others
+        cannot. ``x``, ``y``, ``z`` (each (N,) float32, world metres; strided views are read in place); ``rows``
+        (M,) int64, optional: test only these points (default all, M = N)."""
+        x, y, z = (points_input(c) for c in (x, y, z))
+        rows = np.arange(len(x), dtype=np.int64) if rows is None else np.ascontiguousarray(rows, np.int64)
+        if not len(rows):
             return np.zeros(0, bool)
-        scale = np.float32(1.0 / SUN_CELL_M)
-        px, py = along_sun(x, y, z, self.slope)
-        # int32 cells and shifts (the tile side is a power of two): several times faster than int64 division.
-        cx = np.floor(px * scale).astype(np.int32)
-        cy = np.floor(py * scale).astype(np.int32)
-        shift, t = SUN_TILE_CELLS.bit_length() - 1, SUN_TILE_CELLS
-        ti, tj = cx >> shift, cy >> shift
-        i0, j0 = int(ti.min()), int(tj.min())
-        cols = int(tj.max()) - j0 + 1
-        tile = (ti - i0) * cols + (tj - j0)
-        needed = np.zeros((int(ti.max()) - i0 + 1) * cols, bool)
-        needed[tile] = True
+        sx, sy = np.asarray(self.slope, np.float32)
+        cx, cy, bounds = _cells(x, y, z, rows, sx, sy, np.float32(1.0 / SUN_CELL_M))
+        shift = SUN_TILE_CELLS.bit_length() - 1
+        # The tiles the cells lie in: (i0 .. i1) x (j0 .. j1), numbered row-major; draw those met, once each.
+        i0, i1, j0, j1 = (int(b) >> shift for b in bounds)
+        cols = j1 - j0 + 1
+        needed = _tiles_met(cx, cy, shift, i0, j0, cols, (i1 - i0 + 1) * cols)
         slots = np.full(len(needed), -1, np.int32)
         for k in np.flatnonzero(needed).tolist():
             slots[k] = self._tile(i0 + k // cols, j0 + k % cols)
-        slot = np.take(slots, tile)
-        cell = ((cx & (t - 1)) << shift) | (cy & (t - 1))
         drawn = self._tiles[: self._drawn + 1].reshape(-1)  # the last slot holds -inf: a tile no triangle meets
-        top = np.take(drawn, np.where(slot >= 0, slot, self._drawn) * (t * t) + cell)
-        return z <= top + np.float32(SUN_Z_PAD_M)
+        return _below_tops(cx, cy, z, rows, slots, shift, i0, j0, cols, drawn, self._drawn,
+                           np.float32(SUN_Z_PAD_M))
 
     def _tile(self, i: int, j: int) -> int:
         """The slot of tile (i, j) in ``_tiles``, drawn now if it is not yet; -1 where no triangle meets it."""
@@ -129,3 +127,57 @@ class SunMap:
         self._drawn += 1
         self._slot[(i, j)] = slot
         return slot
+
+
+def points_input(a: np.ndarray) -> np.ndarray:
+    """``a`` as a writeable float32 array (a kernel's input), copied only where it is not one already: a strided
+    view (a column of an (N, 6) ray array) stays a view."""
+    return np.require(a, np.float32, ["W"])
+
+
+@kernel("Tuple((int32[::1], int32[::1], int64[::1]))(float32[:], float32[:], float32[:], int64[::1], float32, float32, "
+        "float32)")
+def _cells(x, y, z, rows, sx, sy, scale):
+    """The cells (cx, cy) (each (M,) int32) of the points ``rows`` projected along the sun (slope (sx, sy); cells
+    ``1 / scale`` wide), and their bounds [min cx, max cx, min cy, max cy] (int64)."""
+    n = rows.size
+    cx = np.empty(n, np.int32)
+    cy = np.empty(n, np.int32)
+    lo_x = lo_y = np.iinfo(np.int32).max
+    hi_x = hi_y = np.iinfo(np.int32).min
+    for k in range(n):
+        i = rows[k]
+        a = np.int32(np.floor((x[i] - z[i] * sx) * scale))
+        b = np.int32(np.floor((y[i] - z[i] * sy) * scale))
+        cx[k] = a
+        cy[k] = b
+        lo_x, hi_x = min(lo_x, a), max(hi_x, a)
+        lo_y, hi_y = min(lo_y, b), max(hi_y, b)
+    return cx, cy, np.array([lo_x, hi_x, lo_y, hi_y], np.int64)
+
+
+@kernel("bool_[::1](int32[::1], int32[::1], int64, int64, int64, int64, int64)")
+def _tiles_met(cx, cy, shift, i0, j0, cols, count):
+    """(count,) bool: the tiles (cells >> shift, numbered row-major from (i0, j0), ``cols`` per row) that the
+    cells (cx, cy) lie in."""
+    met = np.zeros(count, np.bool_)
+    for k in range(cx.size):
+        met[((cx[k] >> shift) - i0) * cols + ((cy[k] >> shift) - j0)] = True
+    return met
+
+
+@kernel("bool_[::1](int32[::1], int32[::1], float32[:], int64[::1], int32[::1], int64, int64, int64, int64, "
+        "float32[::1], int64, float32)")
+def _below_tops(cx, cy, z, rows, slots, shift, i0, j0, cols, tiles, empty, pad):
+    """(M,) bool: the point ``rows[k]`` (height z) lies no higher than ``pad`` above its cell's height, read from
+    the drawn tiles (``tiles``: slots of (2^shift)^2 cells, flat; a tile's slot from ``slots`` as numbered in
+    :func:`_tiles_met`; ``empty``: the slot of a tile no triangle meets)."""
+    side = np.int64(1) << shift
+    out = np.empty(cx.size, np.bool_)
+    for k in range(cx.size):
+        slot = np.int64(slots[((cx[k] >> shift) - i0) * cols + ((cy[k] >> shift) - j0)])
+        if slot < 0:
+            slot = empty
+        cell = ((cx[k] & (side - 1)) << shift) | (cy[k] & (side - 1))
+        out[k] = z[rows[k]] <= tiles[slot * side * side + cell] + pad
+    return out

@@ -110,3 +110,21 @@ def test_the_masked_static_test_equals_the_full_one():
     mask = scene.sun_candidates(*(points[:, k].copy() for k in range(3)), sun)
     assert np.array_equal(scene.occluded(rays, np.inf, where=mask), scene.occluded(rays, np.inf))
     assert scene.occluded(rays, np.inf, where=mask).any()
+
+
+def test_points_by_rows_and_in_place():
+    """A subset by ``rows`` of the columns of an (N, 6) ray array, read in place, gives the candidates of those
+    points alone; and no rows, none."""
+    rng = np.random.default_rng(5)
+    meshes = random_world(rng)
+    sun = sun_at(-60.0, 35.0)
+    points = np.column_stack([rng.uniform(-70, 70, (5000, 2)), rng.uniform(0.0, 3.0, 5000)]).astype(np.float32)
+    rays = sun_rays(points, sun)
+    merged = Mesh.concatenate(meshes)
+    sun_map = SunMap(merged.vertices, merged.triangles, sun)
+    rows = np.sort(rng.choice(len(points), 1200, replace=False))
+    subset = sun_map.candidates(rays[:, 0], rays[:, 1], rays[:, 2], rows)
+    alone = candidates(meshes, points[rows], sun)
+    assert subset.any() and not subset.all()
+    np.testing.assert_array_equal(subset, alone)
+    assert sun_map.candidates(rays[:, 0], rays[:, 1], rays[:, 2], np.zeros(0, np.int64)).shape == (0,)
