@@ -27,6 +27,7 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -234,7 +235,8 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
         return
     queue = collections.deque(jobs)
     children = min(workers, len(jobs)) - 1
-    with cf.ProcessPoolExecutor(children, mp_context=context) as pool:
+    # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
+    with _restored_opencv_threads(), cf.ProcessPoolExecutor(children, mp_context=context) as pool:
         busy: dict[cf.Future, cf.Executor] = {pool.submit(render_shard, queue.popleft()): pool
                                               for _ in range(children)}
         with progress() as bar, cf.ThreadPoolExecutor(1) as here:
@@ -247,6 +249,15 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
                 for future in done:
                     idle.append(busy.pop(future))
                     bar.update(future.result())
+
+
+@contextlib.contextmanager
+def _restored_opencv_threads() -> Iterator[None]:
+    threads = cv2.getNumThreads()
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(threads)
 
 
 def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConfig, condition: ConditionConfig,

@@ -15,6 +15,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
 import pyarrow as pa
@@ -271,7 +272,13 @@ def _state(job: ShardJob) -> _WorkerState:
 
 
 def render_shard(job: ShardJob) -> int:
-    """Render ``job.frames``; write images, point clouds and the shard's tables. Returns frames rendered."""
+    """Render ``job.frames``; write images, point clouds and the shard's tables. Returns frames rendered.
+
+    ``job.threads`` caps Embree's threads per cast and, when not 0, OpenCV's for the process (its post effects:
+    a second thread beside a pool's other workers only costs CPU, ~1.5 ms per frame at noon). Neither changes a
+    pixel."""
+    if job.threads:
+        cv2.setNumThreads(job.threads)
     state = _state(job)
     world, static, cameras, lidars, condition = state.world, state.static, state.cameras, state.lidars, \
         state.condition

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import shutil
 import subprocess
 import sys
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
@@ -104,8 +106,11 @@ def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_di
     # This process has cast rays (record_dir), so the workers fork from a server process, not from here.
     assert _pool_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
     again = tmp_path / "again"
+    opencv_threads = cv2.getNumThreads()
     render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
     assert tree_hashes(again, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
+    # What the render sets for itself in this process comes back: OpenCV's threads, the collector's reach.
+    assert cv2.getNumThreads() == opencv_threads and gc.get_freeze_count() == 0
 
 
 _FRESH_RENDER = """
