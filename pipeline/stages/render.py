@@ -142,7 +142,7 @@ def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
-    reuse_freed_memory()  # before the static world build, whose rasters would otherwise page-fault in anew each time
+    reuse_freed_memory()  # from the start: the static world build's large temporaries too
     with _frozen_heap():
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)

@@ -59,3 +59,7 @@ def test_rasterise_marks_exactly_the_cell_centres_inside():
     one = np.zeros(grid.shape, bool)
     grid.rasterise(tris[50:51], one)  # into a given raster, one triangle
     np.testing.assert_array_equal(one, _centres_in_triangle(grid, tris[50]))
+    flat = np.array([[[1.0, 3.0], [9.0, 3.0], [5.0, 3.0]], [[2.0, 4.0], [2.0, 4.0], [2.0, 4.0]]])
+    assert not grid.rasterise(flat).any()  # zero-area triangles (a segment, a point) mark nothing
+    with pytest.raises(ValueError, match="C-contiguous bool"):
+        grid.rasterise(tris[:1], np.zeros(grid.shape, np.uint8))
