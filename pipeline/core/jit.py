@@ -38,3 +38,10 @@ def as_input(a: np.ndarray, dtype: np.dtype | type) -> np.ndarray:
     """``a`` as a C-contiguous, writeable array of ``dtype``, copied only where it is not one already (a kernel's
     input: the kernels never write their inputs)."""
     return np.require(a, dtype, ("C", "W"))
+
+
+def as_view_input(a: np.ndarray, dtype: np.dtype | type) -> np.ndarray:
+    """``a`` as a writeable array of ``dtype``, copied only where it is not one already: unlike :func:`as_input`,
+    a strided view (a column of an (N, 6) ray array) stays a view, for kernels whose signatures take any layout
+    (``float32[:]``)."""
+    return np.require(a, dtype, ["W"])

@@ -39,13 +39,13 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass
-from pipeline.core.jit import as_input, kernel
+from pipeline.core.jit import as_input, as_view_input, kernel
 from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits, unit_frame_rays
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
-from pipeline.world.sunmap import SunMap, along_sun, points_input, sun_slope
+from pipeline.world.sunmap import SunMap, along_sun, sun_slope
 
 
 @dataclass(frozen=True)
@@ -486,7 +486,7 @@ class FrameScene:
             return np.zeros(len(x), bool)
         lo, hi = self._sun_footprints(slope)
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
-        x, y, z = (points_input(c) for c in (x, y, z))
+        x, y, z = (as_view_input(c, np.float32) for c in (x, y, z))
         sx, sy = np.asarray(slope, np.float32)
         p_lo, p_hi = np.split(_projection_bounds(x, y, z, sx, sy).astype(np.float64), 2)
         near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))

@@ -21,7 +21,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from pipeline.core.jit import kernel
+from pipeline.core.jit import as_view_input, kernel
 
 SUN_CELL_M = 0.25  # grid cell; only how many rays the test lets through depends on it
 SUN_TILE_CELLS = 128  # cells per tile side (32 m)
@@ -82,7 +82,7 @@ class SunMap:
         """(M,) bool: which rays towards the sun from the points (x, y, z) may meet a static triangle; the others
         cannot. ``x``, ``y``, ``z`` (each (N,) float32, world metres; strided views are read in place); ``rows``
         (M,) int64, optional: test only these points (default all, M = N)."""
-        x, y, z = (points_input(c) for c in (x, y, z))
+        x, y, z = (as_view_input(c, np.float32) for c in (x, y, z))
         rows = np.arange(len(x), dtype=np.int64) if rows is None else np.ascontiguousarray(rows, np.int64)
         if not len(rows):
             return np.zeros(0, bool)
@@ -129,12 +129,6 @@ class SunMap:
         return slot
 
 
-def points_input(a: np.ndarray) -> np.ndarray:
-    """``a`` as a writeable float32 array (a kernel's input), copied only where it is not one already: a strided
-    view (a column of an (N, 6) ray array) stays a view."""
-    return np.require(a, np.float32, ["W"])
-
-
 @kernel("Tuple((int32[::1], int32[::1], int64[::1]))(float32[:], float32[:], float32[:], int64[::1], float32, float32, "
         "float32)")
 def _cells(x, y, z, rows, sx, sy, scale):
@@ -156,13 +150,18 @@ def _cells(x, y, z, rows, sx, sy, scale):
     return cx, cy, np.array([lo_x, hi_x, lo_y, hi_y], np.int64)
 
 
+@kernel("int64(int32, int32, int64, int64, int64, int64)")
+def _tile_number(cx, cy, shift, i0, j0, cols):
+    """The tile of cell (cx, cy) (cells >> shift), numbered row-major from tile (i0, j0), ``cols`` per row."""
+    return ((cx >> shift) - i0) * cols + ((cy >> shift) - j0)
+
+
 @kernel("bool_[::1](int32[::1], int32[::1], int64, int64, int64, int64, int64)")
 def _tiles_met(cx, cy, shift, i0, j0, cols, count):
-    """(count,) bool: the tiles (cells >> shift, numbered row-major from (i0, j0), ``cols`` per row) that the
-    cells (cx, cy) lie in."""
+    """(count,) bool: the tiles (numbered by :func:`_tile_number`) that the cells (cx, cy) lie in."""
     met = np.zeros(count, np.bool_)
     for k in range(cx.size):
-        met[((cx[k] >> shift) - i0) * cols + ((cy[k] >> shift) - j0)] = True
+        met[_tile_number(cx[k], cy[k], shift, i0, j0, cols)] = True
     return met
 
 
@@ -170,12 +169,12 @@ def _tiles_met(cx, cy, shift, i0, j0, cols, count):
         "float32[::1], int64, float32)")
 def _below_tops(cx, cy, z, rows, slots, shift, i0, j0, cols, tiles, empty, pad):
     """(M,) bool: the point ``rows[k]`` (height z) lies no higher than ``pad`` above its cell's height, read from
-    the drawn tiles (``tiles``: slots of (2^shift)^2 cells, flat; a tile's slot from ``slots`` as numbered in
-    :func:`_tiles_met`; ``empty``: the slot of a tile no triangle meets)."""
+    the drawn tiles (``tiles``: slots of (2^shift)^2 cells, flat; a tile's slot from ``slots`` as numbered by
+    :func:`_tile_number`; ``empty``: the slot of a tile no triangle meets)."""
     side = np.int64(1) << shift
     out = np.empty(cx.size, np.bool_)
     for k in range(cx.size):
-        slot = np.int64(slots[((cx[k] >> shift) - i0) * cols + ((cy[k] >> shift) - j0)])
+        slot = np.int64(slots[_tile_number(cx[k], cy[k], shift, i0, j0, cols)])
         if slot < 0:
             slot = empty
         cell = ((cx[k] & (side - 1)) << shift) | (cy[k] & (side - 1))
