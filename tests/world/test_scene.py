@@ -128,6 +128,26 @@ def test_make_rays_rotates_directions_and_repeats_the_origin():
     assert make_rays([0.0, 0.0, 0.0], np.zeros((0, 3), np.float32), rotation).shape == (0, 6)
 
 
+def test_make_rays_gives_opencv_transforms_bytes():
+    """make_rays repeats the arithmetic of OpenCV's SIMD transform (fused multiply-adds), so it gives the same
+    bytes; OpenCV computes its last point or two in a scalar loop of its own, equal to within rounding."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from pipeline.world.scene import make_rays
+
+    rng = np.random.default_rng(5)
+    dirs = rng.normal(size=(20000, 3)).astype(np.float32)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    rotation = Rotation.random(random_state=6).as_matrix()
+    origin = np.array([1234.5, -678.25, 3.75])
+    rays = make_rays(origin, dirs, rotation)
+    opencv = cv2.transform(dirs.reshape(-1, 1, 3), rotation.astype(np.float32)).reshape(-1, 3)
+    np.testing.assert_array_equal(rays[:, :3], np.broadcast_to(origin.astype(np.float32), (len(dirs), 3)))
+    np.testing.assert_array_equal(rays[:-2, 3:], opencv[:-2])
+    np.testing.assert_allclose(rays[-2:, 3:], opencv[-2:], atol=1e-7)
+
+
 def sun_towards(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
     return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
