@@ -3,8 +3,8 @@
 Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
 lens), lens effects (bloom, flare ghosts, vignetting), then the sensor's noise. Images are (H, W, 3) float32
 linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized Gaussian fields
-from OpenCV's generator seeded by one draw of it: :func:`standard_normal`), so the same generator state gives
-the same image. Effects that need randomness are skipped when no generator is given.
+from a counter-based generator keyed by one draw of it: :func:`standard_normal`), so the same generator state
+gives the same image. Effects that need randomness are skipped when no generator is given.
 
 - Vignetting: gain(r) = 1 - v * (r / r_corner)^2 with r the distance from the image centre; the corners
   keep exactly 1 - v.
@@ -22,6 +22,7 @@ import functools
 
 import cv2
 import numpy as np
+from scipy.special import ndtri
 
 from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
 from pipeline.core.jit import as_input, kernel
@@ -59,23 +60,65 @@ def vignette(image: np.ndarray, strength: float) -> np.ndarray:
     return image * vignette_gain(image.shape[0], image.shape[1], float(strength))
 
 
-def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
-    """``shape`` float32 standard normal draws, from OpenCV's generator seeded by one draw of ``rng``.
+# Normal draws by table: the 2^16 equiprobable quantiles of the standard normal, Phi^-1((j + 0.5) / 2^16), so
+# |z| <= 4.17 (a cut of the tails that no 8-bit pixel shows: 3 in 100,000 draws lie beyond).
+NORMAL_QUANTILES = ndtri((np.arange(1 << 16) + 0.5) / (1 << 16)).astype(np.float32)
+NORMAL_QUANTILES.flags.writeable = False
+_QUANTILES = NORMAL_QUANTILES.copy()  # the kernels' copy: numba types a read-only array apart
 
-    About 3x faster than numpy's for image-sized arrays and as reproducible (a fixed algorithm, one thread); it
-    reseeds the calling thread's OpenCV generator.
+
+def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
+    """``shape`` float32 standard normal draws (:func:`_normal_draws`), keyed by one draw of ``rng``.
+
+    ~2.5x faster than OpenCV's ``randn`` and ~7x faster than numpy's for image-sized arrays, and as reproducible:
+    a fixed algorithm of integers and a table.
     """
     out = np.empty(shape, np.float32)
-    cv2.setRNGSeed(int(rng.integers(1 << 31)))
-    cv2.randn(out.reshape(-1, 1), 0.0, 1.0)  # one channel: a scalar std on 3 channels would fill only the first
+    _normal_draws(out.reshape(-1), np.uint64(rng.integers(1 << 63)), _QUANTILES)
     return out
+
+
+# SplitMix64 (Steele, Lea & Flood, "Fast splittable pseudorandom number generators", OOPSLA 2014): a Weyl sequence
+# of 64-bit keys, each through a mixing function; its outputs pass BigCrush. Output k of key s is the mix of
+# s + (k + 1) * GAMMA; its four 16-bit quarters, low first, index NORMAL_QUANTILES for draws 4k to 4k + 3.
+_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+
+
+@kernel("uint64(uint64, int64)")
+def _splitmix64(key, k):
+    """Output ``k`` of the SplitMix64 stream of ``key``."""
+    z = key + np.uint64(k + 1) * _GAMMA
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@kernel("float32(uint64, int64, float32[::1])")
+def _draw(bits, j, quantiles):
+    """The draw of the ``j``-th 16-bit quarter (low first) of the SplitMix64 output ``bits``."""
+    return quantiles[np.int64((bits >> np.uint64(16 * j)) & np.uint64(0xFFFF))]
+
+
+@kernel("void(float32[::1], uint64, float32[::1])")
+def _normal_draws(out, key, quantiles):
+    """Fill ``out`` (N,) with standard normal draws: draw i is ``quantiles`` at the (i % 4)-th 16-bit quarter of
+    SplitMix64 output i // 4 of ``key``."""
+    n = out.size
+    for k in range(n // 4):  # whole outputs (a loop the compiler unrolls), then the last few draws
+        bits = _splitmix64(key, k)
+        for j in range(4):
+            out[4 * k + j] = _draw(bits, j, quantiles)
+    for i in range(n - n % 4, n):
+        out[i] = _draw(_splitmix64(key, i // 4), i % 4, quantiles)
 
 
 def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np.random.Generator) -> np.ndarray:
     """Shot + read noise and grain at exposure gain ``gain`` (see the module docstring)."""
     image = as_input(image, np.float32)
-    out = standard_normal(image.shape, rng)
-    _add_noise(image.reshape(-1), out.reshape(-1), np.float32(gain * cfg.shot), np.float32((gain * cfg.read_std) ** 2))
+    out = np.empty(image.shape, np.float32)
+    # The draws of standard_normal(image.shape, rng), made where they are used.
+    _add_noise(image.reshape(-1), out.reshape(-1), np.float32(gain * cfg.shot),
+               np.float32((gain * cfg.read_std) ** 2), np.uint64(rng.integers(1 << 63)), _QUANTILES)
     if cfg.grain_std > 0:
         grain = cv2.GaussianBlur(standard_normal(image.shape[:2], rng), (0, 0), cfg.grain_size_px)
         grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
@@ -83,14 +126,25 @@ def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np
     return out
 
 
-@kernel("void(float32[::1], float32[::1], float32, float32)")
-def _add_noise(image, noise, shot_scale, read_variance):
-    """``noise = image + noise * sqrt(shot_scale * max(image, 0) + read_variance)`` in place: (N,) float32 image and
-    standard normal draws (one pass; in numpy, six over the image)."""
-    for i in range(image.size):
-        x = image[i]
-        variance = (x if x > 0 else np.float32(0)) * shot_scale + read_variance
-        noise[i] = noise[i] * np.sqrt(variance) + x
+@kernel("void(float32[::1], float32[::1], int64, float32, float32, float32)")
+def _noisy(image, out, i, z, shot_scale, read_variance):
+    """``out[i]`` of :func:`_add_noise` for the draw ``z``."""
+    x = image[i]
+    variance = (x if x > 0 else np.float32(0)) * shot_scale + read_variance
+    out[i] = z * np.sqrt(variance) + x
+
+
+@kernel("void(float32[::1], float32[::1], float32, float32, uint64, float32[::1])")
+def _add_noise(image, out, shot_scale, read_variance, key, quantiles):
+    """``out = image + z * sqrt(shot_scale * max(image, 0) + read_variance)``, (N,) float32, with z the draws of
+    :func:`_normal_draws` for ``key``: one pass (in numpy, six over the image and one for the draws)."""
+    n = image.size
+    for k in range(n // 4):
+        bits = _splitmix64(key, k)
+        for j in range(4):
+            _noisy(image, out, 4 * k + j, _draw(bits, j, quantiles), shot_scale, read_variance)
+    for i in range(n - n % 4, n):
+        _noisy(image, out, i, _draw(_splitmix64(key, i // 4), i % 4, quantiles), shot_scale, read_variance)
 
 
 def motion_flow(points_cam: np.ndarray, shift_cam: np.ndarray, fx: float, fy: float) -> np.ndarray:

@@ -116,3 +116,22 @@ def test_standard_normal_is_seeded_and_standard_in_every_channel():
     x = a.reshape(-1).astype(np.float64)
     assert np.mean(x**4) == pytest.approx(3.0, abs=5 * np.sqrt(96 / x.size))  # Gaussian tails
     assert abs(np.corrcoef(x[:-1], x[1:])[0, 1]) < 5 / np.sqrt(x.size)  # no correlation between neighbours
+
+
+def test_normal_draws_are_splitmix64_quarters_indexing_the_quantiles():
+    from scipy.stats import norm
+
+    from pipeline.sensors.post import NORMAL_QUANTILES, _normal_draws, _splitmix64
+
+    # SplitMix64's published outputs for seed 0 (Vigna's splitmix64.c).
+    assert _splitmix64(np.uint64(0), 0) == 16294208416658607535
+    assert _splitmix64(np.uint64(0), 1) == 7960286522194355700
+    np.testing.assert_allclose(NORMAL_QUANTILES[[0, 32767, 32768, 65535]],
+                               norm.ppf(np.array([0.5, 32767.5, 32768.5, 65535.5]) / 65536), rtol=1e-6)
+    np.testing.assert_array_equal(NORMAL_QUANTILES, -NORMAL_QUANTILES[::-1])  # symmetric
+    key = np.uint64(123456789)
+    draws = np.empty(11, np.float32)
+    _normal_draws(draws, key, NORMAL_QUANTILES.copy())
+    bits = [int(_splitmix64(key, k)) for k in range(3)]
+    expected = [NORMAL_QUANTILES[(bits[i // 4] >> (16 * (i % 4))) & 0xFFFF] for i in range(11)]
+    np.testing.assert_array_equal(draws, expected)  # the last three from a part of the third output
