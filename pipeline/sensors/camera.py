@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
+from pipeline.core.jit import kernel
 from pipeline.world.scene import rectangles_mask
 
 CLIP_Z_M = 1e-6  # boxes_pixel_mask: a box is projected where it lies beyond this depth (a micrometre)
@@ -173,6 +174,8 @@ class Camera:
     @functools.cached_property
     def pixel_directions(self) -> np.ndarray:
         """(H*W, 3) float32 unit directions (optical frame) through the pixel centres, row-major."""
+        if not self.has_distortion:  # what unproject gives, in one compiled pass (~15x faster: once per process)
+            return _pinhole_directions(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
         rows, cols = np.divmod(np.arange(self.width * self.height), self.width)
         return self._image_rays(self.pixel_uv(cols, rows))
 
@@ -296,3 +299,19 @@ class Camera:
             dv = (perm_v[:, k] + rng.random(n)) / s
             out[k] = self._image_rays(np.column_stack([cols + du, rows + dv]))
         return out
+
+
+@kernel("float32[:, ::1](int64, int64, float64, float64, float64, float64)")
+def _pinhole_directions(width, height, fx, fy, cx, cy):
+    """:attr:`Camera.pixel_directions` of a lens without distortion, with :meth:`Camera.unproject`'s float64
+    arithmetic in its order: (x, y, 1) / sqrt(x^2 + y^2 + 1) with x = (u - cx) / fx, y = (v - cy) / fy at the
+    pixel centres (u, v)."""
+    out = np.empty((width * height, 3), np.float32)
+    for row in range(height):
+        y = (row + 0.5 - cy) / fy
+        for col in range(width):
+            x = (col + 0.5 - cx) / fx
+            norm = np.sqrt(x * x + y * y + 1.0)
+            i = row * width + col
+            out[i, 0], out[i, 1], out[i, 2] = np.float32(x / norm), np.float32(y / norm), np.float32(1.0 / norm)
+    return out

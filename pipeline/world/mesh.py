@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.core.classes import SemanticClass
+from pipeline.core.jit import as_input, kernel
 
 
 @dataclass(frozen=True)
@@ -55,3 +56,22 @@ class Mesh:
             np.concatenate([m.material for m in meshes]),
             meshes[0].semantic if semantic is None else semantic,
         )
+
+
+def triangle_bounds(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi), each (T, C) float64: per triangle, the least and greatest of each coordinate of its three corners
+    among ``points`` (V, C) (e.g. vertices, or their projections). One compiled pass: numpy's gather and min/max
+    over the corners took ~50 ms for 117k triangles."""
+    return _triangle_bounds(as_input(points, np.float64), as_input(np.reshape(triangles, (-1, 3)), np.int64))
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[:, ::1])")
+def _triangle_bounds(points, triangles):
+    lo = np.empty((triangles.shape[0], points.shape[1]))
+    hi = np.empty((triangles.shape[0], points.shape[1]))
+    for t in range(triangles.shape[0]):
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        for k in range(points.shape[1]):
+            lo[t, k] = min(points[a, k], points[b, k], points[c, k])
+            hi[t, k] = max(points[a, k], points[b, k], points[c, k])
+    return lo, hi

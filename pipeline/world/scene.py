@@ -44,7 +44,7 @@ from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hi
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
-from pipeline.world.mesh import Mesh
+from pipeline.world.mesh import Mesh, triangle_bounds
 from pipeline.world.sunmap import SunMap, along_sun, sun_slope
 
 
@@ -234,8 +234,7 @@ def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray
     a box of its own, so one long ground strip does not make a tall group wide."""
     if not len(triangles):
         return np.zeros((0, 3)), np.zeros((0, 3))
-    corners = np.asarray(vertices, np.float64)[np.asarray(triangles, np.int64)]
-    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    lo, hi = triangle_bounds(vertices, triangles)
     low = hi[:, 2] <= lo[:, 2].min() + LOW_M
     cell_m = np.where(low, LOW_CHUNK_M, CHUNK_M)
     cell = np.floor((lo[:, :2] + hi[:, :2]) / (2.0 * cell_m[:, None])).astype(np.int64)

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from pipeline.core.jit import as_view_input, kernel
+from pipeline.world.mesh import triangle_bounds
 
 SUN_CELL_M = 0.25  # grid cell; only how many rays the test lets through depends on it
 SUN_TILE_CELLS = 128  # cells per tile side (32 m)
@@ -54,14 +55,14 @@ class SunMap:
         triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         # Projections, in cells.
         self._flat = np.column_stack(along_sun(*vertices.T, self.slope)) / SUN_CELL_M
-        corners = self._flat[triangles]
+        flat_lo, flat_hi = triangle_bounds(self._flat, triangles)
         self._triangles = triangles
-        self._top = vertices[triangles, 2].max(axis=1)
+        self._top = triangle_bounds(vertices[:, 2:], triangles)[1][:, 0]
         # Tiles each triangle meets (its cells' box grown by one cell, as the drawing is), listed per tile with the
         # lowest triangle first.
         t = SUN_TILE_CELLS
-        lo = np.floor((corners.min(axis=1) - 1.0) / t).astype(np.int64)
-        hi = np.floor((corners.max(axis=1) + 1.0) / t).astype(np.int64)
+        lo = np.floor((flat_lo - 1.0) / t).astype(np.int64)
+        hi = np.floor((flat_hi + 1.0) / t).astype(np.int64)
         span = hi - lo + 1
         count = span[:, 0] * span[:, 1]
         owner = np.repeat(np.arange(len(triangles)), count)

@@ -65,6 +65,13 @@ def test_transform_inverse_and_composition(xyz, rpy):
 def test_transform_rejects_non_rotation():
     with pytest.raises(ValueError, match="orthonormal"):
         Transform(np.diag([1.0, 1.0, -1.0]), np.zeros(3))
+    # The tolerance is np.allclose's with atol 1e-9: 1e-5 relative on the diagonal of R R^T, 1e-9 off it.
+    Transform(np.diag([1.0, 1.0, 1.0 + 4e-6]), np.zeros(3))
+    for bad in (np.diag([1.0, 1.0, 1.0 + 6e-6]), np.array([[1.0, 2e-9, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+                np.full((3, 3), np.nan)):
+        with pytest.raises(ValueError, match="orthonormal"):
+            Transform(bad, np.zeros(3))
+    Transform(np.array([[1.0, 4e-10, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
 
 
 def test_box_corners_and_contains():

@@ -38,6 +38,17 @@ def test_pixel_centre_rays():
     np.testing.assert_allclose(d[3, 4], expected / np.linalg.norm(expected), atol=1e-7)
 
 
+@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(width_px=37, height_px=23, hfov_deg=70.0),
+                                    CameraConfig(width_px=64, height_px=48, intrinsics=(50.5, 61.0, 30.25, 25.0))])
+def test_pixel_directions_without_distortion_are_unprojects_bytes(config):
+    """Without distortion pixel_directions takes a compiled path of its own: the same bytes as unproject."""
+    cam = Camera(config)
+    rows, cols = np.divmod(np.arange(cam.width * cam.height), cam.width)
+    dirs, ok = cam.unproject(cam.pixel_uv(cols, rows))
+    assert ok.all()
+    np.testing.assert_array_equal(cam.pixel_directions, dirs.astype(np.float32))
+
+
 def test_camera_to_world_looks_along_ego_x():
     cam = Camera(CameraConfig(mount=Transform.from_xyz_rpy((1.0, 0.0, 1.5))))
     pose = cam.camera_to_world(Transform.from_xyz_rpy((10.0, 5.0, 0.0), (0.0, 0.0, np.pi / 2)))
