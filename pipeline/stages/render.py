@@ -36,7 +36,14 @@ from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
 from pipeline.core.tables import read_ipc_files, read_parquet, write_parquet
 from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
-from pipeline.stages.render_frames import SHARD_FORMAT, ShardJob, render_shard, reuse_freed_memory
+from pipeline.stages.render_frames import (
+    SHARD_FORMAT,
+    ShardJob,
+    remember_world,
+    remembered_worlds,
+    render_shard,
+    reuse_freed_memory,
+)
 from pipeline.stages.rig import build_sensors, camera_info, lidar_info
 from pipeline.world.scene import embree_started
 
@@ -137,13 +144,14 @@ def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
     with tmp.open("wb") as fh:
         pickle.dump(world, fh, protocol=pickle.HIGHEST_PROTOCOL)
     tmp.rename(path)
+    remember_world(path, world)
 
 
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
     reuse_freed_memory()  # from the start: the static world build's large temporaries too
-    with _frozen_heap():
+    with _frozen_heap(), remembered_worlds():
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)
 

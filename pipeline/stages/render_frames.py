@@ -8,10 +8,12 @@ it is rendered alone, in another shard, or by another worker.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import pickle
 import sys
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -234,6 +236,24 @@ class _WorkerState:
 
 
 _STATE: dict[tuple, _WorkerState] = {}
+_WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by the path it was pickled to
+
+
+def remember_world(path: Path, world: StaticWorld) -> None:
+    """Keep the static world just pickled to ``path`` (by this process), so that :func:`_state` takes it as it is
+    instead of unpickling it: in this process, and in workers forked from it (~60 ms each, highway). Only within
+    :func:`remembered_worlds` (one render), so that a later render never mistakes it for another pickle at the
+    same path."""
+    _WORLDS[str(path)] = world
+
+
+@contextlib.contextmanager
+def remembered_worlds() -> Iterator[None]:
+    """The scope of :func:`remember_world`: worlds remembered within it are forgotten at its end."""
+    try:
+        yield
+    finally:
+        _WORLDS.clear()
 
 
 def reuse_freed_memory() -> None:
@@ -261,8 +281,10 @@ def _state(job: ShardJob) -> _WorkerState:
 
         _STATE.clear()  # one render at a time per process
         reuse_freed_memory()
-        with job.static_pickle.open("rb") as fh:
-            world: StaticWorld = pickle.load(fh)
+        world = _WORLDS.get(str(job.static_pickle))
+        if world is None:
+            with job.static_pickle.open("rb") as fh:
+                world = pickle.load(fh)
         static = StaticScene(world.meshes)
         cameras, lidars = build_sensors(job.rig)
         _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.condition_from_config(job.condition),

@@ -15,6 +15,7 @@ import pytest
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.core.record import DatasetRecord, RecordError
+from pipeline.stages import render_frames
 from pipeline.stages.render import _pool_context, render
 from tests.conftest import tree_hashes
 from tests.stages.conftest import kill_render_after
@@ -109,8 +110,10 @@ def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_di
     opencv_threads = cv2.getNumThreads()
     render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
     assert tree_hashes(again, skip=("meta.json",)) == tree_hashes(record_dir, skip=("meta.json",))
-    # What the render sets for itself in this process comes back: OpenCV's threads, the collector's reach.
+    # What the render sets for itself in this process comes back: OpenCV's threads, the collector's reach; the
+    # static world it built (which its shards here took without unpickling) is forgotten.
     assert cv2.getNumThreads() == opencv_threads and gc.get_freeze_count() == 0
+    assert not render_frames._WORLDS
 
 
 _FRESH_RENDER = """
