@@ -1,15 +1,18 @@
 """Where a ray towards the sun can meet the static world: a conservative test, drawn lazily tile by tile.
 
 Along the sun's direction s (s_z > 0), a point p projects onto the plane z = 0 at p_xy - p_z * s_xy / s_z, and
-so does every point of its ray towards the sun. The ray can meet a static triangle only where p's projection lies
-in the triangle's projection, and only if p lies no higher than the triangle's highest vertex (the ray rises).
+so does every point of its ray towards the sun. The ray can meet a static triangle only where p's projection q lies
+in the triangle's projection, and only if p lies no higher than the triangle does over q (the ray rises): where the
+line along the sun through q pierces the triangle's plane, h(q), a linear function of q over the projection.
 
-:class:`SunMap` draws the projections of the static triangles on a grid of SUN_CELL_M cells, highest last, each
-cell keeping the height of the highest triangle drawn over it. A cell that a triangle's projection meets either
-has its centre inside the triangle (filled) or has the triangle's outline pass through it (drawn, Bresenham):
-both are drawn, and the result is grown by one cell (a 3x3 maximum), so every cell a projection meets keeps at
-least that triangle's height. A shadow ray whose origin lies above its cell's height cannot meet the static
-world (~75% of the lit pixels of a highway frame at noon, ~45% of an urban one; fewer under a low sun).
+:class:`SunMap` keeps, per cell of a grid of SUN_CELL_M cells over the projections, a height no lower than any
+triangle's over any point of the cell: the greatest over the triangles whose projection meets the cell (each
+widened by SUN_EDGE_CELLS against rounding) of the least of the triangle's top and the greatest of its plane over the
+(widened) cell. On flat ground the plane's bound is the ground's height, so a lit point lifted off the ground
+(shading lifts shadow origins off their surface) is no candidate, though the ground beside a lane marking two
+centimetres higher is. Faces that the sun grazes (a projection of almost no area: walls, kerbs) count with their
+top. A shadow ray whose origin lies above its cell's height cannot meet the static world (~85% of the lit pixels
+of a highway frame at noon).
 
 The grid is cut into tiles of SUN_TILE_CELLS x SUN_TILE_CELLS cells, drawn the first time a point falls in one
 (each with the triangles that meet it, listed once per sun), so a render draws only the part of the world its
@@ -18,7 +21,6 @@ cameras see.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from pipeline.core.jit import as_view_input, kernel
@@ -26,8 +28,13 @@ from pipeline.world.mesh import triangle_bounds
 
 SUN_CELL_M = 0.25  # grid cell; only how many rays the test lets through depends on it
 SUN_TILE_CELLS = 128  # cells per tile side (32 m)
-SUN_Z_PAD_M = 1e-4  # a point this little above a triangle's top still counts: far above float32 rounding
-_FIXED_BITS = 4  # OpenCV's sub-pixel bits for polygon vertices
+SUN_Z_PAD_M = 1e-4  # a point this little above a cell's height still counts: far above float32 rounding
+# Each triangle's projection is drawn widened by this much (in cells, 2 cm) on every side: several times the float32
+# rounding of a point's projection within 20 km of the origin (an ulp there is 2 mm).
+SUN_EDGE_CELLS = 0.08
+# A projection whose area is below this fraction of its edges' squared lengths is a face the sun grazes: its plane
+# is too steep over the projection to bound by, and it counts with its top.
+_GRAZING = 1e-4
 
 
 def sun_slope(sun: np.ndarray) -> np.ndarray:
@@ -57,9 +64,9 @@ class SunMap:
         self._flat = np.column_stack(along_sun(*vertices.T, self.slope)) / SUN_CELL_M
         flat_lo, flat_hi = triangle_bounds(self._flat, triangles)
         self._triangles = triangles
-        self._top = triangle_bounds(vertices[:, 2:], triangles)[1][:, 0]
-        # Tiles each triangle meets (its cells' box grown by one cell, as the drawing is), listed per tile with the
-        # lowest triangle first.
+        self._z = np.ascontiguousarray(vertices[:, 2])
+        # Tiles each triangle meets (its cells' box grown by one cell: more than the drawing's widening), listed per
+        # tile.
         t = SUN_TILE_CELLS
         lo = np.floor((flat_lo - 1.0) / t).astype(np.int64)
         hi = np.floor((flat_hi + 1.0) / t).astype(np.int64)
@@ -69,7 +76,7 @@ class SunMap:
         k = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)  # position within each triangle's box
         tile_i = lo[owner, 0] + k // span[owner, 1]
         tile_j = lo[owner, 1] + k % span[owner, 1]
-        order = np.lexsort((self._top[owner], tile_j, tile_i))
+        order = np.lexsort((tile_j, tile_i))
         self._entry_triangle = owner[order]
         keys = np.column_stack([tile_i[order], tile_j[order]])
         new = np.r_[True, np.any(keys[1:] != keys[:-1], axis=1)] if len(keys) else np.zeros(0, bool)
@@ -110,21 +117,12 @@ class SunMap:
             self._slot[(i, j)] = -1
             return -1
         t = SUN_TILE_CELLS
-        # Image rows follow the first cell index, columns the second; one cell of apron on each side for the 3x3
-        # maximum. A pixel's centre sits at its integer coordinates: cell c spans [c - 0.5, c + 0.5).
-        image = np.full((t + 2, t + 2), -np.inf, np.float32)
-        origin = np.array([i * t - 1, j * t - 1], np.float64)
         entries = self._entry_triangle[self._tile_start[k]: self._tile_start[k + 1]]
-        corners = (self._flat[self._triangles[entries]] - origin - 0.5)[:, :, ::-1]  # (x, y) = (column, row)
-        fixed = np.round(corners * (1 << _FIXED_BITS)).astype(np.int32)
-        for points, top in zip(fixed, self._top[entries].astype(np.float32).tolist(), strict=True):
-            cv2.fillConvexPoly(image, points, top, cv2.LINE_8, _FIXED_BITS)
-            cv2.polylines(image, [points], True, top, 1, cv2.LINE_8, _FIXED_BITS)
-        grown = cv2.dilate(image, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=-np.inf)
+        tile = _draw_tile(self._flat, self._z, self._triangles[entries], i * t, j * t, t)
         slot = self._drawn
         if slot + 1 == len(self._tiles):  # one spare slot stays -inf (see candidates)
             self._tiles = np.concatenate([self._tiles, np.full_like(self._tiles, -np.inf)])
-        self._tiles[slot] = grown[1:-1, 1:-1]
+        self._tiles[slot] = tile
         self._drawn += 1
         self._slot[(i, j)] = slot
         return slot
@@ -181,3 +179,64 @@ def _below_tops(cx, cy, z, rows, slots, shift, i0, j0, cols, tiles, empty, pad):
         cell = ((cx[k] & (side - 1)) << shift) | (cy[k] & (side - 1))
         out[k] = z[rows[k]] <= tiles[slot * side * side + cell] + pad
     return out
+
+
+@kernel("float32[:, ::1](float64[:, ::1], float64[::1], int64[:, ::1], int64, int64, int64)")
+def _draw_tile(flat, z, triangles, i0, j0, side):
+    """(side, side) float32 heights of the cells (i0 + a, j0 + b) (cell (i, j) spans [i, i + 1) x [j, j + 1) of
+    the projections ``flat`` (V, 2), in cells): per cell, the greatest over ``triangles`` (K, 3) (vertex heights
+    ``z`` (V,)) whose projection, widened by SUN_EDGE_CELLS, meets the cell widened as much, of the least of the
+    triangle's top and its plane's greatest height over the widened cell (see the module docstring); -inf where
+    none does."""
+    tile = np.full((side, side), -np.inf, np.float32)
+    e = SUN_EDGE_CELLS
+    px = np.empty(3)
+    py = np.empty(3)
+    for t in range(triangles.shape[0]):
+        top = -np.inf
+        for c in range(3):
+            v = triangles[t, c]
+            px[c], py[c] = flat[v, 0] - i0, flat[v, 1] - j0
+            top = max(top, z[triangles[t, c]])
+        a, b, c0 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        e1x, e1y, e2x, e2y = px[1] - px[0], py[1] - py[0], px[2] - px[0], py[2] - py[0]
+        det = e1x * e2y - e1y * e2x
+        grazing = abs(det) <= _GRAZING * (e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y)
+        gx = gy = 0.0
+        if not grazing:  # h(q) = z_a + gx (qx - px0) + gy (qy - py0)
+            dz1, dz2 = z[b] - z[a], z[c0] - z[a]
+            gx = (dz1 * e2y - dz2 * e1y) / det
+            gy = (e1x * dz2 - e2x * dz1) / det
+        # Over a cell widened by e, the plane rises at most this far above its value at the cell's centre.
+        rise = (0.5 + e) * (abs(gx) + abs(gy))
+        lo_i = max(np.int64(np.floor(min(px[0], px[1], px[2]) - 2 * e)), 0)
+        hi_i = min(np.int64(np.floor(max(px[0], px[1], px[2]) + 2 * e)), side - 1)
+        for i in range(lo_i, hi_i + 1):
+            # The y-range of the triangle within the band x in [i - 2e, i + 1 + 2e]: over its vertices inside the
+            # band and its edges' crossings of the band's sides (both the cell's and the triangle's widening).
+            x0, x1 = i - 2 * e, i + 1 + 2 * e
+            y_lo, y_hi = np.inf, -np.inf
+            for m in range(3):
+                ax, ay, bx, by = px[m], py[m], px[(m + 1) % 3], py[(m + 1) % 3]
+                if x0 <= ax <= x1:
+                    y_lo, y_hi = min(y_lo, ay), max(y_hi, ay)
+                if ax != bx:
+                    for xs in (x0, x1):
+                        f = (xs - ax) / (bx - ax)
+                        if 0.0 <= f <= 1.0:
+                            ys = ay + f * (by - ay)
+                            y_lo, y_hi = min(y_lo, ys), max(y_hi, ys)
+            if y_lo > y_hi:
+                continue
+            lo_j = max(np.int64(np.floor(y_lo - 2 * e)), 0)
+            hi_j = min(np.int64(np.floor(y_hi + 2 * e)), side - 1)
+            for j in range(lo_j, hi_j + 1):
+                h = top
+                if not grazing:
+                    h = min(top, z[a] + gx * (i + 0.5 - px[0]) + gy * (j + 0.5 - py[0]) + rise)
+                h32 = np.float32(h)
+                if h32 < h:  # round up: the bound stays a bound
+                    h32 = np.nextafter(h32, np.float32(np.inf))
+                if h32 > tile[i, j]:
+                    tile[i, j] = h32
+    return tile

@@ -128,3 +128,45 @@ def test_points_by_rows_and_in_place():
     assert subset.any() and not subset.all()
     np.testing.assert_array_equal(subset, alone)
     assert sun_map.candidates(rays[:, 0], rays[:, 1], rays[:, 2], np.zeros(0, np.int64)).shape == (0,)
+
+
+def sloped_world(rng: np.random.Generator) -> list[Mesh]:
+    """The random world, with ramps (quads at slopes up to 40%) and triangles at any orientation added."""
+    meshes = random_world(rng)
+    for _ in range(30):
+        a, d = rng.uniform(-60, 60, 2), rng.normal(size=2)
+        u = d / np.linalg.norm(d)
+        along, across = u * rng.uniform(2.0, 30.0), np.array([-u[1], u[0]]) * rng.uniform(0.5, 8.0)
+        z0, slope = rng.uniform(0.0, 3.0), rng.uniform(-0.4, 0.4)
+        rise = slope * np.linalg.norm(along)
+        meshes.append(quad([[*a, z0], [*(a + along), z0 + rise], [*(a + along + across), z0 + rise],
+                            [*(a + across), z0]]))
+    for _ in range(30):
+        v = np.r_[rng.uniform(-60, 60, 2), rng.uniform(0.0, 4.0)] + rng.normal(scale=3.0, size=(3, 3))
+        meshes.append(Mesh(v, np.array([[0, 1, 2]]), CONCRETE, SemanticClass.BUILDING))
+    return meshes
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_every_blocked_shadow_ray_from_a_surface_is_a_candidate(seed):
+    """Shadow rays start just off a surface (shading lifts them along the normal): a cell's height must bound every
+    triangle's over the whole cell, ramps and tilted triangles included, to within the lift."""
+    rng = np.random.default_rng(100 + seed)
+    meshes = sloped_world(rng)
+    sun = sun_at(rng.uniform(-180, 180), rng.uniform(10, 70))
+    merged = Mesh.concatenate(meshes)
+    n = 60_000
+    tri = rng.integers(0, len(merged.triangles), n)
+    w = rng.dirichlet(np.ones(3), n)
+    corners = merged.vertices[merged.triangles[tri]]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    normal *= np.sign(normal @ sun)[:, None]  # lifted towards the sun's side, as for a lit face
+    lift = rng.choice([1e-4, 1e-3, 5e-3], n)[:, None]
+    points = (np.einsum("nk,nkc->nc", w, corners) + lift * normal).astype(np.float32)
+    found = candidates(meshes, points, sun)
+    blocked = StaticScene(meshes).occluded(sun_rays(points, sun), np.inf)
+    assert np.count_nonzero(blocked) > 0.05 * n
+    assert not np.any(blocked & ~found)
+    on_ground = tri < len(GROUND.triangles)  # flat open ground: only what else lies near the sun line counts
+    assert np.count_nonzero(found[on_ground & ~blocked]) < 0.5 * np.count_nonzero(on_ground & ~blocked)
