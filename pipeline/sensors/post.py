@@ -70,8 +70,8 @@ _QUANTILES = NORMAL_QUANTILES.copy()  # the kernels' copy: numba types a read-on
 def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
     """``shape`` float32 standard normal draws (:func:`_normal_draws`), keyed by one draw of ``rng``.
 
-    ~2.5x faster than OpenCV's ``randn`` and ~7x faster than numpy's for image-sized arrays, and as reproducible:
-    a fixed algorithm of integers and a table.
+    For 800x600x3 draws ~1.5 ms, against 4-6 ms for OpenCV's ``randn`` and 15-18 ms for numpy's float32 normals,
+    and as reproducible: a fixed algorithm of integers and a table.
     """
     out = np.empty(shape, np.float32)
     _normal_draws(out.reshape(-1), np.uint64(rng.integers(1 << 63)), _QUANTILES)

@@ -148,8 +148,9 @@ def make_rays(origin: np.ndarray, directions: np.ndarray, rotation: np.ndarray) 
     """(N, 6) float32 world rays [origin | rotation @ d] from one origin (3,) and (N, 3) float32 unit
     directions in a sensor frame rotated by ``rotation`` (3, 3) into the world.
 
-    One compiled pass (:func:`_rays_from`) with the arithmetic of OpenCV's ``transform`` (same bytes), which with a
-    merge of the two halves took ~2.5x as long.
+    One compiled pass (:func:`_rays_from`) with the arithmetic of OpenCV's SIMD ``transform``, which with a merge of
+    the two halves took ~2.5x as long: the same bytes, but for the last point or two of an array, which OpenCV
+    computes in a scalar loop of its own (within an ulp).
     """
     directions = as_input(np.reshape(directions, (-1, 3)), np.float32)
     return _rays_from(as_input(np.reshape(origin, 3), np.float32), directions,

@@ -110,7 +110,7 @@ def test_standard_normal_is_seeded_and_standard_in_every_channel():
     np.testing.assert_array_equal(a, standard_normal((300, 400, 3), np.random.default_rng(7)))
     assert not np.array_equal(a, standard_normal((300, 400, 3), np.random.default_rng(8)))
     n = a[..., 0].size
-    for channel in np.moveaxis(a, -1, 0):  # a scalar std on a 3-channel array would leave channels 1 and 2 at 0
+    for channel in np.moveaxis(a, -1, 0):
         assert abs(channel.mean()) < 5 / np.sqrt(n)
         assert channel.std() == pytest.approx(1.0, abs=5 * np.sqrt(0.5 / n))
     x = a.reshape(-1).astype(np.float64)
