@@ -197,7 +197,7 @@ def _draw_tile(flat, z, triangles, i0, j0, side):
         for c in range(3):
             v = triangles[t, c]
             px[c], py[c] = flat[v, 0] - i0, flat[v, 1] - j0
-            top = max(top, z[triangles[t, c]])
+            top = max(top, z[v])
         a, b, c0 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         e1x, e1y, e2x, e2y = px[1] - px[0], py[1] - py[0], px[2] - px[0], py[2] - py[0]
         det = e1x * e2y - e1y * e2x
