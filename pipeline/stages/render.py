@@ -39,13 +39,13 @@ from pipeline.stages.common import config_hash, software_versions, write_json, w
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
-    remember_world,
-    remembered_worlds,
+    remembered_world,
     render_shard,
     reuse_freed_memory,
 )
 from pipeline.stages.rig import build_sensors, camera_info, lidar_info
 from pipeline.world.scene import embree_started
+from pipeline.world.static import StaticWorld
 
 log = logging.getLogger(__name__)
 
@@ -134,9 +134,10 @@ def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
     return done.is_file() and done.read_text().split() == [str(f) for f in frames]
 
 
-def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
+def _static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
+    """Build and pickle the static world to ``path`` and return it, unless the pickle is there already (None)."""
     if path.is_file():
-        return
+        return None
     from pipeline.world.static import build_static_world
 
     world = build_static_world(sim_dir / "roads", seed=seed)
@@ -144,14 +145,14 @@ def _static_world(sim_dir: Path, seed: int, path: Path) -> None:
     with tmp.open("wb") as fh:
         pickle.dump(world, fh, protocol=pickle.HIGHEST_PROTOCOL)
     tmp.rename(path)
-    remember_world(path, world)
+    return world
 
 
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
     reuse_freed_memory()  # from the start: the static world build's large temporaries too
-    with _frozen_heap(), remembered_worlds():
+    with _frozen_heap():
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)
 
@@ -188,13 +189,14 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
                      threads=1 if workers > 1 else 0)
             for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
     context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # a forkserver starts now (see there)
-    _static_world(sim_dir, seed, work / "static.pkl")
+    world = _static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
     if resumed:
         log.info("resuming: %d of %d shards already rendered", resumed, len(shards))
     initial = len(selection) - sum(len(j.frames) for j in jobs)
-    _run(jobs, workers, context, lambda: tqdm(total=len(selection), initial=initial, unit="frame",
-                                              desc=f"render {condition.name}", disable=not progress))
+    with remembered_world(work / "static.pkl", world):
+        _run(jobs, workers, context, lambda: tqdm(total=len(selection), initial=initial, unit="frame",
+                                                  desc=f"render {condition.name}", disable=not progress))
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed
     return summary

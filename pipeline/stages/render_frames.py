@@ -239,21 +239,18 @@ _STATE: dict[tuple, _WorkerState] = {}
 _WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by the path it was pickled to
 
 
-def remember_world(path: Path, world: StaticWorld) -> None:
-    """Keep the static world just pickled to ``path`` (by this process), so that :func:`_state` takes it as it is
-    instead of unpickling it: in this process, and in workers forked from it (~60 ms each, highway). Only within
-    :func:`remembered_worlds` (one render), so that a later render never mistakes it for another pickle at the
-    same path."""
-    _WORLDS[str(path)] = world
-
-
 @contextlib.contextmanager
-def remembered_worlds() -> Iterator[None]:
-    """The scope of :func:`remember_world`: worlds remembered within it are forgotten at its end."""
+def remembered_world(path: Path, world: StaticWorld | None) -> Iterator[None]:
+    """Within the block, :func:`_state` takes ``world``, just pickled to ``path`` by this process, as it is instead
+    of unpickling it: in this process, and in workers forked from it (~60 ms each, highway). Forgotten at the end,
+    so that a later render never mistakes it for another pickle at the same path. ``world`` None: nothing to keep
+    (the pickle was there already)."""
+    if world is not None:
+        _WORLDS[str(path)] = world
     try:
         yield
     finally:
-        _WORLDS.clear()
+        _WORLDS.pop(str(path), None)
 
 
 def reuse_freed_memory() -> None:
