@@ -156,7 +156,8 @@ class Camera:
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         xy, ok = self.undistort(np.column_stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy]))
         d = np.column_stack([xy, np.ones(len(xy))])
-        return d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None], ok
+        # an explicit sum in a fixed order (not einsum, whose order may follow the processor's SIMD width)
+        return d / np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])[:, None], ok
 
     def _image_rays(self, uv: np.ndarray) -> np.ndarray:
         dirs, ok = self.unproject(uv)

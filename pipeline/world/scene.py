@@ -149,8 +149,8 @@ def make_rays(origin: np.ndarray, directions: np.ndarray, rotation: np.ndarray) 
     directions in a sensor frame rotated by ``rotation`` (3, 3) into the world.
 
     One compiled pass (:func:`_rays_from`) with the arithmetic of OpenCV's SIMD ``transform``, which with a merge of
-    the two halves took ~2.5x as long: the same bytes, but for the last point or two of an array, which OpenCV
-    computes in a scalar loop of its own (within an ulp).
+    the two halves took longer. Its bytes are its own arithmetic on any processor; OpenCV's agree within rounding,
+    not always in bytes: how many trailing points OpenCV leaves to a scalar loop depends on the SIMD width.
     """
     directions = as_input(np.reshape(directions, (-1, 3)), np.float32)
     return _rays_from(as_input(np.reshape(origin, 3), np.float32), directions,
