@@ -33,7 +33,7 @@ from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
 from pipeline.stages.rig import build_sensors
-from pipeline.world.actors import Actors, srgb8_to_linear
+from pipeline.world.actors import Actors, actor_variants, srgb8_to_linear
 from pipeline.world.materials import material_index
 from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
@@ -116,9 +116,10 @@ def _boxes(cols: dict[str, np.ndarray]) -> Boxes3D:
                    np.column_stack([cols["length_m"], cols["width_m"], cols["height_m"]]), cols["yaw_rad"])
 
 
-def _actors(cols: dict[str, np.ndarray]) -> Actors:
+def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:
     color = srgb8_to_linear(np.column_stack([cols["color_r"], cols["color_g"], cols["color_b"]]))
-    return Actors(cols["track_id"], cols["cls"].tolist(), _boxes(cols), color, cols["braking"])
+    return Actors(cols["track_id"], cols["cls"].tolist(), _boxes(cols), color, cols["braking"],
+                  actor_variants(cols["track_id"], seed))
 
 
 def _write_png(path: Path, image: np.ndarray, kind: str) -> None:
@@ -307,7 +308,7 @@ def render_shard(job: ShardJob) -> int:
         ego, others = state.trajectories.frame(frame)
         ego_pose = Transform.from_xyz_rpy((ego["x_m"], ego["y_m"], ego["z_m"]), (0.0, 0.0, ego["yaw_rad"]))
         signals.apply(frame)
-        actors = _actors(others)
+        actors = _actors(others, job.seed)
         ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
         active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
                                  street_lights_m=world.street_lights, ego_size_m=ego_size_m)

@@ -1,17 +1,26 @@
-"""Shape recipes of the procedural actors, in metres at a typical size of each class.
+"""Shape recipes of the procedural actors (body families per class), in metres at a typical size of each.
 
-Frame: x forward, y left, z up, origin on the ground under the box centre (normalisation to the unit
-box is :func:`pipeline.world.actors.canonical_mesh`'s job). Every part is a convex solid (cuboid or a
-convex profile extruded across y), so outward winding is fixed per part by facing away from its centre.
+Frame: x forward, y left, z up, origin on the ground under the box centre (normalisation to the unit box is
+:func:`pipeline.world.actors.family_mesh`'s job, placement at each actor's size :mod:`pipeline.world.actors`').
+
+Cars, vans and buses are lofted bodies (:mod:`pipeline.world.loft`: a rounded cross-section swept along a side
+profile, with arches, glasshouse and pillars) with wheels (tyre, recessed rim, hub), door mirrors, and lamps,
+plates and grille laid onto the end faces as decals; trucks have a lofted cab on boxes (cargo, trailer). Small
+parts (mirrors, riders, a bicycle's frame) are convex solids (cuboids, or a convex profile extruded across y),
+whose outward winding is fixed per part by facing away from its centre. :data:`FAMILIES` lists each class's
+families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a semi-trailer).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
+from pipeline.world.loft import BodySpec, decal, loft
+from pipeline.world.loft import wheel as loft_wheel
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 
@@ -72,62 +81,211 @@ def merge(parts: list[Part], semantic_class: ObjectClass) -> Mesh:
     )
 
 
-def _lights(x_front: float, x_rear: float, y_in: float, y_out: float, z_head: tuple[float, float],
-            z_tail: tuple[float, float], plate_z: tuple[float, float], plate_half_w: float) -> list[Part]:
-    """Head lights, tail lights and plates as 2 cm thick plaques proud of the front and rear faces."""
-    d = 0.02
+def _mirrors(x: float, z: float, half_w: float, out_m: float = 0.11) -> list[Part]:
+    """Door mirrors at the glasshouse's foot: a housing (paint) on each side reaching ``half_w + out_m``."""
+    return mirrored(lambda y0, y1: cuboid((x - 0.06, y0, z), (x + 0.06, y1, z + 0.13), "paint"), half_w - 0.02,
+                    half_w + out_m)
+
+
+def _wheels(xs: tuple[float, ...], y_outer: float, radius: float, width: float = 0.22) -> list[Part]:
+    return [loft_wheel(x, side * y_outer, radius, width) for x in xs for side in (1.0, -1.0)]
+
+
+@dataclass(frozen=True)
+class Ends:
+    """Lamps, plates and grille on a body's end faces, as :func:`pipeline.world.loft.decal` quads (metres; z of
+    centres above the ground; lamps centred at ``lamp_y`` of the half-width on each side)."""
+
+    head_z: float
+    tail_z: float
+    plate_front_z: float
+    plate_rear_z: float
+    head_size: tuple[float, float] = (0.34, 0.12)
+    tail_size: tuple[float, float] = (0.34, 0.14)
+    lamp_y: float = 0.66
+    grille: tuple[float, float] = (0.0, 0.13)  # (width, height) between the headlamps; width 0 = the gap between
+    bumper_z: float | None = None  # a dark band across the rear bumper's lower part (0.1 m tall)
+    rear: bool = True  # False: the body's rear face is hidden (a truck's cab), no rear lamps or plate
+
+
+def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
+    verts, tris, _ = body
     parts = []
-    for y0, y1 in ((y_in, y_out), (-y_out, -y_in)):
-        parts.append(cuboid((x_front - d, y0, z_head[0]), (x_front + d, y1, z_head[1]), "headlight"))
-        parts.append(cuboid((x_rear - d, y0, z_tail[0]), (x_rear + d, y1, z_tail[1]), "taillight"))
-    for x in (x_front, x_rear):
-        parts.append(cuboid((x - d, -plate_half_w, plate_z[0]), (x + d, plate_half_w, plate_z[1]), "plate"))
+
+    def put(y, z, size, material, end):
+        part = decal(verts, tris, y, z, size[0], size[1], material, end)
+        if part is None:
+            raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the body's {end} face")
+        parts.append(part)
+
+    lamp_y = ends.lamp_y * half_w
+    for side in (1.0, -1.0):
+        put(side * lamp_y, ends.head_z, ends.head_size, "headlight", "front")
+        if ends.rear:
+            put(side * lamp_y, ends.tail_z, ends.tail_size, "taillight", "rear")
+    grille_w = ends.grille[0] or 2.0 * (lamp_y - 0.5 * ends.head_size[0]) - 0.08
+    put(0.0, ends.head_z - 0.01, (grille_w, ends.grille[1]), "trim", "front")
+    put(0.0, ends.plate_front_z, (0.52, 0.12), "plate", "front")
+    if ends.rear:
+        put(0.0, ends.plate_rear_z, (0.52, 0.12), "plate", "rear")
+    if ends.bumper_z is not None and ends.rear:
+        put(0.0, ends.bumper_z, (1.5 * half_w, 0.1), "trim", "rear")
     return parts
 
 
-def car() -> Mesh:
-    """4.5 x 1.8 x 1.5 m saloon: body, glass cabin with painted roof, four wheels, lights, plates."""
-    body = prism_y([(-2.25, 0.30), (2.25, 0.30), (2.25, 0.72), (1.9, 0.86), (-2.25, 0.90)], -0.9, 0.9, "paint",
-                   "paint")
-    cabin = prism_y([(-1.95, 0.85), (0.95, 0.85), (0.15, 1.5), (-1.55, 1.5)], -0.78, 0.78, "glass",
-                    ["paint", "glass", "paint", "glass"])
-    wheels = [wheel(x, 0.32, 0.32, y0, y1) for x in (1.4, -1.35) for y0, y1 in ((0.62, 0.86), (-0.86, -0.62))]
-    return merge([body, cabin, *wheels, *_lights(2.25, -2.25, 0.5, 0.8, (0.55, 0.68), (0.66, 0.8), (0.36, 0.48),
-                                                  0.26)], ObjectClass.CAR)
+def _car_body(spec: BodySpec, mirror_u: float, ends: Ends) -> list[Part]:
+    """A lofted car: body, four wheels set in the arches, door mirrors, lamps, plates and grille."""
+    body = loft(spec)
+    half = 0.5 * spec.width_m
+    xs = tuple((u - 0.5) * spec.length_m for u in spec.wheels_u)
+    belt_z = float(np.interp(mirror_u, *np.asarray(spec.belt).T))
+    return [body, *_end_details(body, half, ends), *_wheels(xs, half - 0.03, spec.wheel_radius_m),
+            *_mirrors((mirror_u - 0.5) * spec.length_m, belt_z, half * (1.0 - 0.5 * spec.tumblehome))]
+
+
+def sedan() -> Mesh:
+    """4.6 x 1.8 x 1.45 m saloon: three boxes (bonnet, cabin, boot), B and C pillars."""
+    spec = BodySpec(4.6, 1.78, top=((0.0, 0.5), (0.006, 0.8), (0.025, 0.95), (0.2, 1.0), (0.27, 1.04),
+                                     (0.37, 1.4), (0.43, 1.45), (0.57, 1.45), (0.71, 1.04), (0.76, 0.97),
+                                     (0.92, 0.84), (0.98, 0.7), (1.0, 0.5)),
+                    sill_z_m=0.3, belt=((0.0, 0.92), (0.35, 0.98), (0.72, 0.98), (1.0, 0.86)),
+                    wheels_u=(0.19, 0.8), wheel_radius_m=0.31, glass_u=(0.33, 0.72), pillars_u=(0.53,))
+    ends = Ends(head_z=0.68, tail_z=0.86, plate_front_z=0.5, plate_rear_z=0.63, bumper_z=0.47)
+    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+
+
+def hatchback() -> Mesh:
+    """4.1 x 1.75 x 1.47 m hatchback: two boxes, a steep tailgate."""
+    spec = BodySpec(4.1, 1.74, top=((0.0, 0.5), (0.006, 0.85), (0.02, 1.0), (0.05, 1.25), (0.09, 1.4), (0.16, 1.47),
+                                     (0.55, 1.47), (0.69, 1.04), (0.75, 0.96), (0.93, 0.82), (0.98, 0.68),
+                                     (1.0, 0.5)),
+                    sill_z_m=0.3, belt=((0.0, 0.95), (0.5, 0.98), (1.0, 0.86)),
+                    wheels_u=(0.16, 0.83), wheel_radius_m=0.3, glass_u=(0.1, 0.7), pillars_u=(0.47, 0.13))
+    ends = Ends(head_z=0.64, tail_z=0.9, plate_front_z=0.49, plate_rear_z=0.68, bumper_z=0.48)
+    return merge(_car_body(spec, 0.7, ends), ObjectClass.CAR)
+
+
+def estate() -> Mesh:
+    """4.8 x 1.8 x 1.48 m estate: the roof runs to a near-vertical tailgate; three side windows."""
+    spec = BodySpec(4.8, 1.8, top=((0.0, 0.5), (0.006, 0.85), (0.02, 1.0), (0.035, 1.25), (0.06, 1.42), (0.12, 1.48),
+                                    (0.57, 1.48), (0.71, 1.04), (0.76, 0.97), (0.92, 0.84), (0.98, 0.7),
+                                    (1.0, 0.5)),
+                    sill_z_m=0.3, belt=((0.0, 0.96), (0.5, 0.98), (1.0, 0.86)),
+                    wheels_u=(0.18, 0.81), wheel_radius_m=0.32, glass_u=(0.07, 0.72), pillars_u=(0.52, 0.27))
+    ends = Ends(head_z=0.65, tail_z=0.9, plate_front_z=0.5, plate_rear_z=0.68, bumper_z=0.48)
+    return merge(_car_body(spec, 0.72, ends), ObjectClass.CAR)
+
+
+def suv() -> Mesh:
+    """4.7 x 1.9 x 1.72 m SUV: tall and boxy, high ground clearance, big wheels."""
+    spec = BodySpec(4.7, 1.88, top=((0.0, 0.72), (0.015, 1.1), (0.04, 1.5), (0.08, 1.67), (0.14, 1.72),
+                                     (0.6, 1.72), (0.71, 1.26), (0.76, 1.16), (0.93, 1.04), (0.985, 0.86),
+                                     (1.0, 0.62)),
+                    sill_z_m=0.42, belt=((0.0, 1.12), (0.5, 1.14), (1.0, 1.04)), tumblehome=0.14,
+                    wheels_u=(0.17, 0.82), wheel_radius_m=0.37, glass_u=(0.08, 0.71), pillars_u=(0.5, 0.25),
+                    corner_m=0.14)
+    ends = Ends(head_z=0.88, tail_z=1.02, plate_front_z=0.64, plate_rear_z=0.84, bumper_z=0.62)
+    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+
+
+def coupe() -> Mesh:
+    """4.4 x 1.82 x 1.32 m coupé: low, a long sloping rear window, no B pillar."""
+    spec = BodySpec(4.4, 1.8, top=((0.0, 0.48), (0.006, 0.76), (0.03, 0.88), (0.22, 0.93), (0.38, 1.28),
+                                    (0.47, 1.32), (0.56, 1.31), (0.69, 0.96), (0.75, 0.9), (0.93, 0.76),
+                                    (0.98, 0.64), (1.0, 0.48)),
+                    sill_z_m=0.28, belt=((0.0, 0.86), (0.5, 0.9), (1.0, 0.8)), tumblehome=0.26,
+                    wheels_u=(0.19, 0.81), wheel_radius_m=0.32, glass_u=(0.36, 0.7))
+    ends = Ends(head_z=0.6, tail_z=0.78, plate_front_z=0.46, plate_rear_z=0.58, bumper_z=0.44)
+    return merge(_car_body(spec, 0.69, ends), ObjectClass.CAR)
 
 
 def van() -> Mesh:
-    """5.0 x 2.0 x 2.2 m van: boxy body with a sloped windscreen, side windows at the cab."""
-    body = prism_y([(-2.5, 0.32), (2.5, 0.32), (2.5, 0.95), (1.75, 1.25), (-2.5, 1.25)], -1.0, 1.0, "paint", "paint")
-    upper = prism_y([(-2.5, 1.24), (1.75, 1.24), (1.0, 2.2), (-2.5, 2.2)], -1.0, 1.0, "paint",
-                    ["paint", "glass", "paint", "paint"])
-    windows = mirrored(lambda y0, y1: cuboid((0.45, y0, 1.35), (1.25, y1, 1.95), "glass"), 0.98, 1.01)
-    wheels = [wheel(x, 0.34, 0.34, y0, y1) for x in (1.6, -1.7) for y0, y1 in ((0.7, 0.95), (-0.95, -0.7))]
-    return merge([body, upper, *windows, *wheels, *_lights(2.5, -2.5, 0.55, 0.9, (0.7, 0.85), (0.8, 1.1),
-                                                           (0.4, 0.52), 0.26)], ObjectClass.VAN)
+    """5.2 x 2.0 x 2.1 m panel van: one box, a short sloped bonnet and a steep windscreen; cab windows only."""
+    spec = BodySpec(5.2, 1.96, top=((0.0, 0.6), (0.01, 1.9), (0.03, 2.08), (0.74, 2.1), (0.8, 1.8),
+                                    (0.87, 1.22), (0.94, 1.08), (0.985, 0.88), (1.0, 0.6)),
+                    sill_z_m=0.38, belt=((0.0, 1.1), (1.0, 1.1)), tumblehome=0.06, plan_taper=0.05,
+                    wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86), corner_m=0.16)
+    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
+    return merge(_car_body(spec, 0.84, ends), ObjectClass.VAN)
 
 
-def truck() -> Mesh:
-    """8.0 x 2.5 x 3.5 m rigid truck: chassis, painted cab with windscreen, cargo box, six wheels."""
-    chassis = cuboid((-4.0, -1.0, 0.45), (3.99, 1.0, 0.95), "rubber")  # not flush with the cab's front (no tie)
-    cab = cuboid((2.1, -1.25, 0.6), (4.0, 1.25, 3.0), "paint")
-    screen = cuboid((3.98, -1.1, 1.85), (4.02, 1.1, 2.8), "glass")
-    side = mirrored(lambda y0, y1: cuboid((2.6, y0, 1.85), (3.7, y1, 2.7), "glass"), 1.23, 1.27)
-    cargo = cuboid((-4.0, -1.25, 0.95), (1.95, 1.25, 3.5), "cargo")
-    wheels = [wheel(x, 0.5, 0.5, y0, y1) for x in (3.1, -1.6, -2.8) for y0, y1 in ((0.9, 1.22), (-1.22, -0.9))]
-    return merge([chassis, cab, screen, *side, cargo, *wheels,
-                  *_lights(4.0, -4.0, 0.7, 1.1, (0.75, 0.94), (0.6, 0.8), (0.5, 0.66), 0.28)], ObjectClass.TRUCK)
+def minibus() -> Mesh:
+    """5.3 x 2.0 x 2.2 m passenger van: the panel van with a band of side windows."""
+    spec = BodySpec(5.3, 1.96, top=((0.0, 0.6), (0.01, 1.95), (0.03, 2.15), (0.74, 2.18), (0.8, 1.85),
+                                    (0.87, 1.24), (0.94, 1.08), (0.985, 0.88), (1.0, 0.6)),
+                    sill_z_m=0.38, belt=((0.0, 1.12), (1.0, 1.12)), tumblehome=0.06, plan_taper=0.05,
+                    wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86),
+                    extra_glass=((0.05, 0.7, 1.25, 1.85),), pillars_u=(0.28, 0.5), corner_m=0.16)
+    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
+    return merge(_car_body(spec, 0.84, ends), ObjectClass.VAN)
+
+
+def pickup() -> Mesh:
+    """5.4 x 1.95 x 1.85 m pickup: cab, a flat-covered load bed, high clearance."""
+    spec = BodySpec(5.4, 1.92, top=((0.0, 0.7), (0.01, 1.08), (0.4, 1.1), (0.415, 1.78), (0.44, 1.85),
+                                    (0.62, 1.85), (0.71, 1.3), (0.76, 1.2), (0.94, 1.08), (0.99, 0.88),
+                                    (1.0, 0.62)),
+                    sill_z_m=0.45, belt=((0.0, 1.08), (0.5, 1.16), (1.0, 1.1)), tumblehome=0.1, plan_taper=0.05,
+                    wheels_u=(0.17, 0.8), wheel_radius_m=0.38, glass_u=(0.43, 0.71), pillars_u=(0.56,))
+    ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.82,
+                bumper_z=0.66)
+    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+
+
+def _truck_rear(x: float, z_lamp: float, half_w: float) -> list[Part]:
+    """A truck's rear: a bumper bar (trim), tail lamps and a plate on it, facing -x at ``x``."""
+    return [cuboid((x - 0.1, -half_w + 0.05, z_lamp - 0.16), (x, half_w - 0.05, z_lamp - 0.04), "trim"),
+            *[cuboid((x - 0.04, y0, z_lamp - 0.04), (x + 0.02, y1, z_lamp + 0.1), "taillight")
+              for y0, y1 in ((half_w - 0.45, half_w - 0.1), (-half_w + 0.1, -half_w + 0.45))],
+            cuboid((x - 0.14, -0.26, z_lamp - 0.15), (x - 0.1, 0.26, z_lamp - 0.04), "plate")]
+
+
+def _cab(length_m: float, width_m: float, height_m: float, x_front: float) -> list[Part]:
+    """A cab-over truck cab: lofted with a big windscreen, lamps, grille and plate in front, at x up to
+    ``x_front``."""
+    h = height_m
+    spec = BodySpec(length_m, width_m, top=((0.0, h - 0.15), (0.55, h), (0.8, h - 0.1), (0.93, h - 0.85),
+                                            (0.97, h - 1.55), (1.0, h - 1.95)),
+                    sill_z_m=0.55, belt=((0.0, h - 1.2), (1.0, h - 1.2)), tumblehome=0.04, plan_taper=0.04,
+                    wheels_u=(0.55,), wheel_radius_m=0.5, glass_u=(0.4, 0.8), corner_m=0.2, arch_clearance_m=0.08)
+    v, t, m = loft(spec)
+    shift = np.array([x_front - 0.5 * length_m, 0.0, 0.0])
+    ends = Ends(head_z=0.9, tail_z=0.0, plate_front_z=0.68, plate_rear_z=0.0, head_size=(0.3, 0.15), lamp_y=0.78,
+                grille=(1.0, 0.24), rear=False)
+    return [(p[0] + shift, p[1], p[2]) for p in [(v, t, m), *_end_details((v, t, m), 0.5 * width_m, ends)]]
+
+
+def box_truck() -> Mesh:
+    """8.0 x 2.5 x 3.5 m rigid truck: a rounded cab with a big windscreen, a cargo box, six wheels."""
+    chassis = cuboid((-3.9, -0.9, 0.5), (2.0, 0.9, 0.95), "trim")
+    cargo = cuboid((-4.0, -1.25, 0.95), (1.85, 1.25, 3.5), "cargo")
+    wheels = _wheels((4.0 - 2.1 + 0.55 * 2.1, -1.6, -2.8), 1.22, 0.5, 0.3)
+    return merge([*_cab(2.1, 2.4, 2.95, 4.0), chassis, cargo, *_truck_rear(-4.0, 0.7, 1.22), *wheels],
+                 ObjectClass.TRUCK)
+
+
+def semi_trailer() -> Mesh:
+    """16 x 2.55 x 4.0 m tractor with a box semi-trailer: cab over engine, a gap, the trailer on three axles."""
+    frame = cuboid((3.0, -0.85, 0.55), (6.9, 0.85, 1.0), "trim")
+    trailer = cuboid((-8.0, -1.275, 1.25), (4.6, 1.275, 4.0), "cargo")
+    skirt = cuboid((-7.9, -1.0, 0.95), (4.6, 1.0, 1.25), "trim")
+    wheels = _wheels((8.0 - 2.3 + 0.55 * 2.3, 4.0, 2.7, -5.2, -6.3, -7.4), 1.24, 0.52, 0.32)
+    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, skirt, *_truck_rear(-8.0, 1.05, 1.25), *wheels],
+                 ObjectClass.TRUCK)
 
 
 def bus() -> Mesh:
-    """12 x 2.55 x 3.2 m bus: painted body, window bands, windscreen, four wheels."""
-    body = cuboid((-6.0, -1.275, 0.35), (6.0, 1.275, 3.2), "paint")
-    band = mirrored(lambda y0, y1: cuboid((-5.6, y0, 1.45), (5.2, y1, 2.75), "glass"), 1.255, 1.295)
-    screen = cuboid((5.98, -1.15, 1.0), (6.02, 1.15, 2.95), "glass")
-    rear = cuboid((-6.02, -1.0, 1.9), (-5.98, 1.0, 2.8), "glass")
-    wheels = [wheel(x, 0.5, 0.5, y0, y1) for x in (4.1, -3.4) for y0, y1 in ((0.9, 1.2), (-1.2, -0.9))]
-    return merge([body, *band, screen, rear, *wheels,
-                  *_lights(6.0, -6.0, 0.75, 1.15, (0.5, 0.7), (0.6, 0.85), (0.45, 0.6), 0.28)], ObjectClass.BUS)
+    """12 x 2.55 x 3.2 m city bus: boxy rounded body, a window band, a deep windscreen, two axles."""
+    spec = BodySpec(12.0, 2.55, top=((0.0, 3.0), (0.02, 3.18), (0.97, 3.2), (0.995, 3.0), (1.0, 2.8)),
+                    sill_z_m=0.35, belt=((0.0, 1.25), (1.0, 1.2)), tumblehome=0.03, plan_taper=0.02,
+                    wheels_u=(0.22, 0.82), wheel_radius_m=0.5, glass_u=(2.0, 2.0),
+                    extra_glass=((0.03, 0.965, 1.3, 2.75), (0.97, 1.01, 1.0, 2.95)),
+                    pillars_u=(0.12, 0.24, 0.36, 0.48, 0.6, 0.72, 0.84), pillar_w_m=0.12, corner_m=0.25,
+                    arch_clearance_m=0.06,
+                    n_stations=40)
+    ends = Ends(head_z=0.7, tail_z=0.95, plate_front_z=0.5, plate_rear_z=0.6, head_size=(0.3, 0.18), tail_size=(0.2,
+                0.4), lamp_y=0.78, grille=(0.9, 0.25))
+    return merge(_car_body(spec, 0.985, ends), ObjectClass.BUS)
 
 
 def _rider(x_seat: float, z_seat: float, x_hands: float, z_hands: float) -> list[Part]:
@@ -176,12 +334,18 @@ def pedestrian() -> Mesh:
     ], ObjectClass.PEDESTRIAN)
 
 
-SHAPES: dict[ObjectClass, Callable[[], Mesh]] = {
-    ObjectClass.CAR: car,
-    ObjectClass.VAN: van,
-    ObjectClass.TRUCK: truck,
-    ObjectClass.BUS: bus,
-    ObjectClass.MOTORCYCLE: motorcycle,
-    ObjectClass.BICYCLE: bicycle,
-    ObjectClass.PEDESTRIAN: pedestrian,
+# Body families per class, in a fixed order (an actor's variant picks one among those that suit its length).
+FAMILIES: dict[ObjectClass, tuple[Callable[[], Mesh], ...]] = {
+    ObjectClass.CAR: (sedan, hatchback, estate, suv, coupe, pickup),
+    ObjectClass.VAN: (van, minibus),
+    ObjectClass.TRUCK: (box_truck, semi_trailer),
+    ObjectClass.BUS: (bus,),
+    ObjectClass.MOTORCYCLE: (motorcycle,),
+    ObjectClass.BICYCLE: (bicycle,),
+    ObjectClass.PEDESTRIAN: (pedestrian,),
+}
+# The length range (metres) each family suits; a family outside its range is chosen only when none suits.
+SUITS_LENGTH_M: dict[Callable[[], Mesh], tuple[float, float]] = {
+    hatchback: (0.0, 4.4), sedan: (4.2, 99.0), estate: (4.4, 99.0), suv: (4.2, 99.0), coupe: (4.0, 4.9),
+    pickup: (4.9, 99.0), box_truck: (0.0, 11.0), semi_trailer: (11.0, 99.0),
 }

@@ -2,7 +2,11 @@
 
 Conventions:
 
-- The canonical mesh of a class lives in the *unit box frame*: centre at the origin, x forward, y left,
+- Each class has several body families (:data:`pipeline.world.actor_shapes.FAMILIES`: sedan, hatchback, estate,
+  SUV, coupé, pickup for cars, and so on); an actor's *model* is one of its class's families, picked by its
+  ``variant`` (a per-actor random number the render draws from the run's seed) among the families that suit its
+  length (:meth:`ActorMeshes.model_codes`), so the same actor keeps its body in every frame.
+- A model's canonical mesh lives in the *unit box frame*: centre at the origin, x forward, y left,
   z up, and its vertices span exactly [-0.5, 0.5] on every axis (it touches all six faces). Placing it
   is the affine map ``p_world = R(yaw) @ diag(length, width, height) @ p_unit + centre``, so the placed
   mesh fills its 3D box exactly and 3D labels and 2D projections agree.
@@ -21,7 +25,7 @@ import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
-from pipeline.world.actor_shapes import SHAPES
+from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
 from pipeline.world.mesh import Mesh
 
 
@@ -35,6 +39,8 @@ class Actors:
         boxes: (N) world boxes (centre, (length, width, height), yaw), metres / radians.
         color_rgb: (N, 3) float32 paint colour, linear RGB in [0, 1].
         brake: (N,) bool, brake lights lit.
+        variant: (N,) uint32 per-actor random number that picks the body family (:meth:`ActorMeshes.model_codes`);
+            0 (the default) picks each class's first suitable family.
     """
 
     track_id: np.ndarray
@@ -42,6 +48,7 @@ class Actors:
     boxes: Boxes3D
     color_rgb: np.ndarray
     brake: np.ndarray = field(default=None)  # type: ignore[assignment]
+    variant: np.ndarray = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         n = len(self.boxes)
@@ -49,10 +56,11 @@ class Actors:
         classes = tuple(ObjectClass(c) for c in self.object_class)
         color = np.asarray(self.color_rgb, dtype=np.float32).reshape(-1, 3)
         brake = np.zeros(n, bool) if self.brake is None else np.asarray(self.brake, dtype=bool).reshape(-1)
-        if not (len(track_id) == len(classes) == len(color) == len(brake) == n):
+        variant = np.zeros(n, np.uint32) if self.variant is None else np.asarray(self.variant, np.uint32).reshape(-1)
+        if not (len(track_id) == len(classes) == len(color) == len(brake) == len(variant) == n):
             raise ValueError(
                 f"actor arrays differ in length: track_id {len(track_id)}, object_class {len(classes)}, "
-                f"boxes {n}, color_rgb {len(color)}, brake {len(brake)}"
+                f"boxes {n}, color_rgb {len(color)}, brake {len(brake)}, variant {len(variant)}"
             )
         if n and (track_id.min() <= 0 or len(np.unique(track_id)) != n):
             raise ValueError("track ids must be positive and unique (0 means static / nothing)")
@@ -62,6 +70,7 @@ class Actors:
         object.__setattr__(self, "object_class", classes)
         object.__setattr__(self, "color_rgb", color)
         object.__setattr__(self, "brake", brake)
+        object.__setattr__(self, "variant", variant)
 
     def __len__(self) -> int:
         return len(self.track_id)
@@ -75,6 +84,18 @@ class Actors:
         """(N,) int32 index of each actor's class in ``list(ObjectClass)``."""
         order = list(ObjectClass)
         return np.array([order.index(c) for c in self.object_class], dtype=np.int32)
+
+
+def actor_variants(track_id: np.ndarray, seed: int) -> np.ndarray:
+    """(N,) uint32 per-actor random numbers from (run seed, track id): SplitMix64's finaliser of their mix, so an
+    actor draws the same number in every frame and shard, and other seeds draw others."""
+    with np.errstate(over="ignore"):
+        z = (np.asarray(track_id, np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+             + np.uint64(int(seed) % 2**64) * np.uint64(0xD1B54A32D192ED03))
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z ^= z >> np.uint64(31)
+    return (z >> np.uint64(32)).astype(np.uint32)
 
 
 def srgb8_to_linear(rgb8: np.ndarray) -> np.ndarray:
@@ -96,33 +117,79 @@ def normalise_to_unit_box(mesh: Mesh) -> Mesh:
 
 
 @functools.cache
+def family_mesh(family) -> Mesh:
+    """The built-in procedural mesh of one body family in the unit box frame (vertices span exactly [-0.5, 0.5]^3)."""
+    return normalise_to_unit_box(family())
+
+
 def canonical_mesh(object_class: ObjectClass) -> Mesh:
-    """The built-in procedural mesh of a class in the unit box frame (vertices span exactly [-0.5, 0.5]^3)."""
-    return normalise_to_unit_box(SHAPES[ObjectClass(object_class)]())
+    """The first body family's mesh of a class, in the unit box frame."""
+    return family_mesh(FAMILIES[ObjectClass(object_class)][0])
 
 
 class ActorMeshes:
-    """The canonical mesh of every class (the built-in procedural ones unless overridden).
+    """The canonical meshes (models) of every class: the built-in body families unless overridden.
 
     Args:
-        overrides: class -> mesh in the unit box frame; each must span exactly [-0.5, 0.5] on every axis
-            (use :func:`normalise_to_unit_box`), so that placed meshes fill their 3D boxes.
+        overrides: class -> one mesh in the unit box frame that replaces all of the class's families; each must
+            span exactly [-0.5, 0.5] on every axis (use :func:`normalise_to_unit_box`), so that placed meshes fill
+            their 3D boxes.
 
     Attributes:
-        scene_cache: per-class Embree scenes and triangle tables, owned by the renderer (pipeline.world.scene).
+        models: every model's mesh, classes in ObjectClass order, each class's families in FAMILIES order.
+        model_class: (M,) the class of each model; model_names: (M,) its family's name ("sedan", ...; the class's
+            name for an override).
+        scene_cache: per-model scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
     def __init__(self, overrides: dict[ObjectClass, Mesh] | None = None) -> None:
-        self._meshes = {c: canonical_mesh(c) for c in ObjectClass}
-        for object_class, mesh in (overrides or {}).items():
+        overrides = {ObjectClass(c): m for c, m in (overrides or {}).items()}
+        for object_class, mesh in overrides.items():
             lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
             if not (np.all(lo == -0.5) and np.all(hi == 0.5)):
                 raise ValueError(f"mesh for {object_class!s} must span exactly [-0.5, 0.5]^3, got {lo} .. {hi}")
-            self._meshes[ObjectClass(object_class)] = mesh
-        self.scene_cache: dict[object, object] = {}  # ObjectClass -> Embree scene; "tables" -> triangle tables
+        self.models: list[Mesh] = []
+        self.model_class: list[ObjectClass] = []
+        self.model_names: list[str] = []
+        # Per class code: the first model index, and each model's (low, high) suitable length in metres.
+        self._first = np.zeros(len(ObjectClass), np.int64)
+        self._suits: list[np.ndarray] = []
+        for code, object_class in enumerate(ObjectClass):
+            self._first[code] = len(self.models)
+            if object_class in overrides:
+                meshes, suits, names = [overrides[object_class]], [(0.0, np.inf)], [object_class.value]
+            else:
+                families = FAMILIES[object_class]
+                meshes = [family_mesh(f) for f in families]
+                suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in families]
+                names = [f.__name__ for f in families]
+            self.model_names += names
+            self.models += meshes
+            self.model_class += [object_class] * len(meshes)
+            self._suits.append(np.asarray(suits, np.float64))
+        self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
 
     def __getitem__(self, object_class: ObjectClass) -> Mesh:
-        return self._meshes[ObjectClass(object_class)]
+        """The class's first model."""
+        return self.models[int(self._first[list(ObjectClass).index(ObjectClass(object_class))])]
+
+    def model_codes(self, actors: Actors) -> np.ndarray:
+        """(N,) int64 each actor's model (index into :attr:`models`): among its class's families whose length range
+        holds the actor's length (all of them where none does), the one at ``variant`` modulo their number."""
+        codes = actors.class_codes
+        out = np.zeros(len(actors), np.int64)
+        length = actors.boxes.size[:, 0] if len(actors) else np.zeros(0)
+        for code in np.unique(codes):
+            idx = np.flatnonzero(codes == code)
+            suits = self._suits[code]
+            ok = (length[idx, None] >= suits[None, :, 0]) & (length[idx, None] < suits[None, :, 1])
+            ok[~ok.any(axis=1)] = True
+            count = ok.sum(axis=1)
+            pick = actors.variant[idx].astype(np.int64) % count  # the pick-th suitable family
+            rank = np.cumsum(ok, axis=1) - 1
+            family = np.argmax(ok & (rank == pick[:, None]), axis=1)
+            out[idx] = self._first[code] + family
+        return out
 
 
 DEFAULT_MESHES = ActorMeshes()
@@ -164,7 +231,7 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
                  ) -> ActorGeometry:
     """Scale and place every actor's canonical mesh (vectorised per class) and merge them; with ``where`` (A,) bool,
     only those actors' (their indices stay positions in ``actors``)."""
-    codes = actors.class_codes
+    codes = meshes.model_codes(actors)
     if where is not None:
         where = np.asarray(where, bool)
         if where.shape != (len(actors),):
@@ -172,11 +239,10 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         codes = np.where(where, codes, -1)
     parts: list[tuple[np.ndarray, ...]] = []
     vertex_offset = 0
-    for code, object_class in enumerate(ObjectClass):
+    for code, mesh in enumerate(meshes.models):
         idx = np.flatnonzero(codes == code)
         if not len(idx):
             continue
-        mesh = meshes[object_class]
         affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
         # verts[n, v] = A_n @ vertex_v + t_n; as one stacked matmul (~10x faster than the same einsum).
         verts = np.matmul(mesh.vertices, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]

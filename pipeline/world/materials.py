@@ -45,7 +45,7 @@ MATERIALS: dict[str, Material] = {
     "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05),
     "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
     "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
-    "headlight": Material((0.9, 0.9, 0.85), specular=0.8, reflectivity=0.80),
+    "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80),  # clear lens
     "taillight": Material((0.45, 0.02, 0.02), specular=0.5, reflectivity=0.70),
     "lamp": Material((0.9, 0.85, 0.7), reflectivity=0.5),
     "skin": Material((0.60, 0.45, 0.35), reflectivity=0.30),
@@ -60,6 +60,10 @@ MATERIALS: dict[str, Material] = {
     "signal_green": Material((0.05, 0.6, 0.2), specular=0.6, reflectivity=0.10, emissive_rgb=(0.3, 6.0, 2.0)),
     "building_light": Material((0.66, 0.62, 0.55), reflectivity=0.35),
     "building_dark": Material((0.30, 0.28, 0.28), reflectivity=0.25),
+    # Appended by the lofted vehicle bodies (pipeline/world/loft.py): alloy rims, black plastic trim (bumpers'
+    # lower bands, sills, grilles, hubs).
+    "rim": Material((0.55, 0.56, 0.58), specular=0.6, shininess=48.0, reflectivity=0.60),
+    "trim": Material((0.035, 0.035, 0.04), specular=0.15, shininess=24.0, reflectivity=0.10),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)

@@ -4,10 +4,10 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
 
 - The static world is one Embree scene built once per run (:class:`StaticScene`); rebuilding a merged
   static+actor BVH every frame costs far more than casting twice.
-- The actors get no Embree scene of their own (:class:`FrameScene`): an actor is its class's canonical mesh
+- The actors get no Embree scene of their own (:class:`FrameScene`): an actor is its model's canonical mesh
   under an affine map, so a ray meets it where the ray mapped into the actor's unit box frame meets the canonical
-  mesh, whose scene is built once per class and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
-  actor) pairs by an exact test against each unit box, then one cast per class present). Building a BVH over the
+  mesh, whose scene is built once per model and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
+  actor) pairs by an exact test against each unit box, then one cast per model present). Building a BVH over the
   placed actors instead cost ~0.5 us per triangle, every frame: ~11 ms of a highway frame, more than its actor
   rays. A ray's result is the nearer of the static and the actor hit. Callers may pass a conservative mask of
   the rays that can reach an actor at all (from projected boxes) to skip the actor test for the rest.
@@ -24,8 +24,8 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   along the sun lies as high as they do (:class:`pipeline.world.sunmap.SunMap`), and all from farther hits.
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
   canonical mesh is affine, so a ray transformed into the actor's unit box frame hits the cached
-  canonical mesh of its class exactly where the original ray hits the placed mesh, with the same ray
-  parameter t. One cast per class present covers all objects.
+  canonical mesh of its model exactly where the original ray hits the placed mesh, with the same ray
+  parameter t. One cast per model present covers all objects.
 
 All positions and directions are in the world frame, metres; ``t_m`` is metres along unit directions.
 """
@@ -38,7 +38,6 @@ import cv2
 import numpy as np
 import open3d as o3d
 
-from pipeline.core.classes import ObjectClass
 from pipeline.core.jit import as_input, as_view_input, fma32, kernel
 from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits, unit_frame_rays
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
@@ -119,7 +118,6 @@ def _occluded(scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, t_max_m: 
     return scene.test_occlusions(o3d.core.Tensor.from_numpy(picked), tfar=t_max_m, nthreads=threads).numpy()
 
 
-_CLASSES = list(ObjectClass)  # an actor's class code is a position in this list (Actors.class_codes)
 _NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.uint32), np.zeros((0, 3), np.float32))  # a cast of no ray
 
 
@@ -188,18 +186,18 @@ def rectangles_mask(rows: int, cols: int, lo: np.ndarray, hi: np.ndarray) -> np.
     return cv2.integral(corners, sdepth=cv2.CV_32F)[1:rows + 1, 1:cols + 1] > 0
 
 
-def _canonical_scene(meshes: ActorMeshes, object_class: ObjectClass) -> o3d.t.geometry.RaycastingScene:
-    """The Embree scene of one class's canonical mesh, cached on the mesh library."""
-    if object_class not in meshes.scene_cache:
-        mesh = meshes[object_class]
-        meshes.scene_cache[object_class] = _embree(mesh.vertices, mesh.triangles)
-    return meshes.scene_cache[object_class]
+def _canonical_scene(meshes: ActorMeshes, model: int) -> o3d.t.geometry.RaycastingScene:
+    """The Embree scene of one model's canonical mesh (an index into ``meshes.models``), cached on the library."""
+    if model not in meshes.scene_cache:
+        mesh = meshes.models[model]
+        meshes.scene_cache[model] = _embree(mesh.vertices, mesh.triangles)
+    return meshes.scene_cache[model]
 
 
 @dataclass(frozen=True)
 class _ClassTables:
-    """Every class's canonical triangles numbered in one sequence (class by class, in ObjectClass order):
-    offsets (C,) the first number of each class, semantic (T,) uint8 and material (T,) int32 per triangle."""
+    """Every model's canonical triangles numbered in one sequence (model by model, as ``ActorMeshes.models``):
+    offsets (M,) the first number of each model, semantic (T,) uint8 and material (T,) int32 per triangle."""
 
     offsets: np.ndarray
     semantic: np.ndarray
@@ -209,7 +207,7 @@ class _ClassTables:
 def _class_tables(meshes: ActorMeshes) -> _ClassTables:
     """The :class:`_ClassTables` of ``meshes``, cached on them."""
     if "tables" not in meshes.scene_cache:
-        parts = [meshes[c] for c in ObjectClass]
+        parts = meshes.models
         counts = np.array([len(m.triangles) for m in parts], np.int64)
         meshes.scene_cache["tables"] = _ClassTables(
             np.concatenate([[0], np.cumsum(counts)[:-1]]),
@@ -357,7 +355,8 @@ class FrameScene:
         if self.active.shape != (len(actors),):
             raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
         self.geometry = place_actors(actors, meshes, self.active)
-        self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its class's canonical mesh)
+        self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
+        self._model = meshes.model_codes(actors)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
         self._paint = material_index("paint")
@@ -427,10 +426,9 @@ class FrameScene:
             raise ValueError(f"actor_index out of range for {len(self.actors)} actors")
         t = np.full(len(rays), np.inf, np.float32)
         local = unit_frame_rays(as_input(rays, np.float32), actor_index, self._inv_linear, self._center)
-        for code, sel in self._pairs_by_class(actor_index):
+        for model, sel in self._pairs_by_model(actor_index):
             # Directions stay non-unit in the unit box frame, so t is still in world metres.
-            t[sel] = _cast(_canonical_scene(self.meshes, _CLASSES[code]), np.take(local, sel, axis=0),
-                           self.threads)[0]
+            t[sel] = _cast(_canonical_scene(self.meshes, model), np.take(local, sel, axis=0), self.threads)[0]
         return np.isfinite(t), t
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max_m: float = np.inf) -> np.ndarray:
@@ -450,17 +448,15 @@ class FrameScene:
         pair_row, pair_actor, local = actor_pairs(as_input(rays, np.float32), sub, self._placed, self._inv_linear,
                                                   self._center, self._radius)
         hit_pair = np.zeros(len(pair_row), bool)
-        for code, sel in self._pairs_by_class(pair_actor):
+        for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
-            hit_pair[sel] = _occluded(_canonical_scene(self.meshes, _CLASSES[code]), local, t_max_m, self.threads,
-                                      sel)
+            hit_pair[sel] = _occluded(_canonical_scene(self.meshes, model), local, t_max_m, self.threads, sel)
         blocked[sub[pair_row[hit_pair]]] = True
         return blocked
 
-    def _pairs_by_class(self, pair_actor: np.ndarray):
-        """(class code, the positions (int64) of that class's entries) for each class among the actors
-        ``pair_actor``."""
-        codes = self.actors.class_codes[pair_actor]
+    def _pairs_by_model(self, pair_actor: np.ndarray):
+        """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""
+        codes = self._model[pair_actor]
         for code in np.unique(codes):
             yield int(code), np.flatnonzero(codes == code)
 
@@ -474,10 +470,10 @@ class FrameScene:
         prim = np.zeros(len(pair_row), np.uint32)
         normal = np.zeros((len(pair_row), 3), np.float32)
         offsets = _class_tables(self.meshes).offsets
-        for code, sel in self._pairs_by_class(pair_actor):
-            scene = _canonical_scene(self.meshes, _CLASSES[code])
-            t[sel], class_prim, normal[sel] = _cast(scene, np.take(local, sel, axis=0), self.threads)
-            prim[sel] = class_prim + np.uint32(offsets[code])  # hits only are read
+        for model, sel in self._pairs_by_model(pair_actor):
+            scene = _canonical_scene(self.meshes, model)
+            t[sel], model_prim, normal[sel] = _cast(scene, np.take(local, sel, axis=0), self.threads)
+            prim[sel] = model_prim + np.uint32(offsets[model])  # hits only are read
         return nearest_actor_hits(len(sub), pair_row, pair_actor, t, prim, normal, self._inv_linear)
 
     def sun_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray) -> np.ndarray:

@@ -62,7 +62,7 @@ def s_elev(ring: int) -> float:
 def test_object_points_lie_in_their_box_and_project_into_their_tight_box(box_meshes, actors_factory, wall):
     actors = actors_factory([[12.0, 2.0, -0.8], [25.0, -3.0, -0.6], [40.0, 4.0, 0.0]],
                             [[4.5, 1.8, 1.5], [8.0, 2.5, 3.0], [12.0, 2.5, 3.2]], yaws=[0.2, -0.4, 3.0])
-    scene = FrameScene(StaticScene([wall(80.0)]), actors)
+    scene = FrameScene(StaticScene([wall(80.0)]), actors, box_meshes)
     mount = Transform.from_xyz_rpy((0.3, 0.0, 0.4))
     lidar = Lidar(LidarConfig(mount=mount, **EXACT))
     s = render_lidar(scene, lidar, EGO, np.random.default_rng(0))

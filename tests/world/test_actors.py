@@ -7,10 +7,13 @@ import pytest
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
+from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
 from pipeline.world.actors import (
     ActorMeshes,
     Actors,
+    actor_variants,
     canonical_mesh,
+    family_mesh,
     normalise_to_unit_box,
     place_actors,
     srgb8_to_linear,
@@ -19,14 +22,17 @@ from pipeline.world.actors import (
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 
+ALL_FAMILIES = [pytest.param(c, f, id=f.__name__) for c, families in FAMILIES.items() for f in families]
 
-@pytest.mark.parametrize("object_class", list(ObjectClass))
-def test_canonical_mesh_spans_the_unit_box_exactly(object_class):
-    mesh = canonical_mesh(object_class)
+
+@pytest.mark.parametrize(("object_class", "family"), ALL_FAMILIES)
+def test_every_family_spans_the_unit_box_exactly(object_class, family):
+    mesh = family_mesh(family)
     np.testing.assert_array_equal(mesh.vertices.min(axis=0), [-0.5, -0.5, -0.5])
     np.testing.assert_array_equal(mesh.vertices.max(axis=0), [0.5, 0.5, 0.5])
     assert mesh.semantic == object_class.semantic
-    # Outward winding: every part is a closed convex solid, so the signed volume is positive.
+    # Outward winding: every part is a closed solid facing out (or a thin decal on one), so the signed volume is
+    # positive.
     v = mesh.vertices[mesh.triangles]
     assert np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0 > 0.05
 
@@ -51,11 +57,11 @@ def _coplanar_overlaps(mesh: Mesh) -> list[tuple[int, int]]:
     return pairs
 
 
-@pytest.mark.parametrize("object_class", list(ObjectClass))
-def test_no_two_materials_share_a_surface(object_class):
+@pytest.mark.parametrize(("object_class", "family"), ALL_FAMILIES)
+def test_no_two_materials_share_a_surface(object_class, family):
     # Where two coplanar triangles overlap, a ray hits both at the same t and Embree reports either, depending on
     # the BVH: the pixel's material would depend on which other actors are in the frame's scene.
-    mesh = canonical_mesh(object_class)
+    mesh = family_mesh(family)
     assert _coplanar_overlaps(mesh) == []
 
 
@@ -69,11 +75,69 @@ def test_the_coplanar_check_finds_an_overlap():
         assert sorted(_coplanar_overlaps(mesh)) == expected
 
 
-@pytest.mark.parametrize("object_class", [ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.BUS])
-def test_vehicles_have_glass_wheels_lights_and_paint(object_class):
-    materials = set(canonical_mesh(object_class).material.tolist())
-    for name in ("paint", "glass", "rubber", "headlight", "taillight", "plate"):
+VEHICLE_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK,
+                                                                ObjectClass.BUS)]
+
+
+@pytest.mark.parametrize(("object_class", "family"), VEHICLE_FAMILIES)
+def test_vehicles_have_glass_wheels_lights_and_paint(object_class, family):
+    materials = set(family_mesh(family).material.tolist())
+    for name in ("paint", "glass", "rubber", "rim", "headlight", "taillight", "plate", "trim"):
         assert material_index(name) in materials, name
+
+
+@pytest.mark.parametrize(("object_class", "family"), VEHICLE_FAMILIES)
+def test_vehicle_views_show_their_parts(object_class, family):
+    """Rays along the body's axes meet what a person expects: tail lamps from behind, headlamps from the front
+    (at the lamps' height, off the centre line), a tyre from the side low between the arches' centres."""
+    from pipeline.world.scene import _cast, _embree
+
+    mesh = family_mesh(family)
+    scene = _embree(mesh.vertices, mesh.triangles)
+    lamp = {name: np.flatnonzero(mesh.material == material_index(name)) for name in ("headlight", "taillight")}
+
+    def first_material(origin, direction, grid):
+        rays = np.array([[*(origin + g), *direction] for g in grid], np.float32)
+        t, prim, _ = _cast(scene, rays)
+        return set(mesh.material[prim[np.isfinite(t)]].tolist())
+
+    # A fan of rays at every height and lateral offset: some must meet each end's lamps.
+    grid = [np.array([0.0, y, z]) for y in np.linspace(-0.45, 0.45, 19) for z in np.linspace(-0.45, 0.45, 37)]
+    assert material_index("taillight") in first_material(np.array([-5.0, 0.0, 0.0]), [1.0, 0.0, 0.0], grid)
+    assert material_index("headlight") in first_material(np.array([5.0, 0.0, 0.0]), [-1.0, 0.0, 0.0], grid)
+    side = [np.array([x, 0.0, z]) for x in np.linspace(-0.45, 0.45, 46) for z in np.linspace(-0.5, -0.3, 5)]
+    seen = first_material(np.array([0.0, -5.0, 0.0]), [0.0, 1.0, 0.0], side)
+    assert {material_index("rubber"), material_index("rim")} <= seen
+    assert len(lamp["headlight"]) and len(lamp["taillight"])
+
+
+def test_variants_pick_families_that_suit_the_length():
+    """A car's variant picks among the car families whose length range holds its length; the same variant and
+    length give the same model; a 16 m truck is a semi-trailer, an 8 m one a box truck."""
+    meshes = ActorMeshes()
+    n = 400
+    rng = np.random.default_rng(1)
+    lengths = rng.uniform(3.6, 5.5, n)
+    boxes = Boxes3D(np.zeros((n, 3)), np.column_stack([lengths, np.full(n, 1.8), np.full(n, 1.5)]), np.zeros(n))
+    actors = Actors(np.arange(1, n + 1), ["car"] * n, boxes, np.zeros((n, 3)),
+                    variant=actor_variants(np.arange(1, n + 1), 7))
+    codes = meshes.model_codes(actors)
+    suits = {f.__name__: SUITS_LENGTH_M[f] for f in FAMILIES[ObjectClass.CAR]}
+    for code, length in zip(codes, lengths, strict=True):
+        assert meshes.model_class[code] == ObjectClass.CAR
+        lo, hi = suits[meshes.model_names[code]]
+        assert lo <= length < hi
+    assert len(set(codes.tolist())) >= 5  # several families in a fleet of 400
+    np.testing.assert_array_equal(meshes.model_codes(actors), codes)
+    trucks = Actors([1, 2], ["truck", "truck"], Boxes3D(np.zeros((2, 3)), [[16.0, 2.5, 4.0], [8.0, 2.5, 3.5]],
+                                                         np.zeros(2)), np.zeros((2, 3)), variant=[5, 5])
+    assert [meshes.model_names[c] for c in meshes.model_codes(trucks)] == ["semi_trailer", "box_truck"]
+
+
+def test_actor_variants_depend_on_seed_and_track_only():
+    a = actor_variants(np.array([1, 2, 3, 1]), 5)
+    assert a.dtype == np.uint32 and a[0] == a[3] and len(set(a[:3].tolist())) == 3
+    assert not np.array_equal(a, actor_variants(np.array([1, 2, 3, 1]), 6))
 
 
 def test_placed_mesh_touches_all_six_faces_of_its_box():
