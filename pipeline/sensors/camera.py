@@ -31,6 +31,9 @@ _CORNER_BITS = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], bo
 _BOX_EDGES = np.array([(k, k | 1 << i) for k in range(8) for i in range(3) if not k & 1 << i])
 
 
+QUALITIES = ("fast", "realistic")
+
+
 @dataclass(frozen=True)
 class CameraConfig:
     """Attributes:
@@ -45,6 +48,8 @@ class CameraConfig:
     samples_everywhere: with several samples, take them at every pixel (else only at edge pixels; see
         :func:`pipeline.sensors.render.edge_pixels`).
     near_m: near plane for projection, metres.
+    quality: "realistic" traces sky occlusion and mirror reflections (:mod:`pipeline.sensors.indirect`); "fast"
+        shades direct light only.
     """
 
     name: str = "front"
@@ -58,6 +63,7 @@ class CameraConfig:
     jitter_seed: int = 0
     samples_everywhere: bool = False
     near_m: float = 0.05
+    quality: str = "realistic"
 
     def __post_init__(self) -> None:
         if self.width_px <= 0 or self.height_px <= 0:
@@ -72,6 +78,9 @@ class CameraConfig:
             raise ValueError(f"camera {self.name!r}: samples_per_pixel must be >= 1")
         if self.near_m <= 0:
             raise ValueError(f"camera {self.name!r}: near_m must be positive")
+        if self.quality not in QUALITIES:
+            raise ValueError(f"camera {self.name!r}: quality must be one of {', '.join(QUALITIES)}, got "
+                             f"{self.quality!r}")
         object.__setattr__(self, "distortion", tuple(float(d) for d in self.distortion))
 
 

@@ -13,7 +13,10 @@ every way a ray of the frame can meet it:
   than the world's floor, so within the capsule that sweeps the sphere away from the sun down to the floor; that
   capsule (grown by the shadow rays' lift off their surface) meets the frustum;
 - a shadow ray towards a spot light that casts shadows (street lamps at night): such a ray is shorter than the
-  light's range, so the sphere comes within that range of the light.
+  light's range, so the sphere comes within that range of the light;
+- a sky-occlusion or mirror ray of a "realistic" camera (:mod:`pipeline.sensors.indirect`): such rays start at hits
+  within INDIRECT_RANGE_M of the camera and meet nothing beyond MIRROR_RANGE_M (or AO_RADIUS_M), so the sphere comes
+  within INDIRECT_REACH_M of the camera.
 
 :class:`pipeline.world.scene.FrameScene` leaves the other actors out (``active``); they
 keep their labels, which come from their boxes, and :func:`pipeline.sensors.groundtruth.project_actors` refuses
@@ -27,6 +30,7 @@ import numpy as np
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition
+from pipeline.sensors.indirect import INDIRECT_REACH_M
 from pipeline.sensors.lidar import Lidar
 from pipeline.world.actors import Actors
 
@@ -75,6 +79,8 @@ def actors_in_reach(
         if sun_shadows:
             reach |= camera.capsules_in_view(centre_cam, world_to_cam.apply(shadow_end), radius + LIFT_MARGIN_M,
                                              near_m=0.0)
+        if camera.config.quality == "realistic":  # sky-occlusion and mirror rays (pipeline.sensors.indirect)
+            reach |= np.linalg.norm(centre - cam_to_world.translation, axis=1) - radius <= INDIRECT_REACH_M
         lights = condition.frame_lights(actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
         for k in np.flatnonzero(lights.shadows):
             reach |= np.linalg.norm(centre - lights.position_m[k], axis=1) - radius <= lights.range_m[k]

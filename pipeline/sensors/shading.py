@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
 from pipeline.sensors.sunlight import sky_and_sun, sun_rays
 from pipeline.world.materials import material_arrays, material_index
@@ -91,14 +92,17 @@ def _sky_channels(up_z: np.ndarray, lighting: Lighting) -> list[np.ndarray]:
 
 
 def shade(
-    scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting, lights: SpotLights | None = None
+    scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting, lights: SpotLights | None = None,
+    indirect: bool = False,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
     radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
-    sky. The sun's and the sky's terms are compiled passes over the rays (:mod:`pipeline.sensors.sunlight`); the
-    few glowing hits, the spot lights and the wet sheen add theirs with numpy.
+    sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
+    (:mod:`pipeline.sensors.indirect`). The sun's and the sky's terms are compiled passes over the rays
+    (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the wet sheen add theirs with
+    numpy.
     """
     mats = _materials()
     wet = None
@@ -117,6 +121,12 @@ def shade(
     out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
                       as_input(hits.color, np.float32), n_dot_l, lit, unshadowed, mats["specular"],
                       mats["shininess"], sun, *rgb)
+    if indirect:
+        # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
+        visibility = sky_visibility(scene, rays, hits)
+        dim = np.flatnonzero(visibility < 1.0)
+        out[dim] -= hits.color[dim] * rgb[1] * (1.0 - visibility[dim])[:, None]
+        reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"])
     glowing = np.flatnonzero(mats["glows"][mat] & hits.hit)
     out[glowing] += np.take(mats["emissive"], mat[glowing], axis=0)
     on_actor = hits.instance_id[glowing] > 0

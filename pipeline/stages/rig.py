@@ -31,7 +31,7 @@ def camera_from_spec(spec: CameraSpec) -> Camera:
         name=spec.name, width_px=spec.width_px, height_px=spec.height_px,
         hfov_deg=spec.hfov_deg if spec.hfov_deg is not None else 90.0, intrinsics=intrinsics,
         distortion=tuple(spec.distortion), mount=_mount(spec.mount), samples_per_pixel=spec.samples_per_pixel,
-        samples_everywhere=spec.samples_everywhere, jitter_seed=zlib.crc32(spec.name.encode()),
+        samples_everywhere=spec.samples_everywhere, jitter_seed=zlib.crc32(spec.name.encode()), quality=spec.quality,
     ))
 
 

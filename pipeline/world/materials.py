@@ -20,6 +20,8 @@ class Material:
     shininess: Phong exponent of the highlight.
     reflectivity: LiDAR reflectivity I0 at normal incidence in [0, 1] (905 nm).
     emissive_rgb: light emitted (lamps, lit tail lights), linear RGB, may exceed 1.
+    fresnel_f0: mirror reflectance at normal incidence (Schlick's F0; 0: no mirror reflection traced): clear-coat
+        paint and glass ~0.04-0.05, metals far more (:mod:`pipeline.sensors.indirect`).
     """
 
     albedo_rgb: tuple[float, float, float]
@@ -27,6 +29,7 @@ class Material:
     shininess: float = 16.0
     reflectivity: float = 0.2
     emissive_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    fresnel_f0: float = 0.0
 
 
 MATERIALS: dict[str, Material] = {
@@ -36,16 +39,18 @@ MATERIALS: dict[str, Material] = {
     "kerb": Material((0.55, 0.55, 0.53), reflectivity=0.40),
     "grass": Material((0.10, 0.22, 0.06), reflectivity=0.45),
     "building": Material((0.50, 0.42, 0.36), reflectivity=0.30),
-    "building_glass": Material((0.08, 0.10, 0.12), specular=0.6, shininess=64.0, reflectivity=0.08),
+    "building_glass": Material((0.08, 0.10, 0.12), specular=0.6, shininess=64.0, reflectivity=0.08,
+                               fresnel_f0=0.08),
     "foliage": Material((0.07, 0.18, 0.05), reflectivity=0.40),
     "bark": Material((0.20, 0.13, 0.08), reflectivity=0.30),
     "metal": Material((0.40, 0.41, 0.43), specular=0.4, shininess=32.0, reflectivity=0.50),
     "barrier": Material((0.40, 0.40, 0.38), specular=0.1, reflectivity=0.60),  # weathered concrete
-    "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=48.0, reflectivity=0.45),
-    "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05),
+    "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=48.0, reflectivity=0.45, fresnel_f0=0.05),
+    "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05, fresnel_f0=0.05),
     "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
     "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
-    "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80),  # clear lens
+    "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80,  # clear lens
+                          fresnel_f0=0.05),
     "taillight": Material((0.45, 0.02, 0.02), specular=0.5, reflectivity=0.70),
     "lamp": Material((0.9, 0.85, 0.7), reflectivity=0.5),
     "skin": Material((0.60, 0.45, 0.35), reflectivity=0.30),
@@ -62,7 +67,7 @@ MATERIALS: dict[str, Material] = {
     "building_dark": Material((0.30, 0.28, 0.28), reflectivity=0.25),
     # Appended by the lofted vehicle bodies (pipeline/world/loft.py): alloy rims, black plastic trim (bumpers'
     # lower bands, sills, grilles, hubs).
-    "rim": Material((0.55, 0.56, 0.58), specular=0.6, shininess=48.0, reflectivity=0.60),
+    "rim": Material((0.55, 0.56, 0.58), specular=0.6, shininess=48.0, reflectivity=0.60, fresnel_f0=0.3),
     "trim": Material((0.035, 0.035, 0.04), specular=0.15, shininess=24.0, reflectivity=0.10),
 }
 
@@ -79,7 +84,7 @@ def material_index(name: str) -> int:
 
 def material_arrays() -> dict[str, np.ndarray]:
     """The table as arrays indexed by material index: albedo (M, 3), specular (M,), shininess (M,),
-    reflectivity (M,), emissive (M, 3), all float32."""
+    reflectivity (M,), emissive (M, 3), fresnel_f0 (M,), all float32."""
     mats = [MATERIALS[n] for n in MATERIAL_NAMES]
     return {
         "albedo": np.array([m.albedo_rgb for m in mats], dtype=np.float32),
@@ -87,4 +92,5 @@ def material_arrays() -> dict[str, np.ndarray]:
         "shininess": np.array([m.shininess for m in mats], dtype=np.float32),
         "reflectivity": np.array([m.reflectivity for m in mats], dtype=np.float32),
         "emissive": np.array([m.emissive_rgb for m in mats], dtype=np.float32),
+        "fresnel_f0": np.array([m.fresnel_f0 for m in mats], dtype=np.float32),
     }

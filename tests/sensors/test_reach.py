@@ -23,7 +23,10 @@ from pipeline.world.scene import FrameScene, StaticScene
 from tests.sensors.conftest import make_actors
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
-CAMERA = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0))  # looks along +x: in view, |y| < x
+# Looks along +x: in view, |y| < x. Direct light only (the closed forms below); the realistic camera's sky-occlusion
+# and mirror rays reach every actor within INDIRECT_REACH_M of it.
+CAMERA = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="fast"))
+REALISTIC = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="realistic"))
 LIDAR = Lidar(LidarConfig(channels=16, fov_upper_deg=2.0, fov_lower_deg=-20.0, horizontal_resolution_deg=1.0,
                           range_max_m=40.0, range_noise_std_m=0.0, dropout_prob=0.0))
 CAR = (4.5, 1.8, 1.5)
@@ -44,9 +47,23 @@ def with_sun(name: str, azimuth_deg: float, elevation_deg: float):
     return dataclasses.replace(condition, lighting=lighting)
 
 
-def reach(actors, condition, street_lights_m=None):
-    return actors_in_reach(actors, EGO, [CAMERA], [LIDAR], condition, floor_z_m=STATIC.floor_z_m,
+def reach(actors, condition, street_lights_m=None, camera=CAMERA):
+    return actors_in_reach(actors, EGO, [camera], [LIDAR], condition, floor_z_m=STATIC.floor_z_m,
                            street_lights_m=street_lights_m)
+
+
+def test_a_realistic_camera_reaches_actors_its_mirror_rays_can_meet(actors_factory):
+    """Sky-occlusion and mirror rays start within INDIRECT_RANGE_M and end within MIRROR_RANGE_M: an actor behind the
+    camera is reached up to INDIRECT_REACH_M (plus its sphere), not beyond."""
+    from pipeline.sensors.indirect import INDIRECT_REACH_M
+
+    camera_x = EGO.apply(CAMERA.config.mount.translation[None])[0, 0]
+    r = 0.5 * np.linalg.norm(CAR)
+    xs = [camera_x - INDIRECT_REACH_M - r + 0.5, camera_x - INDIRECT_REACH_M - r - 0.5]
+    actors = actors_factory([[x, 0.0, 0.75] for x in xs], [CAR] * 2)
+    night = get_condition("night")  # no sun: no shadows reach out of view
+    assert reach(actors, night, camera=REALISTIC).tolist() == [True, False]
+    assert reach(actors, night).tolist() == [False, False]
 
 
 def test_actors_in_view_or_lidar_range_are_reached_and_far_ones_behind_are_not(actors_factory):
@@ -87,33 +104,37 @@ def test_an_actor_out_of_view_is_reached_where_it_shadows_a_street_lamp_in_view(
     assert np.count_nonzero(np.any(images[0] != images[1], axis=-1)) > 100  # its shadow is in the image
 
 
-def random_actors(rng: np.random.Generator, n: int) -> Actors:
+def random_actors(rng: np.random.Generator, n: int, scale: float = 1.0) -> Actors:
     """``n`` actors of random classes, sizes and headings: a third anywhere within 120 m, the others just outside
-    the camera's view, beyond the LiDAR's range, where a shadow or a lamp decides whether they matter."""
+    the camera's view, beyond the LiDAR's range, where a shadow or a lamp decides whether they matter (distances x
+    ``scale``)."""
     classes = [list(ObjectClass)[i] for i in rng.integers(0, len(ObjectClass), n)]
     size = np.column_stack([rng.uniform(0.5, 12.0, n), rng.uniform(0.5, 2.6, n), rng.uniform(1.0, 4.0, n)])
     anywhere = rng.uniform(-120.0, 120.0, (n, 2))
     side = rng.choice([-1.0, 1.0], n)  # along the left or right border of the view (|y| = x), then outwards
     along, out = rng.uniform(45.0, 120.0, n), rng.uniform(3.0, 15.0, n)
     near_border = np.column_stack([along - out, side * (along + out)]) / np.sqrt(2.0)
-    xy = np.where((np.arange(n) < n // 3)[:, None], anywhere, near_border)
+    xy = scale * np.where((np.arange(n) < n // 3)[:, None], anywhere, near_border)
     centre = np.column_stack([xy, 0.5 * size[:, 2]])
     return Actors(np.arange(1, n + 1), tuple(classes), Boxes3D(centre, size, rng.uniform(-np.pi, np.pi, n)),
                   rng.uniform(0.0, 1.0, (n, 3)), rng.random(n) < 0.5)
 
 
-@pytest.mark.parametrize(("seed", "condition"), [(0, "morning"), (1, "noon"), (2, "night"), (3, "dusk")])
-def test_leaving_out_the_actors_out_of_reach_changes_no_output(seed, condition):
+@pytest.mark.parametrize(("seed", "condition", "camera"), [(0, "morning", CAMERA), (1, "noon", CAMERA),
+                                                        (2, "night", CAMERA), (3, "dusk", CAMERA),
+                                                        (4, "morning", REALISTIC), (5, "noon", REALISTIC)])
+def test_leaving_out_the_actors_out_of_reach_changes_no_output(seed, condition, camera):
     rng = np.random.default_rng(seed)
-    actors = random_actors(rng, 150)
+    # A realistic camera reaches all within INDIRECT_REACH_M (~120 m): spread them twice as far, so many are not.
+    actors = random_actors(rng, 150, 1.0 if camera is CAMERA else 2.0)
     lamps = np.column_stack([rng.uniform(10.0, 90.0, 16), rng.uniform(-90.0, 90.0, 16), np.full(16, 8.0)])
     cond = get_condition(condition)
     if cond.lighting.sun_elevation_deg > 0:  # a low sun from anywhere: long shadows
         cond = with_sun(condition, float(rng.uniform(-180.0, 180.0)), float(rng.uniform(8.0, 20.0)))
-    active = reach(actors, cond, street_lights_m=lamps)
+    active = reach(actors, cond, street_lights_m=lamps, camera=camera)
     assert 0.2 * len(actors) < np.count_nonzero(~active)  # a test of something: many are left out
     full, culled = FrameScene(STATIC, actors), FrameScene(STATIC, actors, active=active)
-    cams = [render_camera(s, CAMERA, EGO, cond, street_lights_m=lamps) for s in (full, culled)]
+    cams = [render_camera(s, camera, EGO, cond, street_lights_m=lamps) for s in (full, culled)]
     for field in ("rgb", "instance_id", "semantic", "depth_m"):
         assert np.array_equal(getattr(cams[0], field), getattr(cams[1], field)), field
     assert cams[0].labels.track_id.tolist() == cams[1].labels.track_id.tolist()

@@ -6,6 +6,8 @@ A camera's optical frame (OpenCV) is derived from its body frame (see pipeline.c
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
@@ -31,6 +33,8 @@ class CameraConfig(_Model):
     )
     samples_per_pixel: int = Field(1, ge=1, le=64, description="anti-aliasing samples, taken at edge pixels")
     samples_everywhere: bool = Field(False, description="take the samples at every pixel (shadow edges too)")
+    quality: Literal["fast", "realistic"] = Field(
+        "realistic", description="realistic: sky occlusion and mirror reflections traced; fast: neither (quicker)")
     mount: MountPose
 
     @model_validator(mode="after")

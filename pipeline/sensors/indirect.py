@@ -1,0 +1,165 @@
+"""Light that bounces: sky occlusion (ambient occlusion) and one-bounce Fresnel reflections on paint and glass.
+
+What makes a car read as a car in a photograph, beyond its shape, is how it sits in its light: the sky is shut out
+under and around it (a dark contact shadow, dark wheel arches), and its paint and glass mirror the sky and the
+street, strongly at grazing angles. Both are ray traced here in the same scene as everything else.
+
+- **Sky occlusion.** The ambient (sky fill) term of :func:`pipeline.sensors.shading.shade` is scaled by the share of
+  ``AO_SAMPLES`` cosine-weighted directions about the normal that leave without meeting anything within
+  ``AO_RADIUS_M``, times ``AO_STRENGTH`` (the ground and nearby surfaces also bounce some light back, which this
+  does not trace). Only the hits where it matters are traced, within INDIRECT_RANGE_M of the camera: on actors, and
+  on the world within about a metre of an actor's footprint (:meth:`FrameScene.sun_actor_candidates` with the
+  "sun" straight up: a conservative grid test).
+  The directions are a fixed spiral set rotated about the normal by an angle hashed from the ray's index, so a frame
+  is the same on every run and the pattern shows as fine noise, not bands.
+- **Reflections.** Materials with a Fresnel ``F0`` (:class:`pipeline.world.materials.Material.fresnel_f0`: clear-coat
+  paint, glass, lamps, rims, glazed façades) reflect one bounce: the mirror ray is cast into the scene and what it
+  meets is lit by the sky and the sun without shadows (or is the sky, also beyond MIRROR_RANGE_M: a documented
+  simplification that bounds which actors a frame must hold, :mod:`pipeline.sensors.reach`); Schlick's Fresnel term
+  F weights it, and the surface's own radiance by (1 - F). Hits within INDIRECT_RANGE_M of the camera only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.world.scene import FrameScene, Hits
+
+AO_SAMPLES = 8
+AO_RADIUS_M = 1.5
+AO_STRENGTH = 0.85
+INDIRECT_RANGE_M = 60.0  # hits farther from the camera get neither (a car there is a few pixels tall)
+MIRROR_RANGE_M = 60.0  # a mirror ray that meets nothing nearer sees the sky
+# Every ray of this module meets nothing farther than this from the camera (actors beyond cannot change a pixel:
+# pipeline.sensors.reach); 1 m for the rays' lift off their surfaces.
+INDIRECT_REACH_M = INDIRECT_RANGE_M + max(MIRROR_RANGE_M, AO_RADIUS_M) + 1.0
+_UP = np.array([0.0, 0.0, 1.0])
+
+
+def _hemisphere(samples: int) -> np.ndarray:
+    """(S, 3) float32 cosine-weighted directions about +z: a spiral of equal-area rings (Fibonacci)."""
+    k = np.arange(samples) + 0.5
+    r = np.sqrt(k / samples)  # cosine weighting: uniform in the disc, lifted onto the hemisphere
+    phi = k * np.pi * (3.0 - np.sqrt(5.0))
+    return np.column_stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - r * r)]).astype(np.float32)
+
+
+_PATTERN = _hemisphere(AO_SAMPLES)
+
+
+@kernel("float32[:, ::1](float32[:, ::1], float32[::1], float32[:, ::1], int64[::1], float32[:, ::1])")
+def occlusion_rays(rays, t_m, normal, rows, pattern):
+    """(K * S, 6) float32 rays from the hits ``rows`` of the (N, 6) float32 camera ``rays`` (hit at ``t_m``, unit
+    ``normal`` facing the viewer): for each, the S directions of ``pattern`` ((S, 3), about +z) turned onto its
+    normal and rotated about it by an angle hashed from the row, from the hit lifted 2 mm + 0.1 mm per metre."""
+    s = pattern.shape[0]
+    out = np.empty((rows.size * s, 6), np.float32)
+    for j in range(rows.size):
+        i = rows[j]
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        # A tangent frame (b1, b2, n): Frisvad's construction, with the branch for n pointing down.
+        if n2 < np.float32(-0.9999999):
+            b10, b11, b12 = np.float32(0), np.float32(-1), np.float32(0)
+            b20, b21, b22 = np.float32(-1), np.float32(0), np.float32(0)
+        else:
+            a = np.float32(1) / (np.float32(1) + n2)
+            b = -n0 * n1 * a
+            b10, b11, b12 = np.float32(1) - n0 * n0 * a, b, -n0
+            b20, b21, b22 = b, np.float32(1) - n1 * n1 * a, -n1
+        # A rotation angle from the row: SplitMix64's finaliser, top 24 bits.
+        z = np.uint64(i) * np.uint64(0x9E3779B97F4A7C15)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z = z ^ (z >> np.uint64(31))
+        angle = np.float32(np.float64(z >> np.uint64(40)) * (2.0 * np.pi / 16777216.0))
+        c, sn = np.float32(np.cos(angle)), np.float32(np.sin(angle))
+        lift = np.float32(2e-3) + np.float32(1e-4) * t_m[i]
+        p0 = rays[i, 0] + rays[i, 3] * t_m[i] + n0 * lift
+        p1 = rays[i, 1] + rays[i, 4] * t_m[i] + n1 * lift
+        p2 = rays[i, 2] + rays[i, 5] * t_m[i] + n2 * lift
+        for k in range(s):
+            x = pattern[k, 0] * c - pattern[k, 1] * sn
+            y = pattern[k, 0] * sn + pattern[k, 1] * c
+            zz = pattern[k, 2]
+            r = j * s + k
+            out[r, 0], out[r, 1], out[r, 2] = p0, p1, p2
+            out[r, 3] = x * b10 + y * b20 + zz * n0
+            out[r, 4] = x * b11 + y * b21 + zz * n1
+            out[r, 5] = x * b12 + y * b22 + zz * n2
+    return out
+
+
+def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits) -> np.ndarray:
+    """(N,) float32 in [1 - AO_STRENGTH, 1]: how much of the sky fill reaches each hit (1 where not traced)."""
+    n = len(rays)
+    visibility = np.ones(n, np.float32)
+    if not len(scene.actors) or not n:
+        return visibility
+    hit = hits.hit & (hits.t_m < INDIRECT_RANGE_M)
+    on_actor = hit & (hits.instance_id > 0)
+    t = np.where(hit, hits.t_m, 0.0).astype(np.float32)
+    static = np.flatnonzero(hit & ~on_actor)
+    near = np.zeros(n, bool)
+    if len(static):
+        p = np.take(rays, static, axis=0)
+        x, y, z = (p[:, k] + p[:, 3 + k] * t[static] for k in range(3))
+        near[static] = scene.sun_actor_candidates(x.astype(np.float32), y.astype(np.float32), z.astype(np.float32),
+                                                  _UP)
+    rows = np.flatnonzero(on_actor | near)
+    if not len(rows):
+        return visibility
+    ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN)
+    blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M).reshape(len(rows), AO_SAMPLES)
+    visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * blocked.mean(axis=1, dtype=np.float32)
+    return visibility
+
+
+@kernel("Tuple((float32[:, ::1], float32[::1]))(float32[:, ::1], float32[::1], float32[:, ::1], int64[::1], "
+        "float32[::1])")
+def mirror_rays(rays, t_m, normal, rows, f0):
+    """The mirror rays of the hits ``rows`` ((K, 6) float32, from the hit lifted 2 mm + 0.1 mm per metre along the
+    normal, which faces the viewer) and their Fresnel weights F = F0 + (1 - F0) (1 - cos)^5 (Schlick), ``f0`` (K,)
+    float32 per row, cos the angle between the view ray and the normal."""
+    out = np.empty((rows.size, 6), np.float32)
+    weight = np.empty(rows.size, np.float32)
+    for j in range(rows.size):
+        i = rows[j]
+        d0, d1, d2 = rays[i, 3], rays[i, 4], rays[i, 5]
+        n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
+        cos = -(d0 * n0 + d1 * n1 + d2 * n2)
+        cos = min(max(cos, np.float32(0)), np.float32(1))
+        lift = np.float32(2e-3) + np.float32(1e-4) * t_m[i]
+        for k in range(3):
+            out[j, k] = rays[i, k] + rays[i, 3 + k] * t_m[i] + normal[i, k] * lift
+        out[j, 3] = d0 + np.float32(2) * cos * n0
+        out[j, 4] = d1 + np.float32(2) * cos * n1
+        out[j, 5] = d2 + np.float32(2) * cos * n2
+        g = np.float32(1) - cos
+        g2 = g * g
+        weight[j] = f0[j] + (np.float32(1) - f0[j]) * g2 * g2 * g
+    return out, weight
+
+
+def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.ndarray, fresnel_f0: np.ndarray,
+                sun: np.ndarray, colours: tuple[np.ndarray, ...], specular: np.ndarray,
+                shininess: np.ndarray) -> None:
+    """Blend one bounce of mirror reflection into ``radiance`` ((N, 3) float32, in place) on hits of materials with
+    ``fresnel_f0`` (M,) > 0: radiance = (1 - F) radiance + F env, env lit by ``sun`` (3,) and ``colours`` (sun,
+    ambient, zenith, horizon: each (3,) float32) without shadows, with the ``specular``/``shininess`` tables."""
+    f0 = fresnel_f0[hits.material]
+    rows = np.flatnonzero(hits.hit & (f0 > 0) & (hits.t_m < INDIRECT_RANGE_M))
+    if not len(rows):
+        return
+    t = np.where(hits.hit, hits.t_m, 0.0).astype(np.float32)
+    mirror, weight = mirror_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows,
+                                 as_input(f0[rows], np.float32))
+    bounce = scene.cast_rays(mirror)
+    normal, t_b = as_input(bounce.normal, np.float32), as_input(bounce.t_m, np.float32)
+    n_dot_l, lit, _ = sun_rays(mirror, normal, t_b, sun)
+    env = sky_and_sun(mirror, bounce.hit & (t_b <= MIRROR_RANGE_M), normal, as_input(bounce.material, np.int32),
+                      as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), bool), specular, shininess,
+                      sun, *colours)
+    w = weight[:, None]
+    radiance[rows] = radiance[rows] * (1.0 - w) + env * w
