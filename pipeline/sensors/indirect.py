@@ -7,9 +7,10 @@ street, strongly at grazing angles. Both are ray traced here in the same scene a
 - **Sky occlusion.** The ambient (sky fill) term of :func:`pipeline.sensors.shading.shade` is scaled by the share of
   ``AO_SAMPLES`` cosine-weighted directions about the normal that leave without meeting anything within
   ``AO_RADIUS_M``, times ``AO_STRENGTH`` (the ground and nearby surfaces also bounce some light back, which this
-  does not trace). Only the hits where it matters are traced, within INDIRECT_RANGE_M of the camera: on actors, and
-  on the world within about a metre of an actor's footprint (:meth:`FrameScene.sun_actor_candidates` with the
-  "sun" straight up: a conservative grid test).
+  does not trace). Only the hits where it matters are traced, within INDIRECT_RANGE_M of the camera: on actors
+  (against everything), and on the world within about a metre of an actor's footprint (against the actors only:
+  their contact shadows; the world's occlusion of itself is left out everywhere), found by
+  :meth:`FrameScene.sun_actor_candidates` with the "sun" straight up (a conservative grid test).
   The directions are a fixed spiral set rotated about the normal by an angle hashed from the ray's index, so a frame
   is the same on every run and the pattern shows as fine noise, not bands.
 - **Reflections.** Materials with a Fresnel ``F0`` (:class:`pipeline.world.materials.Material.fresnel_f0`: clear-coat
@@ -111,7 +112,10 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits) -> np.ndarra
     if not len(rows):
         return visibility
     ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN)
-    blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M).reshape(len(rows), AO_SAMPLES)
+    # From the world, only actors occlude (their contact shadow): the world's own occlusion is traced nowhere, so
+    # tracing it near actors only would draw the edges of that region.
+    static_rays = np.repeat(on_actor[rows], AO_SAMPLES)
+    blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M, static_rays=static_rays).reshape(len(rows), AO_SAMPLES)
     visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * blocked.mean(axis=1, dtype=np.float32)
     return visibility
 

@@ -118,7 +118,7 @@ def render_camera(
     image = apply_post(radiance.reshape(h, w, 3), condition.lens, condition.noise, condition.rain, rng, flow=flow,
                        sky_level=_sky_level(condition))
     return CameraFrame(
-        rgb=to_srgb8(image),
+        rgb=to_srgb8(image, "filmic" if indirect else "soft"),
         instance_id=hits.instance_id.reshape(h, w),
         semantic=hits.semantic.reshape(h, w),
         depth_m=depth.reshape(h, w),

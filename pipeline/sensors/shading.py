@@ -190,19 +190,39 @@ def _materials() -> dict[str, np.ndarray]:
 def _srgb_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
     x = np.linspace(0.0, max_linear, size, dtype=np.float64)
     x = np.where(x > 0.8, 0.8 + 0.2 * np.tanh((x - 0.8) / 0.2), x)  # soft shoulder for highlights
+    return _encode_srgb(x)
+
+
+def _encode_srgb(x: np.ndarray) -> np.ndarray:
+    """Display-linear values in [0, 1] to 8-bit sRGB (the standard's piecewise curve, rounded)."""
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
     return np.clip(np.rint(srgb * 255.0), 0, 255).astype(np.uint8)
 
 
-_LUT = _srgb_lut()
-_LUT_SCALE = (len(_LUT) - 1) / 4.0
+FILMIC_GAIN = 0.6  # scene-linear values are scaled by this before the filmic curve (its mid-grey sits higher)
 
 
-def to_srgb8(linear: np.ndarray) -> np.ndarray:
-    """Linear RGB (any shape (..., 3)) to 8-bit sRGB with a soft shoulder above 0.8 (values above 4 clip, NaN
-    is 0), through a 65536-entry lookup table (finer than one 8-bit step everywhere)."""
+def _filmic_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
+    """A filmic tone curve, as a camera's image processor applies one: a toe that deepens the shadows, a long
+    shoulder that rolls highlights off instead of clipping them; Narkowicz's fit of the ACES reference rendering
+    transform, y = x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), of ``FILMIC_GAIN`` times the scene value."""
+    x = FILMIC_GAIN * np.linspace(0.0, max_linear, size, dtype=np.float64)
+    return _encode_srgb(np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0))
+
+
+_LUTS = {"soft": _srgb_lut(), "filmic": _filmic_lut()}
+_LUT_SCALE = (len(_LUTS["soft"]) - 1) / 4.0
+TONE_CURVES = tuple(_LUTS)
+
+
+def to_srgb8(linear: np.ndarray, curve: str = "soft") -> np.ndarray:
+    """Linear RGB (any shape (..., 3)) to 8-bit sRGB through a tone ``curve`` (values above 4 clip, NaN is 0):
+    "soft", linear with a soft shoulder above 0.8, or "filmic" (:func:`_filmic_lut`); a 65536-entry lookup table
+    (finer than one 8-bit step everywhere)."""
+    if curve not in _LUTS:
+        raise ValueError(f"unknown tone curve {curve!r}; known: {', '.join(_LUTS)}")
     x = as_input(linear, np.float32)
-    return _lookup(x.reshape(-1), _LUT, np.float32(_LUT_SCALE)).reshape(x.shape)
+    return _lookup(x.reshape(-1), _LUTS[curve], np.float32(_LUT_SCALE)).reshape(x.shape)
 
 
 @kernel("uint8[::1](float32[::1], uint8[::1], float32)")

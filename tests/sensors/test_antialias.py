@@ -83,7 +83,7 @@ def test_the_rig_file_sets_the_sampling():
 
     rig, _ = load_config(RigConfig, "default", "rigs")
     camera = build_sensors(rig)[0][0].config
-    assert (camera.samples_per_pixel, camera.samples_everywhere) == (1, False)
-    spec = rig.cameras[0].model_copy(update={"samples_per_pixel": 4, "samples_everywhere": True})
+    assert (camera.samples_per_pixel, camera.samples_everywhere, camera.quality) == (4, False, "realistic")
+    spec = rig.cameras[0].model_copy(update={"samples_per_pixel": 2, "samples_everywhere": True, "quality": "fast"})
     camera = build_sensors(rig.model_copy(update={"cameras": [spec]}))[0][0].config
-    assert (camera.samples_per_pixel, camera.samples_everywhere) == (4, True)
+    assert (camera.samples_per_pixel, camera.samples_everywhere, camera.quality) == (2, True, "fast")
