@@ -21,6 +21,7 @@ from evaluation.kitti.prepare import (
     DIFFICULTIES,
     NEIGHBOURS,
     Flat,
+    OverlapRules,
     Pairs,
     det_flags,
     dontcare_overlap,
@@ -29,11 +30,19 @@ from evaluation.kitti.prepare import (
     pairs,
 )
 
-__all__ = ["METRICS", "MIN_OVERLAP_LOOSE", "MIN_OVERLAP_STRICT", "MODES", "evaluate_kitti"]
+__all__ = ["METRICS", "MIN_OVERLAP_LOOSE", "MIN_OVERLAP_STRICT", "MODES", "RULES", "evaluate_kitti"]
 
 log = logging.getLogger(__name__)
 
-MODES = ("official", "exact")
+MODES = ("official", "port", "exact")
+# official: the C++ devkit (double-precision polygons, its sentinel boxes, DontCare in every metric);
+# port: the common Python port (float32 rotated IoU, DontCare in 2D only); both with the devkit's curve.
+# exact: double precision, objects without a 3D box out of BEV/3D, the exact recall-indexed curve.
+RULES: dict[str, OverlapRules] = {
+    "official": OverlapRules(rotated="float64", sentinel_is_box=True, dontcare_metrics=("bbox", "bev", "3d")),
+    "port": OverlapRules(rotated="port", sentinel_is_box=False, dontcare_metrics=("bbox",)),
+    "exact": OverlapRules(rotated="float64", sentinel_is_box=False, dontcare_metrics=("bbox", "bev", "3d")),
+}
 METRICS = ("bbox", "bev", "3d", "aos")
 # the devkit's overlap sets; "aos" always uses the bbox threshold
 MIN_OVERLAP_STRICT: dict[str, float] = {
@@ -134,8 +143,10 @@ def evaluate_kitti(
             are scored as having no detections (and counted); files for unknown frames are an error.
         calib_dir: optional calib directory; when given every frame's calib file must exist and parse.
             Not needed for the metrics: labels are already in the rectified camera frame.
-        mode: "official" (devkit / common Python port semantics, defects included) or "exact"
-            (rotated IoU exact for coincident boxes; precision interpolated at exact recall points).
+        mode: "official" (the C++ devkit evaluate_object.cpp, defects included: double-precision
+            polygon overlaps, its score-threshold curve), "port" (the common Python port
+            kitti_object_eval_python: its float32 rotated IoU, DontCare in 2D only) or "exact"
+            (precision interpolated at exact recall points; see README.md here).
         classes: class names as written in the labels (matched case-insensitively, like the devkit).
         min_overlap: per class a float (all box metrics) or {"bbox", "bev", "3d"} -> float; a
             detection matches when its overlap is strictly greater. Default MIN_OVERLAP_STRICT
@@ -157,14 +168,15 @@ def evaluate_kitti(
     frames, gt_frames, det_frames, n_missing = _load(gt_dir, det_dir, calib_dir)
     gt, det = flatten(gt_frames), flatten(det_frames)
     exact = mode == "exact"
+    rules = RULES[mode]
     notes = []
     compute_aos = "aos" in metrics
     if compute_aos and np.any(det.alpha == -10):
         compute_aos = False
         notes.append("AOS skipped: some detections have alpha = -10 (unknown), as in the devkit")
     box_metrics = [m for m in ("bbox", "bev", "3d") if m in metrics or (m == "bbox" and compute_aos)]
-    overlaps = {m: pairs(gt, det, len(frames), m, exact=exact) for m in box_metrics}
-    dontcare_share = dontcare_overlap(gt, det, len(frames))
+    overlaps = {m: pairs(gt, det, len(frames), m, rules) for m in box_metrics}
+    dontcare_share = {m: dontcare_overlap(gt, det, len(frames), m, rules) for m in box_metrics}
     curve_fn = exact_curve if exact else official_curve
 
     results: dict[str, dict] = {}
@@ -179,8 +191,7 @@ def evaluate_kitti(
             }
             for metric in box_metrics:
                 threshold = overlap_table[cls][metric]
-                # DontCare regions only affect the image-box metric (devkit: BEV/3D DontCare boxes lie at -1000)
-                in_dc = dontcare_share > threshold if metric == "bbox" else np.zeros(len(det), dtype=bool)
+                in_dc = dontcare_share[metric] > threshold
                 problem = _problem(gt, det, overlaps[metric], threshold, gt_flag, det_flag, in_dc)
                 summary = curve_fn(problem, compute_aos=compute_aos and metric == "bbox").summary(exact=exact)
                 if metric in metrics:

@@ -33,8 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--score-threshold", type=float, default=DEFAULT_SCORE_THRESHOLD, metavar="S",
                         help="detections scoring below S are not counted in the table and errors "
                         "(default: %(default)s; the F1-optimal threshold is reported too)")
-    parser.add_argument("--kitti-mode", choices=("official", "exact"), default="official",
-                        help="KITTI AP semantics: the devkit's (official) or with its known defects fixed (exact)")
+    parser.add_argument("--kitti-mode", choices=("official", "port", "exact"), default="official",
+                        help="KITTI AP semantics: the C++ devkit's (official), the common Python port's "
+                        "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
     parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
 
