@@ -4,7 +4,8 @@ Each case is a pair of label directories written from a seeded generator with tw
 number, so the files (and the devkit's answers) are the same on every machine. The cases are
 chosen where a port and the devkit could differ: detections that are exact copies of the ground
 truth (coincident rotated boxes), duplicates, boxes sharing edges, jittered boxes near the overlap
-thresholds, DontCare regions with and without a 3D box, the "-1 -1 -1" sentinel, empty frames.
+thresholds, DontCare regions with and without a 3D box, the "-1 -1 -1" sentinel, empty frames, and no ground
+truth at all.
 
 Used by tests/evaluation/test_kitti_devkit.py and tests/evaluation/regenerate_kitti_devkit_golden.py
 (which regenerates the golden values from a devkit binary).
@@ -24,8 +25,9 @@ CASES: dict[str, tuple[int, float, float, float]] = {
     "partly_exact": (2, 0.5, 0.4, 0.6),
     "jittered": (3, 0.0, 0.9, 1.0),
     "jittered_small": (4, 0.0, 0.8, 0.3),
+    "no_ground_truth": (5, 0.5, 0.5, 0.5),  # the ground-truth files are empty: every detection is a FP
 }
-N_FRAMES = {"gt_as_detection": 60, "partly_exact": 80, "jittered": 80, "jittered_small": 12}
+N_FRAMES = {"gt_as_detection": 60, "partly_exact": 80, "jittered": 80, "jittered_small": 12, "no_ground_truth": 10}
 SIZES = {"Car": (1.5, 1.6, 3.9), "Van": (2.1, 1.9, 5.0), "Pedestrian": (1.75, 0.6, 0.8),
          "Person_sitting": (1.2, 0.6, 0.8), "Cyclist": (1.7, 0.6, 1.8), "Truck": (3.2, 2.5, 9.0)}  # fmt: skip
 KINDS = ["Car"] * 8 + ["Van", "Pedestrian", "Pedestrian", "Pedestrian", "Person_sitting", "Cyclist", "Cyclist", "Truck"]
@@ -109,6 +111,8 @@ def write_case(name: str, root: Path) -> tuple[Path, Path]:
             det_lines.append(_line(kind, -1, -1, _object(rng, kind, int(rng.integers(20))), rng.uniform(0.05, 0.9)))
         if rng.random() < 0.1:  # a 2D-only detection: the no-3D-box sentinel
             det_lines.append(f"Car -1 -1 -10 {_fmt((300, 150, 360, 200))} -1 -1 -1 -1000 -1000 -1000 -10 0.30")
+        if name == "no_ground_truth":
+            gt_lines = []
         (gt_dir / f"{frame:06d}.txt").write_text("".join(line + "\n" for line in gt_lines))
         (det_dir / f"{frame:06d}.txt").write_text("".join(line + "\n" for line in det_lines))
     return gt_dir, det_dir
