@@ -4,8 +4,7 @@ tests/data/kitti/devkit_golden.json holds what the devkit (evaluate_object.cpp, 
 overlaps) printed for the cases of kitti_devkit_cases.py: detections that are the ground truth
 itself (coincident rotated boxes, duplicates), half exact and half jittered, all jittered, with
 DontCare regions with and without a 3D box, 2D-only detections, empty frames, and empty ground
-truth files. Regenerate with
-tests/evaluation/regenerate_kitti_devkit_golden.py --devkit PATH.
+truth files. Regenerate with tests/evaluation/regenerate_kitti_devkit_golden.py --devkit PATH.
 
 Tolerance 1e-5: the devkit prints its precisions with 6 decimals (AP error < 1e-6). The rules
 checked here matter at a coarser scale: on these sets, DontCare in 2D only moves some AP by 2e-3 or
