@@ -6,11 +6,13 @@ A camera's optical frame (OpenCV) is derived from its body frame (see pipeline.c
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from pipeline.core.config.base import ConfigModel
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class _Model(ConfigModel):
+    pass
 
 
 class MountPose(_Model):
