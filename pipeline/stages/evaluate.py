@@ -10,6 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from pipeline.core.digests import path_sha256
 from pipeline.stages.common import atomic_output_dir, write_meta
 
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
@@ -49,7 +50,10 @@ def main(args: argparse.Namespace) -> int:
         kitti_options["calib_dir"] = args.calib
     result = evaluate(args.gt, args.detections, iou_thresholds=args.iou, group_by=args.group_by, metrics=metrics,
                       score_threshold=args.score_threshold, kitti_options=kitti_options)
-    config = {"gt": str(args.gt), "detections": str(args.detections), "iou": list(args.iou),
+    # the digests let `roadsynth report` check that it is given the inputs that were evaluated
+    config = {"gt": str(args.gt), "detections": str(args.detections),
+              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections),
+              "iou": list(args.iou),
               "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
               "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
     with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:
