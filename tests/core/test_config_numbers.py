@@ -148,3 +148,21 @@ def test_loading_never_shows_a_traceback(kind: str, picks) -> None:
             assert str(exc).startswith(f"{path}: ")
             return
     json.dumps(config.model_dump(mode="json"), allow_nan=False)
+
+
+def test_lognormal_without_upper_bound_holds_no_infinity() -> None:
+    """The open upper bound is None (it was inf, which a strict JSON meta.json cannot hold)."""
+    import numpy as np
+    from scipy import stats
+
+    from pipeline.core.config import LogNormal
+
+    dist = LogNormal(median=2.0, sigma=0.5, low=1.0)
+    assert dist.high is None
+    json.dumps(dist.model_dump(mode="json"), allow_nan=False)
+    x = np.array([0.5, 1.0, 2.0, 5.0, 1e3])
+    base = stats.lognorm(s=0.5, scale=2.0)
+    expected = np.clip((base.cdf(x) - base.cdf(1.0)) / (1 - base.cdf(1.0)), 0, 1)
+    np.testing.assert_allclose(dist.cdf(x), expected, rtol=0, atol=1e-12)
+    samples = dist.sample(np.random.default_rng(0), 1000)
+    assert samples.min() >= 1.0 and np.isfinite(samples).all()
