@@ -6,8 +6,10 @@ The binary is the devkit's evaluate_object.cpp (devkit_object, the 40-recall-poi
 with boost (``g++ -O2 -o evaluate_object evaluate_object.cpp``, libboost-dev), with the command line
 of the common offline variant: ``evaluate_object GT_DIR RESULT_DIR``, reading the frames of GT_DIR
 and RESULT_DIR/data/<frame>.txt and writing RESULT_DIR/stats_<class>_detection{,_ground,_3d}.txt
-(one line of 41 precisions per difficulty: easy, moderate, hard). The devkit itself is not part of
-this repository.
+(one line of 41 precisions per difficulty: easy, moderate, hard). The stock devkit_object main
+takes a result id and fixed folders (and the server's copy mails its results), so wrap its evaluation
+functions, unchanged, in a main with that command line. The devkit itself is not part of this
+repository.
 
 For every case of tests/evaluation/kitti_devkit_cases.py it records the sha256 of the written label
 files (so a changed generator is caught) and, per class, metric and difficulty, AP_R40 = mean of
