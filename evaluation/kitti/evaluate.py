@@ -75,6 +75,26 @@ def _overlaps(classes: Sequence[str], min_overlap: Mapping | None) -> dict[str, 
     return out
 
 
+DEVKIT_CLASSES = ("car", "pedestrian", "cyclist")
+
+
+def devkit_skipped(det: Flat, cls: str) -> list[str]:
+    """The box metrics the devkit does not evaluate for ``cls``: it scores a class in 2D only if one of
+    its detections has x1 >= 0, in BEV only if one has x, z != -1000 and w, l > 0, in 3D only if one
+    has x, y, z != -1000 and h, w, l > 0 (loadDetections). Only its three classes are concerned."""
+    if cls.lower() not in DEVKIT_CLASSES:
+        return []
+    mine = det.type == cls.lower()
+    x, y, z, h, w, length = (det.box3d[mine, k] for k in range(6))
+    ground = (x != -1000) & (z != -1000) & (w > 0) & (length > 0)
+    evaluated = {
+        "bbox": bool(np.any(det.bbox[mine, 0] >= 0)),
+        "bev": bool(np.any(ground)),
+        "3d": bool(np.any(ground & (y != -1000) & (h > 0))),
+    }
+    return [m for m, done in evaluated.items() if not done]
+
+
 def _check_args(mode: str, classes: Sequence[str], metrics: Sequence[str]) -> None:
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; expected one of {MODES}")
@@ -157,7 +177,8 @@ def evaluate_kitti(
     Returns:
         {"mode", "settings", "counts", "results": {class: {difficulty: {"num_gt", "num_gt_ignored",
         "num_det", metric: {"ap_r40", "ap_r11"}}}}, "notes"}; AP values are fractions in [0, 1] or
-        None where undefined (exact mode, no ground truth).
+        None where undefined (exact mode, no ground truth) or, in official mode, where the devkit
+        does not evaluate (see :func:`devkit_skipped`).
 
     Raises:
         KittiFormatError: malformed or inconsistent files.
@@ -202,6 +223,15 @@ def evaluate_kitti(
                 entry["aos"] = {"ap_r40": None, "ap_r11": None}
             counts = {k: entry[k] for k in ("num_gt", "num_gt_ignored", "num_det")}
             results[cls][diff.name] = counts | {m: entry[m] for m in metrics}
+        if mode == "official":
+            skipped = [m for m in devkit_skipped(det, cls) if m in metrics or (m == "bbox" and "aos" in metrics)]
+            for metric in [*skipped, *(["aos"] if "bbox" in skipped and "aos" in metrics else [])]:
+                for entry in results[cls].values():
+                    if metric in entry:
+                        entry[metric] = {"ap_r40": None, "ap_r11": None}
+            if skipped:
+                notes.append(f"{cls}: {', '.join(skipped)} not evaluated (None): no detection of the class qualifies, "
+                             "and the devkit evaluates a class only when one does")
     log.info("KITTI %s evaluation of %d frames, %d GT, %d detections", mode, len(frames), len(gt), len(det))
     return {
         "mode": mode,

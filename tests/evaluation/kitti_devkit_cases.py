@@ -26,8 +26,11 @@ CASES: dict[str, tuple[int, float, float, float]] = {
     "jittered": (3, 0.0, 0.9, 1.0),
     "jittered_small": (4, 0.0, 0.8, 0.3),
     "no_ground_truth": (5, 0.5, 0.5, 0.5),  # the ground-truth files are empty: every detection is a FP
+    "sparse_detections": (6, 0.5, 0.3, 0.5),  # no Cyclist detection, Pedestrians in 2D only: not evaluated
 }
-N_FRAMES = {"gt_as_detection": 60, "partly_exact": 80, "jittered": 80, "jittered_small": 12, "no_ground_truth": 10}
+N_FRAMES = {"gt_as_detection": 60, "partly_exact": 80, "jittered": 80, "jittered_small": 12, "no_ground_truth": 10,
+            "sparse_detections": 30}  # fmt: skip
+NO_3D_BOX = "-1.00 -1.00 -1.00 -1000.00 -1000.00 -1000.00 -10.00"
 SIZES = {"Car": (1.5, 1.6, 3.9), "Van": (2.1, 1.9, 5.0), "Pedestrian": (1.75, 0.6, 0.8),
          "Person_sitting": (1.2, 0.6, 0.8), "Cyclist": (1.7, 0.6, 1.8), "Truck": (3.2, 2.5, 9.0)}  # fmt: skip
 KINDS = ["Car"] * 8 + ["Van", "Pedestrian", "Pedestrian", "Pedestrian", "Person_sitting", "Cyclist", "Cyclist", "Truck"]
@@ -76,6 +79,12 @@ def _jitter(rng: np.random.Generator, box3: list[float], scale: float) -> list[f
             x + dx, y + rng.normal(0, 0.1 * scale), z + dz, ry + rng.normal(0, 0.15 * scale)]  # fmt: skip
 
 
+def _two_d_only(line: str) -> str:
+    """The detection line with its 3D box replaced by the no-3D-box sentinel."""
+    fields = line.split()
+    return " ".join([*fields[:8], NO_3D_BOX, fields[15]])
+
+
 def write_case(name: str, root: Path) -> tuple[Path, Path]:
     """Write case ``name`` as root/label_2 (ground truth) and root/results/data (detections)."""
     seed, exact_share, jitter_share, fp_rate = CASES[name]
@@ -113,6 +122,9 @@ def write_case(name: str, root: Path) -> tuple[Path, Path]:
             det_lines.append(f"Car -1 -1 -10 {_fmt((300, 150, 360, 200))} -1 -1 -1 -1000 -1000 -1000 -10 0.30")
         if name == "no_ground_truth":
             gt_lines = []
+        if name == "sparse_detections":
+            det_lines = [_two_d_only(line) if line.startswith("Pedestrian ") else line
+                         for line in det_lines if not line.startswith("Cyclist ")]  # fmt: skip
         (gt_dir / f"{frame:06d}.txt").write_text("".join(line + "\n" for line in gt_lines))
         (det_dir / f"{frame:06d}.txt").write_text("".join(line + "\n" for line in det_lines))
     return gt_dir, det_dir

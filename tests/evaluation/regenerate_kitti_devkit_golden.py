@@ -14,8 +14,8 @@ repository.
 For every case of tests/evaluation/kitti_devkit_cases.py it records the sha256 of the written label
 files (so a changed generator is caught) and, per class, metric and difficulty, AP_R40 = mean of
 precision[1:41] and AP_R11 = mean of precision[0::4] from the devkit's printed precisions (printed
-with 6 decimals, so the golden values carry an error below 1e-6). A class the devkit does not
-evaluate (no detection names it) is left out.
+with 6 decimals, so the golden values carry an error below 1e-6). What the devkit does not evaluate
+(no stats file: no qualifying detection of the class) is listed as "Class/metric" in not_evaluated.
 """
 
 from __future__ import annotations
@@ -59,12 +59,15 @@ def run_devkit(devkit: Path, name: str, root: Path) -> dict:
     if done.returncode != 0:
         raise RuntimeError(f"{devkit} failed on case {name} ({done.returncode}): {done.stdout}{done.stderr}")
     results: dict[str, dict] = {}
+    not_evaluated = []
     for cls in CLASSES:
         for metric, suffix in STATS_SUFFIX.items():
             path = det_dir.parent / f"stats_{cls.lower()}{suffix}.txt"
             if path.is_file():
                 results.setdefault(cls, {})[metric] = read_stats(path)
-    return {"sha256": case_digest(gt_dir, det_dir), "results": results}
+            else:
+                not_evaluated.append(f"{cls}/{metric}")
+    return {"sha256": case_digest(gt_dir, det_dir), "results": results, "not_evaluated": not_evaluated}
 
 
 def main() -> None:

@@ -276,3 +276,17 @@ def test_summary_markdown(tmp_path: Path) -> None:
     text = kitti_summary_markdown(run(tmp_path, gt, det, "exact"))
     assert "| Car | BEV | 0.7 | 50.00 |" in text
     assert text.count("\n|") >= 2 + 3 * 4
+
+
+def test_official_mode_skips_what_the_devkit_does_not_evaluate(tmp_path: Path) -> None:
+    """The devkit evaluates BEV/3D for a class only if one of its detections has a 3D box, and a class
+    at all only if it is detected: official mode reports None there (with a note), port mode 0."""
+    gt = {"000000": [obj(**far(0)), obj("Cyclist", **far(1))]}
+    det = {"000000": ["Car -1 -1 -10 300.0 50.0 350.0 110.0 -1 -1 -1 -1000 -1000 -1000 -10 0.9"]}
+    official = run(tmp_path, gt, det, "official", metrics=("bbox", "bev", "3d"))
+    assert ap(official, "bbox") == pytest.approx((0.0, 1 / 11))
+    assert ap(official, "bev") == ap(official, "3d") == (None, None)
+    assert ap(official, "bbox", "Cyclist") == (None, None)
+    assert any("Car: bev, 3d not evaluated" in n for n in official["notes"])
+    port = run(tmp_path, gt, det, "port", metrics=("bbox", "bev", "3d"))
+    assert ap(port, "bev") == (0.0, 0.0) and ap(port, "bbox", "Cyclist") == (0.0, 0.0)

@@ -32,13 +32,24 @@ def _golden() -> dict:
     return json.loads(GOLDEN.read_text())["cases"]
 
 
-def _compare(result: dict, expected: dict) -> list[str]:
-    """Every (class, metric, difficulty) of the devkit's answer that the result misses by more than TOLERANCE."""
+def _compare(result: dict, expected: dict, not_evaluated: list[str] | None = None) -> list[str]:
+    """Every (class, metric, difficulty) of the devkit's answer that the result misses by more than
+    TOLERANCE, and every AP that is None where the devkit evaluated or a number where it did not."""
     misses = []
+    if not_evaluated is not None:
+        for cls in ("Car", "Pedestrian", "Cyclist"):
+            for metric in ("bbox", "bev", "3d"):
+                none = [result["results"][cls][d][metric]["ap_r40"] is None for d in DIFFICULTIES]
+                skipped = f"{cls}/{metric}" in not_evaluated
+                if any(none) != skipped or len(set(none)) > 1:
+                    misses.append(f"{cls} {metric}: AP None {none}, devkit skipped: {skipped}")
     for cls, per_metric in expected.items():
         for metric, per_difficulty in per_metric.items():
             for diff in DIFFICULTIES:
                 got = result["results"][cls][diff][metric]
+                if got["ap_r40"] is None:
+                    misses.append(f"{cls} {metric} {diff}: None, the devkit evaluated it")
+                    continue
                 for key in ("ap_r40", "ap_r11"):
                     want = per_difficulty[diff][key]
                     if abs(got[key] - want) > TOLERANCE:
@@ -52,8 +63,17 @@ def test_official_mode_equals_devkit(tmp_path: Path, case: str) -> None:
     gt_dir, det_dir = write_case(case, tmp_path)
     assert case_digest(gt_dir, det_dir) == golden["sha256"], "case files changed: regenerate the golden values"
     result = evaluate_kitti(gt_dir, det_dir, mode="official", metrics=("bbox", "bev", "3d"))
-    assert set(golden["results"]) == {"Car", "Pedestrian", "Cyclist"}
-    assert _compare(result, golden["results"]) == []
+    assert golden["results"], "the devkit evaluated nothing: a useless case"
+    assert _compare(result, golden["results"], golden["not_evaluated"]) == []
+
+
+def test_cases_cover_what_the_devkit_skips() -> None:
+    golden = _golden()
+    assert {"Cyclist/bbox", "Cyclist/3d", "Pedestrian/bev", "Pedestrian/3d"} <= set(
+        golden["sparse_detections"]["not_evaluated"]
+    )
+    assert "Pedestrian/bbox" not in golden["sparse_detections"]["not_evaluated"]
+    assert all(not case["not_evaluated"] for name, case in golden.items() if name != "sparse_detections")
 
 
 def test_port_mode_is_not_the_devkit(tmp_path: Path) -> None:
@@ -73,4 +93,4 @@ def test_official_mode_equals_devkit_binary(tmp_path: Path, case: str) -> None:
     live = run_devkit(Path(os.environ["KITTI_DEVKIT"]), case, tmp_path)
     result = evaluate_kitti(tmp_path / "label_2", tmp_path / "results" / "data", mode="official",
                             metrics=("bbox", "bev", "3d"))  # fmt: skip
-    assert _compare(result, live["results"]) == []
+    assert _compare(result, live["results"], live["not_evaluated"]) == []
