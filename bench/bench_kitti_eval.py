@@ -119,7 +119,7 @@ def main() -> None:
         n_gt, n_det = sum(len(f) for f in gt.values()), sum(len(f) for f in det.values())
         t_parse = (t_gt[0] + t_det[0], t_gt[1] + t_det[1])
         rows.append((f"parse labels ({n_gt} GT, {n_det} det lines)", t_parse, ""))
-        for mode in ("official", "exact"):
+        for mode in ("official", "port", "exact"):
             for metrics in (("bev", "3d"), ("bbox", "bev", "3d", "aos")):
                 result, t = _timed(lambda m=mode, ms=metrics: evaluate_kitti(gt_dir, det_dir, mode=m, metrics=ms))
                 car = result["results"]["Car"]["moderate"]

@@ -21,6 +21,7 @@ from evaluation.kitti.prepare import (
     DIFFICULTIES,
     NEIGHBOURS,
     Flat,
+    OverlapRules,
     Pairs,
     det_flags,
     dontcare_overlap,
@@ -29,11 +30,19 @@ from evaluation.kitti.prepare import (
     pairs,
 )
 
-__all__ = ["METRICS", "MIN_OVERLAP_LOOSE", "MIN_OVERLAP_STRICT", "MODES", "evaluate_kitti"]
+__all__ = ["METRICS", "MIN_OVERLAP_LOOSE", "MIN_OVERLAP_STRICT", "MODES", "RULES", "evaluate_kitti"]
 
 log = logging.getLogger(__name__)
 
-MODES = ("official", "exact")
+MODES = ("official", "port", "exact")
+# official: the C++ devkit (double-precision polygons, its sentinel boxes, DontCare in every metric);
+# port: the common Python port (float32 rotated IoU, DontCare in 2D only); both with the devkit's curve.
+# exact: double precision, objects without a 3D box out of BEV/3D, the exact recall-indexed curve.
+RULES: dict[str, OverlapRules] = {
+    "official": OverlapRules(rotated="float64", sentinel_is_box=True, dontcare_metrics=("bbox", "bev", "3d")),
+    "port": OverlapRules(rotated="port", sentinel_is_box=False, dontcare_metrics=("bbox",)),
+    "exact": OverlapRules(rotated="float64", sentinel_is_box=False, dontcare_metrics=("bbox", "bev", "3d")),
+}
 METRICS = ("bbox", "bev", "3d", "aos")
 # the devkit's overlap sets; "aos" always uses the bbox threshold
 MIN_OVERLAP_STRICT: dict[str, float] = {
@@ -64,6 +73,26 @@ def _overlaps(classes: Sequence[str], min_overlap: Mapping | None) -> dict[str, 
                 raise ValueError(f"min_overlap[{cls!r}][{metric!r}] must be a number in [0, 1), got {value!r}")
         out[cls] = {m: float(per_metric[m]) for m in ("bbox", "bev", "3d")}
     return out
+
+
+DEVKIT_CLASSES = ("car", "pedestrian", "cyclist")
+
+
+def devkit_skipped(det: Flat, cls: str) -> list[str]:
+    """The box metrics the devkit does not evaluate for ``cls``: it scores a class in 2D only if one of
+    its detections has x1 >= 0, in BEV only if one has x, z != -1000 and w, l > 0, in 3D only if one
+    has x, y, z != -1000 and h, w, l > 0 (loadDetections). Only its three classes are concerned."""
+    if cls.lower() not in DEVKIT_CLASSES:
+        return []
+    mine = det.type == cls.lower()
+    x, y, z, h, w, length = (det.box3d[mine, k] for k in range(6))
+    ground = (x != -1000) & (z != -1000) & (w > 0) & (length > 0)
+    evaluated = {
+        "bbox": bool(np.any(det.bbox[mine, 0] >= 0)),
+        "bev": bool(np.any(ground)),
+        "3d": bool(np.any(ground & (y != -1000) & (h > 0))),
+    }
+    return [m for m, done in evaluated.items() if not done]
 
 
 def _check_args(mode: str, classes: Sequence[str], metrics: Sequence[str]) -> None:
@@ -134,8 +163,10 @@ def evaluate_kitti(
             are scored as having no detections (and counted); files for unknown frames are an error.
         calib_dir: optional calib directory; when given every frame's calib file must exist and parse.
             Not needed for the metrics: labels are already in the rectified camera frame.
-        mode: "official" (devkit / common Python port semantics, defects included) or "exact"
-            (rotated IoU exact for coincident boxes; precision interpolated at exact recall points).
+        mode: "official" (the C++ devkit evaluate_object.cpp, defects included: double-precision
+            polygon overlaps, its score-threshold curve), "port" (the common Python port
+            kitti_object_eval_python: its float32 rotated IoU, DontCare in 2D only) or "exact"
+            (precision interpolated at exact recall points; see README.md here).
         classes: class names as written in the labels (matched case-insensitively, like the devkit).
         min_overlap: per class a float (all box metrics) or {"bbox", "bev", "3d"} -> float; a
             detection matches when its overlap is strictly greater. Default MIN_OVERLAP_STRICT
@@ -146,7 +177,8 @@ def evaluate_kitti(
     Returns:
         {"mode", "settings", "counts", "results": {class: {difficulty: {"num_gt", "num_gt_ignored",
         "num_det", metric: {"ap_r40", "ap_r11"}}}}, "notes"}; AP values are fractions in [0, 1] or
-        None where undefined (exact mode, no ground truth).
+        None where undefined (exact mode, no ground truth) or, in official mode, where the devkit
+        does not evaluate (see :func:`devkit_skipped`).
 
     Raises:
         KittiFormatError: malformed or inconsistent files.
@@ -157,14 +189,15 @@ def evaluate_kitti(
     frames, gt_frames, det_frames, n_missing = _load(gt_dir, det_dir, calib_dir)
     gt, det = flatten(gt_frames), flatten(det_frames)
     exact = mode == "exact"
+    rules = RULES[mode]
     notes = []
     compute_aos = "aos" in metrics
     if compute_aos and np.any(det.alpha == -10):
         compute_aos = False
         notes.append("AOS skipped: some detections have alpha = -10 (unknown), as in the devkit")
     box_metrics = [m for m in ("bbox", "bev", "3d") if m in metrics or (m == "bbox" and compute_aos)]
-    overlaps = {m: pairs(gt, det, len(frames), m, exact=exact) for m in box_metrics}
-    dontcare_share = dontcare_overlap(gt, det, len(frames))
+    overlaps = {m: pairs(gt, det, len(frames), m, rules) for m in box_metrics}
+    dontcare_share = {m: dontcare_overlap(gt, det, len(frames), m, rules) for m in box_metrics}
     curve_fn = exact_curve if exact else official_curve
 
     results: dict[str, dict] = {}
@@ -179,8 +212,7 @@ def evaluate_kitti(
             }
             for metric in box_metrics:
                 threshold = overlap_table[cls][metric]
-                # DontCare regions only affect the image-box metric (devkit: BEV/3D DontCare boxes lie at -1000)
-                in_dc = dontcare_share > threshold if metric == "bbox" else np.zeros(len(det), dtype=bool)
+                in_dc = dontcare_share[metric] > threshold
                 problem = _problem(gt, det, overlaps[metric], threshold, gt_flag, det_flag, in_dc)
                 summary = curve_fn(problem, compute_aos=compute_aos and metric == "bbox").summary(exact=exact)
                 if metric in metrics:
@@ -191,6 +223,15 @@ def evaluate_kitti(
                 entry["aos"] = {"ap_r40": None, "ap_r11": None}
             counts = {k: entry[k] for k in ("num_gt", "num_gt_ignored", "num_det")}
             results[cls][diff.name] = counts | {m: entry[m] for m in metrics}
+        if mode == "official":
+            skipped = [m for m in devkit_skipped(det, cls) if m in metrics or (m == "bbox" and "aos" in metrics)]
+            for metric in [*skipped, *(["aos"] if "bbox" in skipped and "aos" in metrics else [])]:
+                for entry in results[cls].values():
+                    if metric in entry:
+                        entry[metric] = {"ap_r40": None, "ap_r11": None}
+            if skipped:
+                notes.append(f"{cls}: {', '.join(skipped)} not evaluated (None): no detection of the class qualifies, "
+                             "and the devkit evaluates a class only when one does")
     log.info("KITTI %s evaluation of %d frames, %d GT, %d detections", mode, len(frames), len(gt), len(det))
     return {
         "mode": mode,

@@ -12,13 +12,19 @@ Conventions (KITTI rectified camera frame: x right, y down, z forward):
 Two rotated-rectangle intersections are provided:
 
 - :func:`bev_intersection_exact`: float64 convex clipping that treats boundary contacts and
-  collinear edges robustly (agrees with shapely to ~1e-12).
+  collinear edges robustly (agrees with shapely to ~1e-12). This is what the official KITTI devkit
+  computes (evaluate_object.cpp intersects boost::geometry double-precision polygons), up to the
+  last bits of rounding; ``mode="official"`` and ``mode="exact"`` use it.
 - :func:`bev_intersection_port`: the single-precision algorithm of the common Python port
-  (kitti_object_eval_python ``rotate_iou``), reproduced for ``mode="official"``: corners inside the
+  (kitti_object_eval_python ``rotate_iou``), reproduced for ``mode="port"``: corners inside the
   other rectangle by a non-tolerant dot-product test, edge crossings by strict orientation tests
   (collinear edges never cross), vertices sorted by a pseudo-angle, fan-triangulated area. Because
   the tests have no tolerance, coincident or edge-sharing rotated rectangles lose vertices to
   float32 rounding and their intersection collapses (often to 0).
+
+IoU definitions are the devkit's: BEV = intersection / (l_a w_a + l_b w_b - intersection); 3D =
+BEV intersection x vertical overlap / (h_a w_a l_a + h_b w_b l_b - that); criterion "a" divides by
+the area (volume) of ``a`` alone (the devkit's DontCare test, ``a`` = the detection).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "ROTATED",
     "bev_intersection_exact",
     "bev_intersection_port",
     "bev_iou",
@@ -109,7 +116,8 @@ def bev_intersection_exact(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Exact intersection area of P pairs of rotated rectangles, float64.
 
     Args:
-        a, b: (P, 5) float64 BEV boxes (x, z, l, w, ry), l, w >= 0.
+        a, b: (P, 5) float64 BEV boxes (x, z, l, w, ry), l and w of one sign (the devkit's "-1 -1 -1"
+            sentinel is a unit square: a rectangle turned by pi).
 
     Returns:
         (P,) float64 area in m^2.
@@ -227,26 +235,63 @@ def _port_area(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.sum(np.where(k < (count - 2)[:, None], tri, 0.0), axis=1)
 
 
-def bev_iou(a: np.ndarray, b: np.ndarray, *, exact: bool) -> np.ndarray:
-    """IoU of P pairs of BEV boxes (x, z, l, w, ry), (P, 5) -> (P,) float64."""
-    inter = bev_intersection_exact(a, b) if exact else bev_intersection_port(a, b)
-    union = a[:, 2] * a[:, 3] + b[:, 2] * b[:, 3] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+ROTATED = ("float64", "port")
 
 
-def box3d_iou(a: np.ndarray, b: np.ndarray, *, exact: bool) -> np.ndarray:
-    """IoU of P pairs of 3D boxes.
+def _bev_intersection(a: np.ndarray, b: np.ndarray, rotated: str) -> np.ndarray:
+    if rotated == "float64":
+        return bev_intersection_exact(a, b)
+    if rotated == "port":
+        return bev_intersection_port(a, b)
+    raise ValueError(f"unknown rotated-intersection algorithm {rotated!r}; expected one of {ROTATED}")
+
+
+def _ratio(inter: np.ndarray, denom: np.ndarray) -> np.ndarray:
+    # a zero intersection is no overlap whatever the denominator (the devkit's 0 / 0 is NaN: no match either)
+    return np.divide(inter, denom, out=np.zeros_like(inter), where=(inter > 0) & (denom != 0))
+
+
+def bev_iou(a: np.ndarray, b: np.ndarray, *, rotated: str, criterion: str = "union") -> np.ndarray:
+    """Overlap of P pairs of BEV boxes (x, z, l, w, ry), (P, 5) -> (P,) float64.
+
+    Args:
+        a, b: (P, 5) float64 BEV boxes.
+        rotated: "float64" (polygon clipping in double precision, as the devkit's boost::geometry) or
+            "port" (the common Python port's float32 algorithm).
+        criterion: "union" (intersection / (area a + area b - intersection)) or "a" (intersection /
+            area of a: the devkit's DontCare test with a = the detection).
+
+    Areas are the signed products l * w, as the devkit's polygon areas: its "-1 -1 -1" sentinel box is
+    a 1 x 1 m square.
+    """
+    inter = _bev_intersection(a, b, rotated)
+    area_a = a[:, 2] * a[:, 3]
+    if criterion == "union":
+        return _ratio(inter, area_a + b[:, 2] * b[:, 3] - inter)
+    if criterion == "a":
+        return _ratio(inter, area_a)
+    raise ValueError(f"unknown criterion {criterion!r}; expected 'union' or 'a'")
+
+
+def box3d_iou(a: np.ndarray, b: np.ndarray, *, rotated: str, criterion: str = "union") -> np.ndarray:
+    """Overlap of P pairs of 3D boxes.
 
     Args:
         a, b: (P, 7) float64 (x, y, z, h, w, l, ry): bottom centre in the camera frame, sizes, yaw.
-        exact: exact float64 BEV intersection, else the port's float32 one.
+        rotated: the BEV intersection algorithm, as in :func:`bev_iou`.
+        criterion: "union" or "a" (intersection volume / volume of a), as in :func:`bev_iou`.
 
     Returns:
-        (P,) float64 = BEV intersection x vertical overlap / union of volumes.
+        (P,) float64 = BEV intersection x vertical overlap / union of volumes (volumes h * w * l, as
+        the devkit's box3DOverlap).
     """
     bev_a, bev_b = a[:, [0, 2, 5, 4, 6]], b[:, [0, 2, 5, 4, 6]]
-    inter_area = bev_intersection_exact(bev_a, bev_b) if exact else bev_intersection_port(bev_a, bev_b)
+    inter_area = _bev_intersection(bev_a, bev_b, rotated)
     overlap_h = np.minimum(a[:, 1], b[:, 1]) - np.maximum(a[:, 1] - a[:, 3], b[:, 1] - b[:, 3])
     inter = inter_area * np.maximum(overlap_h, 0.0)
-    union = a[:, 3] * a[:, 4] * a[:, 5] + b[:, 3] * b[:, 4] * b[:, 5] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=inter > 0)
+    volume_a = a[:, 3] * a[:, 4] * a[:, 5]
+    if criterion == "union":
+        return _ratio(inter, volume_a + b[:, 3] * b[:, 4] * b[:, 5] - inter)
+    if criterion == "a":
+        return _ratio(inter, volume_a)
+    raise ValueError(f"unknown criterion {criterion!r}; expected 'union' or 'a'")

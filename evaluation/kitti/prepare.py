@@ -15,7 +15,7 @@ from evaluation.kitti.io import KittiFrame
 from evaluation.kitti.iou import bev_iou, box3d_iou, image_box_overlap
 
 __all__ = [
-    "DIFFICULTIES", "NEIGHBOURS", "Difficulty", "Flat", "Pairs",
+    "DIFFICULTIES", "NEIGHBOURS", "Difficulty", "Flat", "OverlapRules", "Pairs",
     "det_flags", "dontcare_overlap", "flatten", "gt_flags", "pairs",
 ]  # fmt: skip
 
@@ -119,6 +119,24 @@ def det_flags(det: Flat, cls: str, diff: Difficulty) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class OverlapRules:
+    """How a mode computes overlaps.
+
+    Attributes:
+        rotated: the BEV intersection algorithm, "float64" or "port" (see :mod:`evaluation.kitti.iou`).
+        sentinel_is_box: the devkit reads the "-1 -1 -1" no-3D-box sentinel as sizes, so such an
+            object is a 1 x 1 m square at its location (x, z = -1000 for KITTI's DontCare) and
+            overlaps another sentinel there; False leaves objects without a 3D box out of BEV/3D.
+        dontcare_metrics: the box metrics in which DontCare regions absorb unassigned detections
+            (the devkit: all three, each with its own overlap; the Python port: "bbox" only).
+    """
+
+    rotated: str
+    sentinel_is_box: bool
+    dontcare_metrics: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class Pairs:
     """Sparse overlaps of (ground truth, detection) pairs of the same frame, K pairs with overlap > 0.
 
@@ -145,36 +163,49 @@ def _all_pairs(gt: Flat, det: Flat, n_frames: int, gt_mask: np.ndarray) -> tuple
     return g, d
 
 
-def pairs(gt: Flat, det: Flat, n_frames: int, metric: str, *, exact: bool) -> Pairs:
+def _box_overlap(
+    first: Flat, i: np.ndarray, second: Flat, j: np.ndarray, metric: str, rules: OverlapRules, criterion: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Overlap of the pairs (first[i], second[j]) of a metric, only where it can be positive.
+
+    Returns the kept (i, j) and their overlap; criterion "a" divides by the size of ``first``.
+    """
+    if metric == "bbox":
+        return i, j, image_box_overlap(first.bbox[i], second.bbox[j], criterion=criterion)
+    if metric not in ("bev", "3d"):
+        raise ValueError(f"unknown metric {metric!r}; expected 'bbox', 'bev' or '3d'")
+    a, b = first.box3d[i], second.box3d[j]
+    # cheap rejection by circumscribed circles before the polygon clipping
+    radius_a = np.hypot(a[:, 4], a[:, 5]) / 2
+    radius_b = np.hypot(b[:, 4], b[:, 5]) / 2
+    near = np.hypot(a[:, 0] - b[:, 0], a[:, 2] - b[:, 2]) < radius_a + radius_b
+    if not rules.sentinel_is_box:
+        near &= first.has_box3d[i] & second.has_box3d[j]
+    i, j, a, b = i[near], j[near], a[near], b[near]
+    if metric == "bev":
+        cols = [0, 2, 5, 4, 6]
+        return i, j, bev_iou(a[:, cols], b[:, cols], rotated=rules.rotated, criterion=criterion)
+    return i, j, box3d_iou(a, b, rotated=rules.rotated, criterion=criterion)
+
+
+def pairs(gt: Flat, det: Flat, n_frames: int, metric: str, rules: OverlapRules) -> Pairs:
     """Overlaps of the metric ("bbox", "bev" or "3d") for all same-frame pairs with overlap > 0.
 
     DontCare ground truth is left out (it only enters through :func:`dontcare_overlap`).
     """
     g, d = _all_pairs(gt, det, n_frames, gt.type != "dontcare")
-    if metric == "bbox":
-        overlap = image_box_overlap(gt.bbox[g], det.bbox[d])
-    elif metric in ("bev", "3d"):
-        a, b = gt.box3d[g], det.box3d[d]
-        # cheap rejection by circumscribed circles before the polygon clipping
-        radius_a = np.hypot(a[:, 4], a[:, 5]) / 2
-        radius_b = np.hypot(b[:, 4], b[:, 5]) / 2
-        near = np.hypot(a[:, 0] - b[:, 0], a[:, 2] - b[:, 2]) < radius_a + radius_b
-        near &= gt.has_box3d[g] & det.has_box3d[d]
-        g, d, a, b = g[near], d[near], a[near], b[near]
-        if metric == "bev":
-            overlap = bev_iou(a[:, [0, 2, 5, 4, 6]], b[:, [0, 2, 5, 4, 6]], exact=exact)
-        else:
-            overlap = box3d_iou(a, b, exact=exact)
-    else:
-        raise ValueError(f"unknown metric {metric!r}; expected 'bbox', 'bev' or '3d'")
+    d, g, overlap = _box_overlap(det, d, gt, g, metric, rules, "union")
     keep = overlap > 0
     return Pairs(gt=g[keep], det=d[keep], overlap=overlap[keep])
 
 
-def dontcare_overlap(gt: Flat, det: Flat, n_frames: int) -> np.ndarray:
-    """(N_det,) float64: per detection, the largest share of its 2D box inside one DontCare region."""
-    g, d = _all_pairs(gt, det, n_frames, gt.type == "dontcare")
-    share = image_box_overlap(det.bbox[d], gt.bbox[g], criterion="a")
+def dontcare_overlap(gt: Flat, det: Flat, n_frames: int, metric: str, rules: OverlapRules) -> np.ndarray:
+    """(N_det,) float64: per detection, the largest share of its box (2D area, BEV area or volume,
+    by metric) inside one DontCare region; 0 where the mode ignores DontCare for the metric."""
     best = np.zeros(len(det))
+    if metric not in rules.dontcare_metrics:
+        return best
+    g, d = _all_pairs(gt, det, n_frames, gt.type == "dontcare")
+    d, g, share = _box_overlap(det, d, gt, g, metric, rules, "a")
     np.maximum.at(best, d, share)
     return best

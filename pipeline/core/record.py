@@ -112,7 +112,7 @@ class RecordInfo:
     schema_version: int = SCHEMA_VERSION
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True, indent=2) + "\n"
+        return json.dumps(asdict(self), sort_keys=True, indent=2, allow_nan=False) + "\n"
 
     @classmethod
     def from_dict(cls, data: dict, source: str) -> RecordInfo:

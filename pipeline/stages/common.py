@@ -10,6 +10,7 @@ import contextlib
 import hashlib
 import json
 import logging
+import math
 import sys
 from collections.abc import Iterator
 from importlib import metadata
@@ -21,9 +22,32 @@ from pipeline.core.files import atomic_dir
 log = logging.getLogger(__name__)
 
 
+def _non_finite(data: Any, where: str = "") -> Iterator[tuple[str, float]]:
+    """(key path, value) of every inf or NaN float in nested dicts and lists."""
+    if isinstance(data, float) and not math.isfinite(data):
+        yield where or "(top level)", data
+    elif isinstance(data, dict):
+        for key, value in data.items():
+            yield from _non_finite(value, f"{where}.{key}" if where else str(key))
+    elif isinstance(data, (list, tuple)):
+        for i, value in enumerate(data):
+            yield from _non_finite(value, f"{where}[{i}]")
+
+
+def _dumps(data: Any, source: str, **kwargs: Any) -> str:
+    """json.dumps that refuses inf and NaN (``Infinity`` and ``NaN`` are not JSON) and names the key."""
+    try:
+        return json.dumps(data, allow_nan=False, **kwargs)
+    except ValueError:
+        bad = next(_non_finite(data), None)
+        if bad is None:
+            raise
+        raise ValueError(f"{source}: {bad[0]} is {bad[1]!r}; JSON holds only finite numbers") from None
+
+
 def canonical_json(data: Any) -> str:
     """JSON with sorted keys and no insignificant whitespace: the input of :func:`config_hash`."""
-    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return _dumps(data, "config", sort_keys=True, separators=(",", ":"), ensure_ascii=True)
 
 
 def config_hash(data: Any) -> str:
@@ -54,8 +78,9 @@ def software_versions() -> dict[str, str | None]:
 
 
 def write_json(path: Path, data: Any) -> None:
-    """Write JSON deterministically (sorted keys, two-space indent, trailing newline)."""
-    path.write_text(json.dumps(data, sort_keys=True, indent=2) + "\n")
+    """Write JSON deterministically (sorted keys, two-space indent, trailing newline); inf or NaN
+    anywhere is an error naming the file and the key, never ``Infinity`` or ``NaN`` in the file."""
+    path.write_text(_dumps(data, str(path), sort_keys=True, indent=2) + "\n")
 
 
 def write_meta(

@@ -10,6 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from pipeline.core.digests import path_sha256
 from pipeline.stages.common import atomic_output_dir, write_meta
 
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
@@ -33,8 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--score-threshold", type=float, default=DEFAULT_SCORE_THRESHOLD, metavar="S",
                         help="detections scoring below S are not counted in the table and errors "
                         "(default: %(default)s; the F1-optimal threshold is reported too)")
-    parser.add_argument("--kitti-mode", choices=("official", "exact"), default="official",
-                        help="KITTI AP semantics: the devkit's (official) or with its known defects fixed (exact)")
+    parser.add_argument("--kitti-mode", choices=("official", "port", "exact"), default="official",
+                        help="KITTI AP semantics: the C++ devkit's (official), the common Python port's "
+                        "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
     parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
 
@@ -48,7 +50,10 @@ def main(args: argparse.Namespace) -> int:
         kitti_options["calib_dir"] = args.calib
     result = evaluate(args.gt, args.detections, iou_thresholds=args.iou, group_by=args.group_by, metrics=metrics,
                       score_threshold=args.score_threshold, kitti_options=kitti_options)
-    config = {"gt": str(args.gt), "detections": str(args.detections), "iou": list(args.iou),
+    # the digests let `roadsynth report` check that it is given the inputs that were evaluated
+    config = {"gt": str(args.gt), "detections": str(args.detections),
+              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections),
+              "iou": list(args.iou),
               "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
               "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
     with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:

@@ -3,6 +3,8 @@ condition, and a strip of example frames with ground truth and detections drawn.
 
 Reads the evaluate stage's ``metrics.json``, the COCO ground truth and the detections (COCO results);
 writes OUT/report.md, OUT/examples.png and OUT/metrics.json (flat, per condition, for ``dvc metrics``).
+The ground truth and detections must be the files that were evaluated (their sha256 is in the
+evaluation's ``meta.json``) and the grouping the evaluation's ``--group-by``: the table comes from it.
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ import cv2
 import numpy as np
 
 from evaluation import evaluate
+from evaluation.table import MISSING_GROUP
 from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.evaluated import check_evaluated_inputs
 
 log = logging.getLogger(__name__)
 
@@ -30,7 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gt", type=Path, required=True, help="COCO ground truth that was evaluated")
     parser.add_argument("--detections", type=Path, required=True, help="COCO results that were evaluated")
     parser.add_argument("--images", type=Path, help="folder of the GT's images (default: GT folder/images)")
-    parser.add_argument("--group-by", default="condition", help="image attribute to report by (default condition)")
+    parser.add_argument("--group-by", help="image attribute to report by; must be the evaluation's --group-by "
+                        "(default: that one)")
     parser.add_argument("--examples", type=int, default=2, help="example frames per group (default 2)")
     parser.add_argument("--out", type=Path, required=True, help="report folder")
 
@@ -48,16 +53,22 @@ def _table(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]], di
     return ious, by_group, by_bin
 
 
+def _group(image: dict, group_by: str) -> str:
+    """The image's group label, as the evaluation's table writes it."""
+    value = image.get(group_by)
+    return MISSING_GROUP if value is None else str(value)
+
+
 def coco_by_group(gt_path: Path, det_path: Path, group_by: str) -> dict[str, list[float]]:
     """COCO stats (12 numbers, pycocotools order) for each value of the image attribute ``group_by``."""
     gt = json.loads(gt_path.read_text())
     dets = json.loads(det_path.read_text())
-    values = sorted({str(img.get(group_by)) for img in gt["images"]})
+    values = sorted({_group(img, group_by) for img in gt["images"]})
     out = {}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         for value in values:
-            ids = {img["id"] for img in gt["images"] if str(img.get(group_by)) == value}
+            ids = {img["id"] for img in gt["images"] if _group(img, group_by) == value}
             sub = dict(gt, images=[i for i in gt["images"] if i["id"] in ids],
                        annotations=[a for a in gt["annotations"] if a["image_id"] in ids])
             (tmp / "gt.json").write_text(json.dumps(sub))
@@ -100,8 +111,8 @@ def examples_strip(gt_path: Path, det_path: Path, images: Path, group_by: str, p
     gt = json.loads(gt_path.read_text())
     dets = json.loads(det_path.read_text())
     rows = []
-    for value in sorted({str(img.get(group_by)) for img in gt["images"]}):
-        imgs = sorted((i for i in gt["images"] if str(i.get(group_by)) == value), key=lambda i: i["id"])
+    for value in sorted({_group(img, group_by) for img in gt["images"]}):
+        imgs = sorted((i for i in gt["images"] if _group(i, group_by) == value), key=lambda i: i["id"])
         picks = [imgs[k] for k in np.unique(np.linspace(0, len(imgs) - 1, per_group).round().astype(int))]
         tiles = []
         for img in picks:
@@ -128,21 +139,25 @@ def main(args: argparse.Namespace) -> int:
     metrics_path = args.eval / "metrics.json"
     if not metrics_path.is_file():
         raise FileNotFoundError(f"{metrics_path}: not found (run `roadsynth evaluate --out {args.eval}` first)")
+    group_by = check_evaluated_inputs(args.eval, args.gt, args.detections, args.group_by)
     metrics = json.loads(metrics_path.read_text())
+    for name, key in (("table", "rows"), ("coco", "stats")):
+        if key not in metrics.get(name, {}):
+            raise ValueError(f"{metrics_path}: {name}.{key} is missing ({name}: {metrics.get(name)!r}); "
+                             f"run `roadsynth evaluate` with --metrics including {name}")
     score_threshold = float(metrics["table"]["score_threshold"])
     ious, table, bins = _table(metrics)
-    coco = {"all": [float(s) for s in metrics["coco"]["stats"]], **coco_by_group(args.gt, args.detections,
-                                                                                    args.group_by)}
+    coco = {"all": [float(s) for s in metrics["coco"]["stats"]], **coco_by_group(args.gt, args.detections, group_by)}
     images = args.images or args.gt.parent / "images"
     with atomic_output_dir(args.out) as tmp:
-        (tmp / "report.md").write_text(_markdown(ious, table, bins, coco, args.group_by, score_threshold))
-        strip = examples_strip(args.gt, args.detections, images, args.group_by, args.examples, score_threshold)
+        (tmp / "report.md").write_text(_markdown(ious, table, bins, coco, group_by, score_threshold))
+        strip = examples_strip(args.gt, args.detections, images, group_by, args.examples, score_threshold)
         cv2.imwrite(str(tmp / "examples.png"), strip)
         flat = {group: {**{f"precision@{t:g}": by_iou[t]["precision"] for t in ious},
                         **{f"recall@{t:g}": by_iou[t]["recall"] for t in ious},
                         "coco_ap": coco.get(group, [None])[0], "coco_ap50": coco.get(group, [None, None])[1]}
                 for group, by_iou in table.items()}
         write_json(tmp / "metrics.json", flat)
-        write_meta(tmp, stage="report", config={"eval": str(args.eval), "group_by": args.group_by}, seed=None)
+        write_meta(tmp, stage="report", config={"eval": str(args.eval), "group_by": group_by}, seed=None)
     log.info("wrote %s", args.out)
     return 0

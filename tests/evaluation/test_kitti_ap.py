@@ -1,7 +1,7 @@
-"""KITTI AP on hand-made cases with closed-form answers, in both modes.
+"""KITTI AP on hand-made cases with closed-form answers, in every mode.
 
 Recall of the devkit arithmetic used below: p is the 41-point precision array, AP_R40 =
-mean(p[1:41]) and AP_R11 = mean(p[0::4]). In official mode p[i] is the precision at the i-th
+mean(p[1:41]) and AP_R11 = mean(p[0::4]). In official and port modes p[i] is the precision at the i-th
 threshold of getThresholds (one per true positive while there are fewer than 40 ground-truth
 objects), the rest 0; in exact mode p[i] is the best precision at recall >= i / 40.
 """
@@ -17,7 +17,7 @@ import pytest
 from evaluation.kitti import KittiFormatError, evaluate_kitti, kitti_summary_markdown
 from evaluation.kitti.ap import devkit_thresholds
 
-BOTH = ("official", "exact")
+MODES = ("official", "port", "exact")
 
 
 def obj(kind="Car", x=0.0, z=20.0, ry=0.0, bbox=(100.0, 100.0, 200.0, 160.0), trunc=0.0, occ=0, alpha=0.0, score=None):
@@ -53,26 +53,26 @@ def ap(result: dict, metric: str, cls: str = "Car", difficulty: str = "easy") ->
     return entry["ap_r40"], entry["ap_r11"]
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_one_of_two_cars_found(tmp_path: Path, mode: str) -> None:
     gt = {"000000": [obj(**far(0)), obj(**far(1))]}
     det = {"000000": [obj(**far(0), score=0.9)]}
     result = run(tmp_path, gt, det, mode)
     # official: one threshold, p = [1, 0, ...]; exact: precision 1 up to recall 1/2
-    expected = (0.0, 1 / 11) if mode == "official" else (0.5, 6 / 11)
+    expected = (0.0, 1 / 11) if mode != "exact" else (0.5, 6 / 11)
     for metric in ("bbox", "bev", "3d", "aos"):
         assert ap(result, metric) == pytest.approx(expected, abs=1e-12)
     assert result["results"]["Car"]["easy"]["num_gt"] == 2
     json.dumps(result)
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_fewer_than_40_objects_all_found(tmp_path: Path, mode: str) -> None:
     gt = {"000000": [obj(**far(0)), obj(**far(1))]}
     det = {"000000": [obj(**far(0), score=0.9), obj(**far(1), score=0.8)]}
     result = run(tmp_path, gt, det, mode)
     # official: two thresholds -> p = [1, 1, 0, ...]: R40 = 1/40, R11 = 1/11; exact: a perfect 1
-    expected = (1 / 40, 1 / 11) if mode == "official" else (1.0, 1.0)
+    expected = (1 / 40, 1 / 11) if mode != "exact" else (1.0, 1.0)
     assert ap(result, "bev") == pytest.approx(expected, abs=1e-12)
     assert ap(result, "3d") == pytest.approx(expected, abs=1e-12)
 
@@ -84,28 +84,30 @@ def test_devkit_thresholds() -> None:
     assert devkit_thresholds(np.zeros(0), 5).tolist() == []
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_false_positive_ranked_above_true_positive(tmp_path: Path, mode: str) -> None:
     gt = {"000000": [obj(**far(0))]}
     det = {"000000": [obj(**far(1), score=0.9), obj(**far(0), score=0.8)]}
     result = run(tmp_path, gt, det, mode)
-    expected = (0.0, 0.5 / 11) if mode == "official" else (0.5, 0.5)
+    expected = (0.0, 0.5 / 11) if mode != "exact" else (0.5, 0.5)
     assert ap(result, "bbox") == pytest.approx(expected, abs=1e-12)
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_identical_rotated_boxes(tmp_path: Path, mode: str) -> None:
-    """The port's rotated IoU loses identical rotated boxes; exact mode finds them."""
+    """The port's float32 rotated IoU loses identical rotated boxes; the devkit's double-precision
+    polygons (official) and exact mode find them."""
     gt = {"000000": [obj(x=1.0, z=20.0, ry=0.3)]}
     det = {"000000": [obj(x=1.0, z=20.0, ry=0.3, score=0.9)]}
     result = run(tmp_path, gt, det, mode)
-    expected = (0.0, 0.0) if mode == "official" else (1.0, 1.0)
+    # one car found: the devkit's curve has one threshold, p = [1, 0, ...]
+    expected = {"official": (0.0, 1 / 11), "port": (0.0, 0.0), "exact": (1.0, 1.0)}[mode]
     assert ap(result, "bev") == pytest.approx(expected, abs=1e-12)
     assert ap(result, "3d") == pytest.approx(expected, abs=1e-12)
-    assert ap(result, "bbox")[1] == pytest.approx(1 / 11 if mode == "official" else 1.0)
+    assert ap(result, "bbox")[1] == pytest.approx(1 / 11 if mode != "exact" else 1.0)
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_difficulty_filters(tmp_path: Path, mode: str) -> None:
     box = (100.0, 100.0, 200.0, 140.0)  # 40 px high: not above the easy minimum
     gt = {
@@ -124,21 +126,21 @@ def test_difficulty_filters(tmp_path: Path, mode: str) -> None:
     assert result["counts"]["frames_without_detection_file"] == 1
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_ignored_ground_truth_absorbs_its_detection(tmp_path: Path, mode: str) -> None:
     # a 30 px car is ignored at easy; its 30 px detection is ignored too (below the height): no FP
     small = {**far(0), "bbox": (300.0, 50.0, 350.0, 80.0)}
     gt = {"000000": [obj(**small), obj(**far(1))]}
     det = {"000000": [obj(**small, score=0.95), obj(**far(1), score=0.5)]}
     result = run(tmp_path, gt, det, mode)
-    assert ap(result, "bbox", difficulty="easy") == pytest.approx((0, 1 / 11) if mode == "official" else (1, 1))
+    assert ap(result, "bbox", difficulty="easy") == pytest.approx((0, 1 / 11) if mode != "exact" else (1, 1))
     assert ap(result, "bbox", difficulty="moderate") == pytest.approx(
-        (1 / 40, 1 / 11) if mode == "official" else (1, 1)
+        (1 / 40, 1 / 11) if mode != "exact" else (1, 1)
     )
 
 
-@pytest.mark.parametrize("mode", BOTH)
-def test_dontcare_absorbs_false_positives_in_2d_only(tmp_path: Path, mode: str) -> None:
+@pytest.mark.parametrize("mode", MODES)
+def test_dontcare_without_3d_box_absorbs_false_positives_in_2d_only(tmp_path: Path, mode: str) -> None:
     region = (600.0, 40.0, 700.0, 120.0)
     gt = {"000000": [obj(**far(0)), obj("DontCare", bbox=region)]}
     fp_in_dontcare = obj(x=10.0, z=30.0, bbox=(610.0, 50.0, 690.0, 110.0), score=0.9)
@@ -146,11 +148,41 @@ def test_dontcare_absorbs_false_positives_in_2d_only(tmp_path: Path, mode: str) 
     result = run(tmp_path, gt, det, mode)
     assert result["counts"]["dontcare"] == 1
     # 2D: the FP is inside the DontCare region and not counted; BEV: DontCare has no 3D box, FP counts
-    assert ap(result, "bbox") == pytest.approx((0, 1 / 11) if mode == "official" else (1, 1))
-    assert ap(result, "bev") == pytest.approx((0, 0.5 / 11) if mode == "official" else (0.5, 0.5))
+    assert ap(result, "bbox") == pytest.approx((0, 1 / 11) if mode != "exact" else (1, 1))
+    assert ap(result, "bev") == pytest.approx((0, 0.5 / 11) if mode != "exact" else (0.5, 0.5))
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
+def test_dontcare_with_3d_box_absorbs_in_bev_and_3d_like_the_devkit(tmp_path: Path, mode: str) -> None:
+    """The devkit tests every metric's DontCare regions with that metric's overlap over the
+    detection's own size (BEV area, volume); the Python port does so in 2D only."""
+    dontcare = "DontCare -1 -1 -10 600.0 40.0 700.0 120.0 2.0 3.0 6.0 10.0 1.7 30.0 0.0"
+    gt = {"000000": [obj(**far(0)), dontcare]}
+    # 4 x 1.6 m footprint, 1.5 m high, wholly inside the 6 x 3 x 2 m region: share 1 in BEV and 3D
+    fp_in_dontcare = obj(x=10.0, z=30.0, bbox=(610.0, 50.0, 690.0, 110.0), score=0.9)
+    det = {"000000": [fp_in_dontcare, obj(**far(0), score=0.8)]}
+    result = run(tmp_path, gt, det, mode)
+    absorbed = {"official": (0, 1 / 11), "port": (0, 0.5 / 11), "exact": (1, 1)}[mode]
+    assert ap(result, "bev") == pytest.approx(absorbed)
+    assert ap(result, "3d") == pytest.approx(absorbed)
+
+
+def test_two_dimensional_detection_meets_dontcare_sentinel_in_bev_like_the_devkit(tmp_path: Path) -> None:
+    """The devkit reads "-1 -1 -1 -1000 -1000 -1000" as a 1 x 1 m square at (-1000, -1000), so a
+    2D-only detection lies wholly inside a KITTI DontCare region in BEV and is not a false positive
+    there; in 3D its height range is empty, so it stays one. Official mode reproduces this; exact
+    mode leaves objects without a 3D box out of BEV and 3D."""
+    gt = {"000000": [obj(**far(0)), obj("DontCare", bbox=(600.0, 40.0, 700.0, 120.0))]}
+    two_d = "Car -1 -1 -10 300.0 150.0 360.0 200.0 -1 -1 -1 -1000 -1000 -1000 -10 0.9"
+    det = {"000000": [two_d, obj(**far(0), score=0.8)]}
+    official = run(tmp_path, gt, det, "official")
+    assert ap(official, "bev") == pytest.approx((0, 1 / 11))
+    assert ap(official, "3d") == pytest.approx((0, 0.5 / 11))
+    exact = run(tmp_path, gt, det, "exact")
+    assert ap(exact, "bev") == pytest.approx((0.5, 0.5))
+
+
+@pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize(
     ("cls", "neighbour", "other"), [("Car", "Van", "Truck"), ("Pedestrian", "Person_sitting", "Cyclist")]
 )
@@ -171,7 +203,7 @@ def test_neighbour_classes_are_ignored_not_missed(
             assert ap(result, "bbox", cls)[1] == pytest.approx(expected_exact[0] / 11)
 
 
-@pytest.mark.parametrize("mode", BOTH)
+@pytest.mark.parametrize("mode", MODES)
 def test_aos(tmp_path: Path, mode: str) -> None:
     gt = {"000000": [obj(**far(0), alpha=0.0), obj(**far(1), alpha=0.0)]}
     det = {"000000": [obj(**far(0), alpha=np.pi / 2, score=0.9), obj(**far(1), alpha=0.0, score=0.8)]}
@@ -244,3 +276,17 @@ def test_summary_markdown(tmp_path: Path) -> None:
     text = kitti_summary_markdown(run(tmp_path, gt, det, "exact"))
     assert "| Car | BEV | 0.7 | 50.00 |" in text
     assert text.count("\n|") >= 2 + 3 * 4
+
+
+def test_official_mode_skips_what_the_devkit_does_not_evaluate(tmp_path: Path) -> None:
+    """The devkit evaluates BEV/3D for a class only if one of its detections has a 3D box, and a class
+    at all only if it is detected: official mode reports None there (with a note), port mode 0."""
+    gt = {"000000": [obj(**far(0)), obj("Cyclist", **far(1))]}
+    det = {"000000": ["Car -1 -1 -10 300.0 50.0 350.0 110.0 -1 -1 -1 -1000 -1000 -1000 -10 0.9"]}
+    official = run(tmp_path, gt, det, "official", metrics=("bbox", "bev", "3d"))
+    assert ap(official, "bbox") == pytest.approx((0.0, 1 / 11))
+    assert ap(official, "bev") == ap(official, "3d") == (None, None)
+    assert ap(official, "bbox", "Cyclist") == (None, None)
+    assert any("Car: bev, 3d not evaluated" in n for n in official["notes"])
+    port = run(tmp_path, gt, det, "port", metrics=("bbox", "bev", "3d"))
+    assert ap(port, "bev") == (0.0, 0.0) and ap(port, "bbox", "Cyclist") == (0.0, 0.0)

@@ -40,12 +40,12 @@ def test_exact_intersection_matches_shapely(pairs) -> None:
 @given(rect, st.integers(0, 3))
 def test_exact_iou_of_coincident_and_quarter_turned_boxes(box, quarter_turns) -> None:
     a = np.array([box])
-    assert bev_iou(a, a, exact=True)[0] == pytest.approx(1.0, abs=1e-9)
+    assert bev_iou(a, a, rotated="float64")[0] == pytest.approx(1.0, abs=1e-9)
     # a square turned by a multiple of 90 degrees is the same polygon
     square = np.array([[box[0], box[1], box[2], box[2], box[4]]])
     turned = square.copy()
     turned[0, 4] += quarter_turns * np.pi / 2
-    assert bev_iou(square, turned, exact=True)[0] == pytest.approx(1.0, abs=1e-9)
+    assert bev_iou(square, turned, rotated="float64")[0] == pytest.approx(1.0, abs=1e-9)
 
 
 def test_random_pairs_vectorised_match_shapely() -> None:
@@ -66,17 +66,17 @@ def test_port_algorithm_loses_coincident_rotated_boxes() -> None:
     """The port's inclusion test has no tolerance and collinear edges never cross, so for identical
     rotated rectangles float32 rounding drops corners and the intersection collapses."""
     box = np.array([[1.0, 20.0, 4.0, 1.6, 0.3]])
-    assert bev_iou(box, box, exact=True)[0] == pytest.approx(1.0, abs=1e-12)
-    assert bev_iou(box, box, exact=False)[0] == 0.0
+    assert bev_iou(box, box, rotated="float64")[0] == pytest.approx(1.0, abs=1e-12)
+    assert bev_iou(box, box, rotated="port")[0] == 0.0
     # axis-aligned boxes are computed without rounding, so the port gets them right
     aligned = np.array([[1.0, 20.0, 4.0, 1.6, 0.0]])
-    assert bev_iou(aligned, aligned, exact=False)[0] == pytest.approx(1.0, abs=1e-5)  # float32
+    assert bev_iou(aligned, aligned, rotated="port")[0] == pytest.approx(1.0, abs=1e-5)  # float32
     # over many random coincident boxes most lose area in the port
     rng = np.random.default_rng(0)
     boxes = np.column_stack([rng.uniform(-20, 20, (200, 2)), rng.uniform(1, 5, (200, 2)), rng.uniform(-3, 3, 200)])
-    port = bev_iou(boxes, boxes, exact=False)
+    port = bev_iou(boxes, boxes, rotated="port")
     assert np.mean(port < 0.99) > 0.5
-    np.testing.assert_allclose(bev_iou(boxes, boxes, exact=True), 1.0, atol=1e-12)
+    np.testing.assert_allclose(bev_iou(boxes, boxes, rotated="float64"), 1.0, atol=1e-12)
 
 
 def test_3d_iou_uses_camera_y_down() -> None:
@@ -84,14 +84,14 @@ def test_3d_iou_uses_camera_y_down() -> None:
     a = np.array([[0.0, 2.0, 10.0, 1.0, 2.0, 4.0, 0.7]])  # y in [1, 2]
     b = np.array([[0.0, 2.5, 10.0, 2.0, 2.0, 4.0, 0.7]])  # y in [0.5, 2.5]
     # overlap in y is [1, 2]: 1 m of 1 m and 2 m -> IoU = 8 / (8 + 16 - 8)
-    assert box3d_iou(a, b, exact=True)[0] == pytest.approx(0.5, abs=1e-12)
+    assert box3d_iou(a, b, rotated="float64")[0] == pytest.approx(0.5, abs=1e-12)
     disjoint = b.copy()
     disjoint[0, 1] = 5.0  # y in [3, 5]
-    assert box3d_iou(a, disjoint, exact=True)[0] == 0.0
+    assert box3d_iou(a, disjoint, rotated="float64")[0] == 0.0
     shifted = a.copy()
     shifted[0, 0] += 2.0  # half the length: with ry = 0 the length lies along x
     shifted[0, 6] = a[0, 6] = 0.0
-    assert box3d_iou(a, shifted, exact=True)[0] == pytest.approx(1.0 / 3.0, abs=1e-12)
+    assert box3d_iou(a, shifted, rotated="float64")[0] == pytest.approx(1.0 / 3.0, abs=1e-12)
 
 
 def test_image_box_overlap() -> None:
@@ -101,3 +101,28 @@ def test_image_box_overlap() -> None:
     np.testing.assert_allclose(image_box_overlap(a, b, criterion="a"), [0.5, 0.0, 0.04])
     with pytest.raises(ValueError, match="criterion"):
         image_box_overlap(a, b, criterion="b")
+
+
+def test_share_of_a_inside_b_bev_and_3d() -> None:
+    """criterion "a": the devkit's DontCare test, intersection over the detection's own area or volume."""
+    det = np.array([[0.0, 2.0, 10.0, 1.0, 2.0, 4.0, 0.0]])  # 4 x 2 m, y in [1, 2]
+    region = np.array([[2.0, 2.0, 10.0, 4.0, 2.0, 4.0, 0.0]])  # shifted by half the length, y in [-2, 2]
+    cols = [0, 2, 5, 4, 6]
+    assert bev_iou(det[:, cols], region[:, cols], rotated="float64", criterion="a")[0] == pytest.approx(0.5)
+    assert box3d_iou(det, region, rotated="float64", criterion="a")[0] == pytest.approx(0.5)
+    assert box3d_iou(region, det, rotated="float64", criterion="a")[0] == pytest.approx(4 / 32)
+    with pytest.raises(ValueError, match="criterion"):
+        bev_iou(det[:, cols], region[:, cols], rotated="float64", criterion="b")
+    with pytest.raises(ValueError, match="float64"):
+        bev_iou(det[:, cols], region[:, cols], rotated="float32")
+
+
+def test_sentinel_sizes_are_a_unit_square_as_in_the_devkit() -> None:
+    """The devkit builds its polygon from the sizes as read: "-1 -1 -1" is a 1 x 1 m square (a
+    rectangle turned by pi), so two sentinels at the same place overlap fully in BEV; in 3D their
+    height range [y + 1, y] is empty."""
+    sentinel = np.array([[-1000.0, -1000.0, -1000.0, -1.0, -1.0, -1.0, -10.0]])
+    assert bev_iou(sentinel[:, [0, 2, 5, 4, 6]], sentinel[:, [0, 2, 5, 4, 6]], rotated="float64")[0] == pytest.approx(1)
+    assert box3d_iou(sentinel, sentinel, rotated="float64")[0] == 0.0
+    unit = np.array([[-1000.0, -1000.0, 1.0, 1.0, -10.0]])
+    assert bev_intersection_exact(sentinel[:, [0, 2, 5, 4, 6]], unit)[0] == pytest.approx(1.0, abs=1e-9)

@@ -1,9 +1,9 @@
 """Vectorised KITTI AP against a plain-loop reference written from the devkit's description.
 
 The reference follows evaluate_object.cpp step by step (cleanData, computeStatistics with and
-without FP, getThresholds, the 41-point precision) for official mode, and for exact mode re-runs the
-score-priority assignment from scratch at every distinct score (so it also checks that one
-assignment serves all thresholds). Problems are small, crowded and full of ties and conflicts.
+without FP, getThresholds, the 41-point precision) for official and port modes (equal in 2D), and
+for exact mode re-runs the score-priority assignment from scratch at every distinct score (so it
+also checks that one assignment serves all thresholds). Problems are small, crowded and full of ties and conflicts.
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def test_matches_loop_reference(tmp_path: Path, seed: int) -> None:
     rng = np.random.default_rng(seed)
     gt_dir, det_dir = _random_problem(tmp_path, rng, n_frames=[3, 10, 25][seed % 3])
     gt, det = read_label_dir(gt_dir, with_score=False), read_label_dir(det_dir, with_score=True)
-    for mode in ("official", "exact"):
+    for mode in ("official", "port", "exact"):
         result = evaluate_kitti(gt_dir, det_dir, mode=mode, classes=("Pedestrian",), metrics=("bbox",))
         for d, name in enumerate(("easy", "moderate", "hard")):
             got = result["results"]["Pedestrian"][name]["bbox"]

@@ -58,3 +58,65 @@ def test_markdown_and_examples(scored):
     assert "| morning | 100.0 | 100.0 |" in text
     strip = cv2.imread(str(root / "report" / "examples.png"))
     assert strip is not None and strip.shape[0] > 2 * 200  # one row per condition
+
+
+def _report(root, capsys, *extra, gt=None, dets=None, eval_dir=None):
+    """Run the report CLI; (exit code, first stderr line, whether the output folder exists)."""
+    out = root / "report-bad"
+    code = cli(["report", "--eval", str(eval_dir or root / "eval"),
+                "--gt", str(gt or root / "coco" / "annotations.json"),
+                "--detections", str(dets or root / "dets.json"), "--out", str(out), *extra])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err.splitlines()[0] if err else "", out.exists()
+
+
+def test_report_rejects_a_group_by_the_evaluation_did_not_use(scored, capsys):
+    root, _ = scored
+    code, first, written = _report(root, capsys, "--group-by", "weather")
+    meta = root / "eval" / "meta.json"
+    assert (code, written) == (2, False)
+    assert first.startswith(f"roadsynth report: error: {meta}: config.group_by is 'condition', not 'weather'")
+
+
+def test_report_rejects_detections_that_were_not_evaluated(scored, capsys):
+    root, _ = scored
+    other = root / "other_dets.json"
+    other.write_text(json.dumps(json.loads((root / "dets.json").read_text())[1:]))  # one detection less
+    code, first, written = _report(root, capsys, dets=other)
+    assert (code, written) == (2, False)
+    assert first.startswith(f"roadsynth report: error: {other}: not the --detections that {root / 'eval'} evaluated")
+    assert "config.detections_sha256" in first
+
+
+def test_report_rejects_ground_truth_that_was_not_evaluated(scored, capsys):
+    root, _ = scored
+    gt = json.loads((root / "coco" / "annotations.json").read_text())
+    gt["images"] = gt["images"][:-1]
+    other = root / "other_gt.json"
+    other.write_text(json.dumps(gt))
+    code, first, written = _report(root, capsys, gt=other)
+    assert (code, written) == (2, False)
+    assert first.startswith(f"roadsynth report: error: {other}: not the --gt that {root / 'eval'} evaluated")
+
+
+def test_report_needs_an_evaluation_meta_with_digests(scored, capsys, tmp_path):
+    root, _ = scored
+    fake = tmp_path / "eval"
+    fake.mkdir()
+    (fake / "metrics.json").write_text((root / "eval" / "metrics.json").read_text())
+    code, first, written = _report(root, capsys, eval_dir=fake)
+    assert (code, written) == (2, False)
+    assert first == f"roadsynth report: error: {fake / 'meta.json'}: not found " \
+                    "(--eval must be an output folder of `roadsynth evaluate`)"
+    meta = json.loads((root / "eval" / "meta.json").read_text())
+    del meta["config"]["gt_sha256"]
+    (fake / "meta.json").write_text(json.dumps(meta))
+    code, first, written = _report(root, capsys, eval_dir=fake)
+    assert (code, written) == (2, False)
+    assert first.startswith(f"roadsynth report: error: {fake / 'meta.json'}: config.gt_sha256 is missing")
+    meta = json.loads((root / "eval" / "meta.json").read_text())
+    meta["config"]["group_by"] = None
+    (fake / "meta.json").write_text(json.dumps(meta))
+    code, first, _ = _report(root, capsys, eval_dir=fake)
+    assert code == 2 and first.startswith(f"roadsynth report: error: {fake / 'meta.json'}: config.group_by is null")

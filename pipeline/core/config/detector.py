@@ -7,14 +7,16 @@ of the network input (``input_size`` = width, height) unless a name says otherwi
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
+
+from pipeline.core.config.base import ConfigModel
 
 # COCO category names the detector can learn (pipeline.core.classes.COCO_CATEGORIES).
 DETECTOR_CLASSES = ("person", "bicycle", "car", "motorcycle", "bus", "truck")
 
 
-class _Frozen(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class _Frozen(ConfigModel):
+    pass
 
 
 class BackboneConfig(_Frozen):

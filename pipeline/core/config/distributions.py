@@ -10,7 +10,9 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from pipeline.core.config.base import ConfigModel
 
 
 def _stats():
@@ -21,9 +23,7 @@ def _stats():
     return stats
 
 
-class _Dist(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class _Dist(ConfigModel):
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -98,25 +98,28 @@ class LogNormal(_Dist):
     median: float = Field(gt=0)
     sigma: float = Field(gt=0)
     low: float = 0.0
-    high: float = float("inf")
+    high: float | None = Field(None, description="upper truncation; None = not truncated above")
 
     @model_validator(mode="after")
     def _check(self) -> LogNormal:
-        if not 0 <= self.low < self.high:
+        if not 0 <= self.low < (np.inf if self.high is None else self.high):
             raise ValueError(f"need 0 <= low < high, got low={self.low}, high={self.high}")
         return self
 
     def _base(self):
         return _stats().lognorm(s=self.sigma, scale=self.median)
 
-    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+    def _cdf_bounds(self) -> tuple[float, float]:
         base = self._base()
-        lo, hi = base.cdf(self.low), base.cdf(self.high)
-        return base.ppf(lo + (hi - lo) * rng.uniform(size=n))
+        return base.cdf(self.low), 1.0 if self.high is None else base.cdf(self.high)
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        lo, hi = self._cdf_bounds()
+        return self._base().ppf(lo + (hi - lo) * rng.uniform(size=n))
 
     def cdf(self, x: np.ndarray) -> np.ndarray:
         base = self._base()
-        lo, hi = base.cdf(self.low), base.cdf(self.high)
+        lo, hi = self._cdf_bounds()
         return np.clip((base.cdf(x) - lo) / (hi - lo), 0.0, 1.0)
 
 

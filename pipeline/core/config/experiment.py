@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
+
+from pipeline.core.config.base import ConfigModel
 
 
-class ExperimentConfig(BaseModel):
+class ExperimentConfig(ConfigModel):
     """The cross product scenarios x seeds is simulated; each run is rendered under every condition."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     name: str
     description: str = ""

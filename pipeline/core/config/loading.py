@@ -67,13 +67,16 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
 
 
 def format_validation_error(source: str, exc: ValidationError) -> str:
-    lines = [f"{source}: invalid config ({exc.error_count()} error{'s' if exc.error_count() > 1 else ''})"]
+    """One line per error, each naming the key path, the value given and what is expected; the first
+    line also names the file, so that a one-line report (a log, a CLI error) says where to look."""
+    lines = []
     for err in exc.errors(include_url=False):
         # Tagged unions add the tag name to the location; it is not a key the user wrote.
         loc = tuple(p for p in err["loc"] if p not in ("constant", "uniform", "truncnormal", "lognormal"))
         shown = "" if err["type"] == "missing" else f" got {err.get('input')!r}:"
-        lines.append(f"  {_format_loc(loc)}:{shown} {err['msg']}")
-    return "\n".join(lines)
+        lines.append(f"{_format_loc(loc)}:{shown} {err['msg']}")
+    more = f" (and {len(lines) - 1} more below)" if len(lines) > 1 else ""
+    return "\n".join([f"{source}: invalid config: {lines[0]}{more}"] + [f"  {line}" for line in lines[1:]])
 
 
 def parse_config(model: type[M], data: Any, source: str) -> M:

@@ -9,14 +9,15 @@ from __future__ import annotations
 import enum
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from pipeline.core.classes import ObjectClass
+from pipeline.core.config.base import ConfigModel
 from pipeline.core.config.distributions import Constant, Distribution, TruncNormal
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, use_enum_values=False)
+class _Model(ConfigModel):
+    model_config = ConfigDict(use_enum_values=False)
 
 
 class NetworkKind(str, enum.Enum):
