@@ -10,7 +10,7 @@ street, strongly at grazing angles. Both are ray traced here in the same scene a
   does not trace). Only the hits where it matters are traced, within INDIRECT_RANGE_M of the camera: on actors
   (against everything), and on the world within about a metre of an actor's footprint (against the actors only:
   their contact shadows; the world's occlusion of itself is left out everywhere), found by
-  :meth:`FrameScene.sun_actor_candidates` with the "sun" straight up (a conservative grid test).
+  :meth:`FrameScene.near_actors` (a conservative grid test).
   The directions are a fixed spiral set rotated about the normal by an angle hashed from the ray's index, so a frame
   is the same on every run and the pattern shows as fine noise, not bands.
 - **Reflections.** Materials with a Fresnel ``F0`` (:class:`pipeline.world.materials.Material.fresnel_f0`: clear-coat
@@ -36,7 +36,6 @@ MIRROR_RANGE_M = 60.0  # a mirror ray that meets nothing nearer sees the sky
 # Every ray of this module meets nothing farther than this from the camera (actors beyond cannot change a pixel:
 # pipeline.sensors.reach); 1 m for the rays' lift off their surfaces.
 INDIRECT_REACH_M = INDIRECT_RANGE_M + max(MIRROR_RANGE_M, AO_RADIUS_M) + 1.0
-_UP = np.array([0.0, 0.0, 1.0])
 
 
 def _hemisphere(samples: int) -> np.ndarray:
@@ -60,15 +59,13 @@ def occlusion_rays(rays, t_m, normal, rows, pattern):
     for j in range(rows.size):
         i = rows[j]
         n0, n1, n2 = normal[i, 0], normal[i, 1], normal[i, 2]
-        # A tangent frame (b1, b2, n): Frisvad's construction, with the branch for n pointing down.
-        if n2 < np.float32(-0.9999999):
-            b10, b11, b12 = np.float32(0), np.float32(-1), np.float32(0)
-            b20, b21, b22 = np.float32(-1), np.float32(0), np.float32(0)
-        else:
-            a = np.float32(1) / (np.float32(1) + n2)
-            b = -n0 * n1 * a
-            b10, b11, b12 = np.float32(1) - n0 * n0 * a, b, -n0
-            b20, b21, b22 = b, np.float32(1) - n1 * n1 * a, -n1
+        # A tangent frame (b1, b2, n) without a singularity (Duff et al. 2017, "Building an orthonormal basis,
+        # revisited").
+        sign = np.float32(1) if n2 >= 0 else np.float32(-1)
+        a = np.float32(-1) / (sign + n2)
+        b = n0 * n1 * a
+        b10, b11, b12 = np.float32(1) + sign * n0 * n0 * a, sign * b, -sign * n0
+        b20, b21, b22 = b, sign + n1 * n1 * a, -n1
         # A rotation angle from the row: SplitMix64's finaliser, top 24 bits.
         z = np.uint64(i) * np.uint64(0x9E3779B97F4A7C15)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -106,8 +103,8 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits) -> np.ndarra
     if len(static):
         p = np.take(rays, static, axis=0)
         x, y, z = (p[:, k] + p[:, 3 + k] * t[static] for k in range(3))
-        near[static] = scene.sun_actor_candidates(x.astype(np.float32), y.astype(np.float32), z.astype(np.float32),
-                                                  _UP)
+        near[static] = scene.near_actors(x.astype(np.float32), y.astype(np.float32), z.astype(np.float32),
+                                         AO_RADIUS_M)
     rows = np.flatnonzero(on_actor | near)
     if not len(rows):
         return visibility

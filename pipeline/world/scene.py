@@ -486,10 +486,23 @@ class FrameScene:
         at least SHADOW_CELL_M; each box grown by a cell, far beyond rounding) and each point looks up its cell. A
         point above every actor's highest vertex is no candidate: its ray only rises.
         """
-        slope = sun_slope(sun)
+        return self._footprint_candidates(x, y, z, sun_slope(sun), 0.0)
+
+    def near_actors(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, radius_m: float) -> np.ndarray:
+        """(M,) bool, conservative: which world points (x, y, z) (each (M,) float32) lie within ``radius_m`` of a
+        placed actor's footprint (the 2D bounds of its vertices, grown by ``radius_m``) and no higher than
+        ``radius_m`` above the actors' highest vertex; the others are farther from every actor (e.g. their sky
+        occlusion rays of that length cannot meet one)."""
+        return self._footprint_candidates(x, y, z, np.zeros(2), float(radius_m))
+
+    def _footprint_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray,
+                              grow_m: float) -> np.ndarray:
+        """:meth:`sun_actor_candidates` for the sun's ``slope`` (:func:`sun_slope`; 0 = straight up), the actors'
+        projected bounds and their top grown by ``grow_m``."""
         if not len(self._placed) or not len(x):
             return np.zeros(len(x), bool)
         lo, hi = self._sun_footprints(slope)
+        lo, hi = lo - grow_m, hi + grow_m
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
         x, y, z = (as_view_input(c, np.float32) for c in (x, y, z))
         sx, sy = np.asarray(slope, np.float32)
@@ -503,7 +516,7 @@ class FrameScene:
         grid = rectangles_mask(rows, cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
                                np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
         return _in_marked_cells(x, y, z, sx, sy, np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell),
-                                grid, np.float32(self._top_z + CHUNK_PAD_M))
+                                grid, np.float32(self._top_z + grow_m + CHUNK_PAD_M))
 
     def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
