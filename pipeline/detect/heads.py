@@ -43,10 +43,11 @@ class Preset:
     placement: Literal["top-left", "centre"]
     interpolation: Literal["linear", "area"]
     nms_iou: float | None
+    floor_size: bool = False  # resized size int(w * r) (YOLOX's preproc) instead of round(w * r)
 
 
 PRESETS: dict[str, Preset] = {
-    "yolox": Preset("bgr", 1.0, 114.0, "top-left", "linear", 0.65),
+    "yolox": Preset("bgr", 1.0, 114.0, "top-left", "linear", 0.65, floor_size=True),
     "yolov5": Preset("rgb", 1.0 / 255.0, 114.0, "centre", "linear", 0.45),
     "yolov8": Preset("rgb", 1.0 / 255.0, 114.0, "centre", "linear", 0.7),
     # Our exported detector: see pipeline.detect.data.letterbox (grey 0.5, INTER_AREA); it does its own decoding.

@@ -283,13 +283,15 @@ class OnnxDetector:
         w_in, h_in = o.input_size
         h, w = rgb.shape[:2]
         img = rgb[:, :, ::-1] if o.channels == "bgr" else rgb
-        interp = _INTERPOLATION[heads.PRESETS[self.family].interpolation]
+        preset = heads.PRESETS[self.family]
+        interp = _INTERPOLATION[preset.interpolation]
         if o.resize == "stretch":
             canvas = cv2.resize(img, (w_in, h_in), interpolation=interp).astype(np.float32)
             place = Placement(w_in / w, h_in / h)
         else:
             s = min(w_in / w, h_in / h)
-            nw, nh = min(round(w * s), w_in), min(round(h * s), h_in)
+            fit = int if preset.floor_size else round
+            nw, nh = min(fit(w * s), w_in), min(fit(h * s), h_in)
             # Ultralytics centres with round(pad / 2 - 0.1): the odd pixel goes right / bottom.
             dx, dy = (round((w_in - nw) / 2 - 0.1), round((h_in - nh) / 2 - 0.1)) if o.placement == "centre" else (0, 0)
             canvas = np.full((h_in, w_in, 3), o.pad_value, np.float32)
