@@ -128,11 +128,11 @@ class Evaluation:
     coco_precision: np.ndarray | None
     kitti_markdown: str | None
 
-    def write(self, out_dir: str | Path) -> None:
-        """Write metrics.json, plots/ and report.md into ``out_dir`` (created if needed)."""
+    def write(self, out_dir: str | Path, *, png: bool = True) -> None:
+        """Write metrics.json, plots/ (data; PNG renderings too with ``png``) and report.md into ``out_dir``."""
         from evaluation.outputs import write_outputs
 
-        write_outputs(self, Path(out_dir))
+        write_outputs(self, Path(out_dir), png=png)
 
 
 def load_inputs(gt: str | Path, detections: str | Path) -> tuple[GroundTruth, Detections, str, dict[str, int]]:

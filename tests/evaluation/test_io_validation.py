@@ -90,6 +90,8 @@ def test_missing_area_is_named():
         (bad_results(0, category_id="car"), r"results\[0\]: field 'category_id' is 'car'"),
         (bad_results(0, category_id=2.0), r"results\[0\]: field 'category_id' is 2.0"),
         (bad_results(0, category_id=0), r"results\[0\]: field 'category_id' is 0"),
+        (bad_results(1, image_id=True), r"results\[1\]: field 'image_id' is True"),  # JSON true is not 1
+        (bad_results(1, score=False), r"results\[1\]: field 'score' is False"),
         (bad_results(1, bbox=[0, 0, 5, -5]), r"results\[1\]: field 'bbox'"),
         (bad_results(1, bbox=[0, 0, 5, math.inf]), r"results\[1\]: field 'bbox'"),
         ({"annotations": []}, r"got a JSON dict \(is this a ground-truth file"),
