@@ -105,7 +105,10 @@ def write_results(path: Path, results: list[dict], gt_path: Path) -> None:
     """Validate ``results`` with the evaluation stage's reader, then write them atomically."""
     from evaluation.io_coco import detections_from_list, read_coco_gt
 
-    detections_from_list(results, read_coco_gt(gt_path), str(path))
+    checked = detections_from_list(results, read_coco_gt(gt_path), str(path))
+    if checked.not_in_gt:
+        log.info("%d detections are of categories %s lacks (kept: evaluate counts them per id): %s",
+                 sum(checked.not_in_gt.values()), gt_path, checked.not_in_gt)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(results, separators=(",", ":")) + "\n")

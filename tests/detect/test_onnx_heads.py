@@ -162,3 +162,32 @@ def test_coco80_table():
     assert ids[0] == 1 and ids[2] == 3 and ids[5] == 6 and ids[7] == 8 and ids[-1] == 90
     assert set(range(1, 91)) - set(ids) == {12, 26, 29, 30, 45, 66, 68, 69, 71, 83}
     assert dict(COCO80)[32] == "tie"
+
+
+def test_names_files_and_model_metadata(tmp_path):
+    from pipeline.detect.classmap import metadata_names
+
+    (tmp_path / "data.yaml").write_text("names:\n  0: person\n  1: Car\n  2: forklift\n")
+    (tmp_path / "names.json").write_text('{"names": ["bus", "truck"]}')
+    assert read_names(tmp_path / "data.yaml") == ["person", "Car", "forklift"]
+    assert names_map(read_names(tmp_path / "data.yaml")) == ({0: 1, 1: 3}, ["forklift"])
+    assert names_map(read_names(tmp_path / "names.json"))[0] == {0: 6, 1: 8}
+    assert metadata_names("{0: 'person', 1: 'bicycle'}") == ["person", "bicycle"]  # Ultralytics' metadata
+    assert metadata_names("not python") is None
+    (tmp_path / "bad.yaml").write_text("names:\n  0: person\n  2: car\n")
+    with pytest.raises(ValueError, match=r"bad.yaml: field 'names' keys are \[0, 2\]"):
+        read_names(tmp_path / "bad.yaml")
+    with pytest.raises(FileNotFoundError, match="names file not found"):
+        read_names(tmp_path / "missing.txt")
+
+
+def test_names_from_the_models_metadata(tmp_path):
+    out = yolox_output(n_classes=3)
+    constant_model(tmp_path / "m.onnx", out)
+    model = onnx.load(str(tmp_path / "m.onnx"))
+    onnx.helper.set_model_props(model, {"names": "{0: 'truck', 1: 'bus', 2: 'car'}"})
+    onnx.save(model, str(tmp_path / "m.onnx"))
+    det = OnnxDetector(tmp_path / "m.onnx")
+    assert det.options.class_map == {0: 8, 1: 6, 2: 3}
+    (d,) = det.predict([IMAGE])
+    assert d.category_ids.tolist() == [3]  # the anchor's class 2 is 'car' by the model's own names
