@@ -20,7 +20,7 @@ def test_cli_writes_outputs(tmp_path):
                "--out", str(out), "--iou", "0.5", "0.7", "--metrics", "table,coco,errors"])
     assert rc == 0
     metrics = json.loads((out / "metrics.json").read_text())
-    assert [r["iou"] for r in metrics["table"]["rows"] if r["class"] == "all"] == [0.5, 0.7]
+    assert [r["iou"] for r in metrics["table"]["rows"] if r["class"] == "all" and r["group"] == "all"] == [0.5, 0.7]
     assert json.loads((out / "meta.json").read_text())["stage"] == "evaluate"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["eval", "gt.json", "res.json"]  # no temporaries
 
