@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 export DVC_NO_ANALYTICS := 1
 export PATH := $(abspath $(BIN)):$(PATH)
 
-.PHONY: demo test setup setup-dev system-deps lint bench clean-data
+.PHONY: demo test setup setup-dev system-deps lint bench clean-data paper paper-outputs
 
 demo: setup
 	$(BIN)/dvc repro
@@ -69,3 +69,83 @@ bench: setup-dev
 
 clean-data:
 	rm -rf data
+
+# ---------------------------------------------------------------------------------------------------
+# The paper's experiment (Li, Kusari & LeBlanc, Table 1) as one command:
+#
+#     make paper ONNX=path/to/detector.onnx
+#
+# reads $(PAPER) (scenarios, seeds, conditions, rig, vehicles, warm-up, duration, IoU thresholds),
+# simulates every (scenario, seed), renders every condition ($(PAPER_FRAMES) frames per run), exports
+# COCO with the last seed of each scenario as the test split, trains the baseline detector on the
+# others' morning frames, runs the baseline and the ONNX detector (`detect --onnx`: YOLOX / YOLOv5 /
+# YOLOv8 raw heads or decoded outputs) on the test split, evaluates both per condition and writes
+# $(PAPER_OUT)/report/report.md: Table 1 with the paper's figures beside both detectors, recall by
+# distance and by box height, COCO AP. Outputs already made are kept (make's timestamps); every
+# stage writes atomically. PAPER_* variables below scale it down (the tests run a 2-frame version).
+PAPER ?= configs/experiments/paper_table1.yaml
+PAPER_OUT ?= data/paper
+PAPER_FRAMES ?= 60
+PAPER_TRAIN_CONFIG ?= default
+PAPER_TRAIN_CONDITIONS ?= morning
+ONNX ?=
+ONNX_NAME ?= $(basename $(notdir $(ONNX)))
+ONNX_OPTIONS ?=
+
+paper: setup
+	$(MAKE) --no-print-directory paper-outputs ONNX="$(ONNX)"
+
+ifneq ($(filter paper-outputs,$(MAKECMDGOALS)),)
+ifeq ($(strip $(ONNX)),)
+$(error give the ONNX detector: make paper ONNX=path/to/detector.onnx)
+endif
+paper_get = $(shell $(BIN)/python -c "import yaml; v = yaml.safe_load(open('$(PAPER)'))['$(1)']; print(*v) if isinstance(v, list) else print(v)")
+P_SCENARIOS := $(call paper_get,scenarios)
+P_SEEDS := $(call paper_get,seeds)
+P_CONDITIONS := $(call paper_get,conditions)
+P_IOUS := $(call paper_get,iou_thresholds)
+PAPER_RIG ?= $(call paper_get,rig)
+P_SIM_ARGS := --vehicles $(call paper_get,vehicles) --warmup $(call paper_get,warmup_s) --duration $(call paper_get,duration_s)
+empty :=
+space := $(empty) $(empty)
+P_SPLITS := test=$(subst $(space),+,$(foreach s,$(P_SCENARIOS),$(s):$(lastword $(P_SEEDS)))),train=*
+P_RECORDS := $(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(foreach c,$(P_CONDITIONS),$(PAPER_OUT)/records/$(s)-$(n)-$(c))))
+P_GT := $(PAPER_OUT)/coco/annotations_test.json
+
+define paper_record
+$(PAPER_OUT)/records/$(1)-$(2)-$(3): $(PAPER_OUT)/sim/$(1)-$(2)
+	roadsynth render --sim $$< --condition $(3) --rig $(PAPER_RIG) --frames $(PAPER_FRAMES) --no-progress --out $$@
+endef
+define paper_sim
+$(PAPER_OUT)/sim/$(1)-$(2): $(PAPER)
+	roadsynth simulate --scenario $(1) --seed $(2) $(P_SIM_ARGS) --no-progress --out $$@
+endef
+$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(eval $(call paper_sim,$(s),$(n)))))
+$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(foreach c,$(P_CONDITIONS),$(eval $(call paper_record,$(s),$(n),$(c))))))
+
+$(PAPER_OUT)/coco: $(P_RECORDS)
+	roadsynth export --dataset $(PAPER_OUT)/records --format coco --splits "$(P_SPLITS)" --no-progress --out $@
+
+$(PAPER_OUT)/models/baseline: $(PAPER_OUT)/coco
+	roadsynth train --coco $< --split train --conditions $(PAPER_TRAIN_CONDITIONS) --config $(PAPER_TRAIN_CONFIG) \
+		--seed 0 --no-progress --out $@
+
+$(PAPER_OUT)/detections/baseline.json: $(PAPER_OUT)/models/baseline $(PAPER_OUT)/coco
+	roadsynth detect --model $< --coco $(PAPER_OUT)/coco --split test --no-progress --out $@
+
+$(PAPER_OUT)/detections/$(ONNX_NAME).json: $(ONNX) $(PAPER_OUT)/coco
+	roadsynth detect --onnx $(ONNX) --coco $(PAPER_OUT)/coco --split test --no-progress $(ONNX_OPTIONS) --out $@
+
+$(PAPER_OUT)/eval/%: $(PAPER_OUT)/detections/%.json
+	roadsynth evaluate --gt $(P_GT) --detections $< --group-by condition --iou $(P_IOUS) \
+		--metrics table,coco,errors --out $@
+
+$(PAPER_OUT)/report: $(PAPER_OUT)/eval/baseline $(PAPER_OUT)/eval/$(ONNX_NAME)
+	roadsynth report --gt $(P_GT) --paper --out $@ \
+		--eval baseline=$(PAPER_OUT)/eval/baseline --detections baseline=$(PAPER_OUT)/detections/baseline.json \
+		--eval $(ONNX_NAME)=$(PAPER_OUT)/eval/$(ONNX_NAME) \
+		--detections $(ONNX_NAME)=$(PAPER_OUT)/detections/$(ONNX_NAME).json
+	@echo "Table 1, ours beside the paper's: $@/report.md"
+
+paper-outputs: $(PAPER_OUT)/report
+endif

@@ -6,7 +6,12 @@ list (deep-copied beforehand: pycocotools mutates its inputs) and runs load + ev
 summarize; ours includes its strict validation. Prints seconds, speed-up over pycocotools and whether
 the 12 stats (and, for ours, the precision array) equal pycocotools' to 1e-12.
 
-    .venv/bin/python bench/bench_coco_eval.py [--images 5000] [--seed 0] [--repeat 1]
+Then the whole process, as a user runs it, from the same problem written to JSON files: ``roadsynth
+evaluate --metrics coco`` (interpreter start, imports, reading and validating the files, metrics.json,
+plot data and report.md; no PNGs, as without ``--png``) against a Python process running pycocotools'
+COCO(file), loadRes(file), evaluate, accumulate, summarize. Best of ``--repeat`` each, alternating.
+
+    .venv/bin/python bench/bench_coco_eval.py [--images 5000] [--seed 0] [--repeat 1] [--no-process]
 """
 
 from __future__ import annotations
@@ -93,11 +98,61 @@ def run_ours(gt: dict, results: list):
     return np.asarray(summarize_coco(acc, g.category_names)["stats"]), acc.precision
 
 
+PYCOCOTOOLS_SCRIPT = """
+import contextlib, io, json, sys
+from pycocotools.coco import COCO
+from pycocotools.cocoeval import COCOeval
+with contextlib.redirect_stdout(io.StringIO()):
+    gt = COCO(sys.argv[1])
+    ev = COCOeval(gt, gt.loadRes(sys.argv[2]), "bbox")
+    ev.evaluate()
+    ev.accumulate()
+    ev.summarize()
+print(json.dumps(ev.stats.tolist()))
+"""
+
+
+def whole_process(gt: dict, results: list, repeat: int) -> None:
+    """Seconds of ``roadsynth evaluate --metrics coco`` and of a pycocotools script, each a fresh process."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        (tmp / "gt.json").write_text(json.dumps(gt))
+        (tmp / "dt.json").write_text(json.dumps(results))
+        gt_path, dt_path = str(tmp / "gt.json"), str(tmp / "dt.json")
+        commands = {
+            "pycocotools": [sys.executable, "-c", PYCOCOTOOLS_SCRIPT, gt_path, dt_path],
+            "roadsynth evaluate": [sys.executable, "-m", "pipeline.stages.cli", "evaluate", "--gt", gt_path,
+                                   "--detections", dt_path, "--metrics", "coco", "--out", str(tmp / "eval")],
+        }
+        best = dict.fromkeys(commands, float("inf"))
+        for _ in range(repeat):
+            for name, cmd in commands.items():
+                t0 = time.perf_counter()
+                subprocess.run(cmd, cwd=repo, check=True, capture_output=True)
+                best[name] = min(best[name], time.perf_counter() - t0)
+        stats = json.loads((tmp / "eval" / "metrics.json").read_text())["coco"]["stats"]
+        ref = subprocess.run(commands["pycocotools"], cwd=repo, check=True, capture_output=True, text=True).stdout
+    diff = float(np.max(np.abs(np.array(stats) - np.array(json.loads(ref)))))
+    print(f"whole process (files {(len(json.dumps(gt)) + len(json.dumps(results))) / 1e6:.0f} MB):")
+    print(f"{'command':<20}{'seconds':>10}{'vs pycocotools':>16}")
+    for name, seconds in best.items():
+        print(f"{name:<20}{seconds:>10.2f}{best['pycocotools'] / seconds:>15.1f}x")
+    print(f"max |stats diff| of the two processes: {diff:.2e}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--images", type=int, default=5000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=1, help="best of N runs per tool")
+    parser.add_argument("--no-process", action="store_true", help="skip the whole-process comparison")
     args = parser.parse_args()
     logging.disable(logging.INFO)
     gt, results = make_problem(args.images, args.seed)
@@ -124,6 +179,8 @@ def main() -> None:
         print(f"{name:<18}{timings[name]:>10.3f}{timings['pycocotools'] / timings[name]:>15.1f}x"
               f"{timings['faster-coco-eval'] / timings[name]:>20.2f}x{diff:>18.2e}{diff <= 1e-12!s:>13}{p_match!s:>17}")
     print("stats (pycocotools):", np.array2string(ref_stats, precision=4, separator=", "))
+    if not args.no_process:
+        whole_process(gt, results, args.repeat)
 
 
 if __name__ == "__main__":

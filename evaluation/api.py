@@ -65,7 +65,7 @@ class _Context:
     score_threshold: float
     group_by: str | None
     kitti_options: dict[str, Any]
-    ignored: dict[str, int]
+    ignored: dict[str, Any]
     artifacts: dict[str, Any] = dataclasses.field(default_factory=dict)
     _matches: dict[tuple[float, ...], TableMatches] = dataclasses.field(default_factory=dict)
 
@@ -128,11 +128,11 @@ class Evaluation:
     coco_precision: np.ndarray | None
     kitti_markdown: str | None
 
-    def write(self, out_dir: str | Path) -> None:
-        """Write metrics.json, plots/ and report.md into ``out_dir`` (created if needed)."""
+    def write(self, out_dir: str | Path, *, png: bool = True) -> None:
+        """Write metrics.json, plots/ (data; PNG renderings too with ``png``) and report.md into ``out_dir``."""
         from evaluation.outputs import write_outputs
 
-        write_outputs(self, Path(out_dir))
+        write_outputs(self, Path(out_dir), png=png)
 
 
 def load_inputs(gt: str | Path, detections: str | Path) -> tuple[GroundTruth, Detections, str, dict[str, int]]:
@@ -182,7 +182,12 @@ def evaluate(
     if not np.isfinite(score_threshold):
         raise InputError(f"score threshold must be finite, got {score_threshold}")
     g, d, kind, ignored = load_inputs(gt, detections)
-    ignored.update({"crowd_gt": int(g.iscrowd.sum()),
+    if d.not_in_gt:
+        log.info("%s: %d detections of categories the ground truth lacks are not scored (by category id: %s)",
+                 detections, sum(d.not_in_gt.values()), d.not_in_gt)
+    ignored.update({"detections_of_categories_not_in_gt": sum(d.not_in_gt.values()),
+                    "detections_by_category_not_in_gt": {str(k): v for k, v in sorted(d.not_in_gt.items())},
+                    "crowd_gt": int(g.iscrowd.sum()),
                     "detections_below_score_threshold": int((d.score < score_threshold).sum())})
     ctx = _Context(gt=g, dt=d, kind=kind, gt_path=Path(gt), det_path=Path(detections), iou_thresholds=thresholds,
                    score_threshold=float(score_threshold), group_by=group_by, kitti_options=dict(kitti_options or {}),

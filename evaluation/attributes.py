@@ -2,6 +2,8 @@
 
 - Distance (``distance_m``, metres from the sensor): bins ``0-30``, ``30-50``, ``50+``, each closed
   on the left and open on the right (30.0 m falls in ``30-50``).
+- Box height (``bbox`` height, pixels; every object has one): bins ``<30``, ``30-60``, ``60+``, closed
+  on the left (a 30 px box is ``30-60``), the sizes where a detector's recall usually falls off.
 - Occlusion (``occlusion``): when every given value is a JSON integer it is a KITTI-style level and kept
   as is (``0`` fully visible, ``1`` partly occluded, ``2`` largely occluded, ``3`` unknown); otherwise it
   is an occluded fraction in [0, 1] binned into ``none`` [0, 0.1), ``partial`` [0.1, 0.5) and
@@ -22,6 +24,14 @@ DISTANCE_LABELS = ("0-30", "30-50", "50+")
 OCCLUSION_FRACTION_EDGES = (0.0, 0.1, 0.5)
 OCCLUSION_FRACTION_LABELS = ("none", "partial", "heavy")
 KITTI_OCCLUSION_LABELS = {0: "0 visible", 1: "1 partly", 2: "2 largely", 3: "3 unknown"}
+HEIGHT_EDGES_PX = (0.0, 30.0, 60.0)
+HEIGHT_LABELS = ("<30", "30-60", "60+")
+
+
+def height_bins(height_px: np.ndarray) -> np.ndarray:
+    """(N,) object array of bin labels for (N,) float64 box heights (>= 0)."""
+    idx = np.searchsorted(np.asarray(HEIGHT_EDGES_PX), height_px, side="right") - 1
+    return np.asarray(HEIGHT_LABELS, dtype=object)[np.clip(idx, 0, len(HEIGHT_LABELS) - 1)]
 
 
 def distance_bins(distance_m: np.ndarray) -> np.ndarray:

@@ -79,6 +79,8 @@ class Detections:
         category_index: (N,) int64 index into the ground truth's ``category_ids``.
         bbox: (N, 4) float64 ``x, y, w, h``.
         score: (N,) float64 confidence, finite.
+        not_in_gt: detections left out because the ground truth lacks their category, by category id
+            (pycocotools evaluates the ground truth's categories only).
 
     Entries keep their file order: ties in score are broken by it, as pycocotools does.
     """
@@ -88,6 +90,7 @@ class Detections:
     category_index: np.ndarray
     bbox: np.ndarray
     score: np.ndarray
+    not_in_gt: dict[int, int] = dataclasses.field(default_factory=dict)
 
     @property
     def area(self) -> np.ndarray:

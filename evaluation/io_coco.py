@@ -1,8 +1,11 @@
 """Read and validate a COCO instances JSON (ground truth) and a COCO results JSON (detections).
 
-Validation is strict: wrong types, missing fields, id 0, duplicate ids, unknown image or category ids,
-negative or non-finite sizes and non-finite scores are errors naming the file, the entry and the field.
-Nothing is dropped. Deviations from pycocotools, all on inputs it mishandles or crashes on:
+Validation is strict: wrong types, missing fields, id 0, duplicate ids, unknown image ids (and, in the
+ground truth, unknown category ids), negative or non-finite sizes and non-finite scores are errors
+naming the file, the entry and the field. A result whose category the ground truth lacks (a COCO-80
+detector on a dataset of 6 classes) is left out of scoring, as pycocotools does (it evaluates the
+ground truth's categories), and counted per category id in :attr:`Detections.not_in_gt`; nothing else
+is dropped. Deviations from pycocotools, all on inputs it mishandles or crashes on:
 
 - a missing ``iscrowd`` reads as 0 (pycocotools raises ``KeyError``);
 - an empty results list is zero detections (pycocotools raises ``IndexError``);
@@ -142,13 +145,19 @@ def detections_from_list(data: Any, gt: GroundTruth, path: str = "<detections>")
                          f"got a JSON {type(data).__name__}{hint}")
     image_index = lookup(int_column(data, "image_id", path, "results"), gt.image_ids, "image_id", path,
                          "results", "images")
-    category_index = lookup(int_column(data, "category_id", path, "results"), gt.category_ids, "category_id",
-                            path, "results", "categories")
+    category_ids = int_column(data, "category_id", path, "results")
     bbox = box_column(data, path, "results")
     score, _ = number_column(data, "score", path, "results")
+    known = np.isin(category_ids, gt.category_ids)
+    not_in_gt: dict[int, int] = {}
+    if not known.all():
+        ids, counts = np.unique(category_ids[~known], return_counts=True)
+        not_in_gt = {int(i): int(c) for i, c in zip(ids, counts, strict=True)}
+        image_index, category_ids, bbox, score = image_index[known], category_ids[known], bbox[known], score[known]
+    category_index = np.searchsorted(gt.category_ids, category_ids).astype(np.int64)
     log.debug("%s: %d detections", path, len(score))
     return Detections(source=str(path), image_index=image_index, category_index=category_index, bbox=bbox,
-                      score=score)
+                      score=score, not_in_gt=not_in_gt)
 
 
 def read_coco_gt(path: str | Path) -> GroundTruth:

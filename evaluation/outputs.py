@@ -7,7 +7,7 @@ Plots read only the saved curve data (the render step never recomputes a metric)
 - ``plots/table.csv``: precision and recall by IoU threshold per group (class ``all``);
 - ``plots/coco_pr.csv``: COCO's interpolated precision at the 101 recall thresholds, all classes averaged,
   at IoU 0.5, 0.75 and 0.5:0.95 (area ``all``, the largest max_dets);
-- PNG renderings of the same data (matplotlib, Agg).
+- PNG renderings of the same data (matplotlib, Agg), when asked (``png``; the CLI's ``--png``).
 """
 
 from __future__ import annotations
@@ -100,15 +100,19 @@ def _write_coco_pr(precision: np.ndarray, path: Path) -> Path:
     return path
 
 
-def write_outputs(evaluation: Evaluation, out_dir: Path) -> None:
-    """Write metrics.json, plots/ (data and PNG) and report.md into ``out_dir``."""
+def write_outputs(evaluation: Evaluation, out_dir: Path, *, png: bool = True) -> None:
+    """Write metrics.json, plots/ (data, and PNG with ``png``) and report.md into ``out_dir``.
+
+    PNG rendering imports matplotlib (about half a second), so it happens only when asked.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(_clean(evaluation.metrics), indent=2, sort_keys=True) + "\n")
     plots = out_dir / "plots"
     plots.mkdir(exist_ok=True)
     write_plot_data(evaluation, plots)
-    from evaluation.plots import render_pngs
+    if png:
+        from evaluation.plots import render_pngs
 
-    render_pngs(plots)
+        render_pngs(plots)
     (out_dir / "report.md").write_text(report_markdown(evaluation))
     log.info("wrote metrics.json, plots/ and report.md to %s", out_dir)

@@ -103,6 +103,13 @@ def _errors_section(errors: dict[str, Any]) -> list[str]:
     return [*out, ""]
 
 
+def _count(value: Any) -> str:
+    """An ignored count, or counts by id (``id 10: 3, id 44: 1``)."""
+    if isinstance(value, dict):
+        return ", ".join(f"id {k}: {v}" for k, v in value.items()) or "none"
+    return str(value)
+
+
 def report_markdown(evaluation: Evaluation) -> str:
     """The Markdown report of an evaluation."""
     m = evaluation.metrics
@@ -119,5 +126,5 @@ def report_markdown(evaluation: Evaluation) -> str:
     else:
         out += [evaluation.kitti_markdown or "", ""]
     out += ["## Ignored and skipped items", ""]
-    out += _md_table(["item", "count"], [[k, str(v)] for k, v in sorted(m["ignored"].items())])
+    out += _md_table(["item", "count"], [[k, _count(v)] for k, v in sorted(m["ignored"].items())])
     return "\n".join(out) + "\n"

@@ -11,8 +11,8 @@ Definitions (README.md has the full text):
   every threshold (the F1-optimal threshold and the PR curves reuse it).
 - ``precision = tp / (tp + fp)``, ``recall = tp / (tp + fn)``, ``f1 = 2 p r / (p + r)``; ``null`` when the
   denominator is 0.
-- Distance and occlusion rows bin the *ground truth*: recall, tp and fn per bin. A false positive has
-  no distance or occlusion, so precision, fp and f1 are ``null`` there.
+- Distance, box-height and occlusion rows bin the *ground truth*: recall, tp and fn per bin. A false
+  positive has no such bin, so precision, fp and f1 are ``null`` there.
 """
 
 from __future__ import annotations
@@ -22,7 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.attributes import DISTANCE_LABELS, KITTI_OCCLUSION_LABELS, OCCLUSION_FRACTION_LABELS, distance_bins
+from evaluation.attributes import (
+    DISTANCE_LABELS,
+    HEIGHT_LABELS,
+    KITTI_OCCLUSION_LABELS,
+    OCCLUSION_FRACTION_LABELS,
+    distance_bins,
+    height_bins,
+)
 from evaluation.coco import sort_detections
 from evaluation.data import Detections, GroundTruth
 from evaluation.matching import greedy_match
@@ -150,12 +157,13 @@ def _rows(group, cls, thr, tp, fp, fn, with_precision: bool = True) -> list[dict
 
 def _bin_rows(gt: GroundTruth, m: TableMatches, gt_tp: np.ndarray) -> list[dict[str, Any]]:
     rows = []
-    for prefix, valid, labels in (("distance_m", gt.distance_valid, None), ("occlusion", gt.occlusion_valid,
-                                                                            gt.occlusion)):
+    bins = (("distance_m", gt.distance_valid, distance_bins(gt.distance_m)),
+            ("height_px", np.ones(len(gt), bool), height_bins(gt.bbox[:, 3])),
+            ("occlusion", gt.occlusion_valid, gt.occlusion))
+    for prefix, valid, labels in bins:
         valid = valid & m.gt_object
         if not valid.any():
             continue
-        labels = distance_bins(gt.distance_m) if labels is None else labels
         for label in sorted(set(labels[valid].tolist()), key=_bin_key):
             in_bin = valid & (labels == label)
             for ki, cls in enumerate(["all", *gt.category_names]):
@@ -170,7 +178,7 @@ def _bin_rows(gt: GroundTruth, m: TableMatches, gt_tp: np.ndarray) -> list[dict[
 
 
 _BIN_ORDER = {label: i for i, label in enumerate(
-    (*DISTANCE_LABELS, *OCCLUSION_FRACTION_LABELS, *KITTI_OCCLUSION_LABELS.values()))}
+    (*DISTANCE_LABELS, *HEIGHT_LABELS, *OCCLUSION_FRACTION_LABELS, *KITTI_OCCLUSION_LABELS.values()))}
 
 
 def _bin_key(label: str) -> tuple[int, str]:

@@ -64,7 +64,7 @@ def int_column(entries: Sequence[Any], field: str, path: str, section: str, *, n
     expected = "a non-zero integer" if nonzero else "an integer"
     values = _values(entries, field, path, section, expected, _MISSING)
     arr = np.array(values) if values else np.zeros(0, np.int64)
-    if arr.dtype.kind != "i" or arr.ndim != 1 or any(v is True or v is False for v in values):
+    if arr.dtype.kind != "i" or arr.ndim != 1 or bool in set(map(type, values)):
         raise _first_bad(entries, field, path, section, _is_int, expected)
     arr = arr.astype(np.int64, copy=False)
     if nonzero and (arr == 0).any():
@@ -97,7 +97,7 @@ def number_column(
     def ok(v: Any) -> bool:
         return v is None or (_is_number(v) and (minimum is None or v >= minimum))
 
-    if arr.dtype.kind not in "if" or arr.ndim != 1 or any(v is True or v is False for v in values):
+    if arr.dtype.kind not in "if" or arr.ndim != 1 or bool in set(map(type, values)):
         raise _first_bad(entries, field, path, section, ok, expected)
     arr = arr.astype(np.float64, copy=False)
     bad = ~np.isfinite(arr)

@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="KITTI AP semantics: the C++ devkit's (official), the common Python port's "
                         "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
+    parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
     parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
 
 
@@ -57,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
               "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
               "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
     with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:
-        result.write(tmp)
+        result.write(tmp, png=args.png)
         write_meta(tmp, stage="evaluate", config=config, seed=None)
     table = result.metrics["table"]
     for row in table.get("rows", []):

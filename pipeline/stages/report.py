@@ -1,10 +1,16 @@
 """``roadsynth report``: the experiment's summary — the paper's table per condition, COCO AP per
-condition, and a strip of example frames with ground truth and detections drawn.
+condition, recall by distance and box height, and a strip of example frames with ground truth and
+detections drawn.
 
 Reads the evaluate stage's ``metrics.json``, the COCO ground truth and the detections (COCO results);
 writes OUT/report.md, OUT/examples.png and OUT/metrics.json (flat, per condition, for ``dvc metrics``).
 The ground truth and detections must be the files that were evaluated (their sha256 is in the
 evaluation's ``meta.json``) and the grouping the evaluation's ``--group-by``: the table comes from it.
+
+Several detectors (``--eval NAME=DIR --detections NAME=FILE``, once per detector, e.g. the baseline and
+a pretrained ONNX model) share one report: Table 1 puts their precision and recall side by side per
+condition, with ``--paper`` the figures of Li, Kusari & LeBlanc's Table 1 (:data:`PAPER_TABLE1`) beside
+them; metrics.json then nests the flat metrics by detector name; examples.png draws the first detector.
 """
 
 from __future__ import annotations
@@ -27,12 +33,24 @@ log = logging.getLogger(__name__)
 
 HELP = "summarise an evaluation per condition: the paper's table, COCO AP, example frames"
 GT_BGR, DET_BGR = (60, 220, 60), (40, 40, 255)
+# Li, Kusari & LeBlanc, Table 1 (a detector trained on real photos, run on CARLA frames of SUMO traffic):
+# precision and recall at IoU 0.5, 0.6, 0.7, 0.8 per condition.
+PAPER_TABLE1 = {
+    "morning": {"precision": (0.82, 0.81, 0.79, 0.47), "recall": (0.41, 0.40, 0.40, 0.28)},
+    "night": {"precision": (0.81, 0.79, 0.70, 0.37), "recall": (0.23, 0.23, 0.21, 0.12)},
+}
+PAPER_IOUS = (0.5, 0.6, 0.7, 0.8)
+PAPER_SOURCE = "paper (Li et al., Table 1)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--eval", type=Path, required=True, help="output folder of `roadsynth evaluate`")
+    parser.add_argument("--eval", action="append", required=True, metavar="[NAME=]DIR",
+                        help="output folder of `roadsynth evaluate`; once per detector, as NAME=DIR, to compare")
     parser.add_argument("--gt", type=Path, required=True, help="COCO ground truth that was evaluated")
-    parser.add_argument("--detections", type=Path, required=True, help="COCO results that were evaluated")
+    parser.add_argument("--detections", action="append", required=True, metavar="[NAME=]FILE",
+                        help="COCO results that were evaluated (the same NAMEs as --eval)")
+    parser.add_argument("--paper", action="store_true",
+                        help="put the paper's Table 1 figures beside ours (morning and night, IoU 0.5-0.8)")
     parser.add_argument("--images", type=Path, help="folder of the GT's images (default: GT folder/images)")
     parser.add_argument("--group-by", help="image attribute to report by; must be the evaluation's --group-by "
                         "(default: that one)")
@@ -91,7 +109,7 @@ def _markdown(ious, table, bins, coco, group_by: str, score_threshold: float) ->
                            for t in ious)
         lines.append(f"| {group} | {cells} |")
     if bins:
-        lines += ["", "## Recall (%) by ground-truth distance and occlusion", "",
+        lines += ["", "## Recall (%) by ground-truth distance, box height (px) and occlusion", "",
                   "| bin | " + " | ".join(f"R@{t:g}" for t in ious) + " |", "|---" * (1 + len(ious)) + "|"]
         lines += [f"| {name} | " + " | ".join(f"{100 * by_iou[t]['recall']:.1f}" for t in ious) + " |"
                   for name, by_iou in bins.items()]
@@ -135,29 +153,101 @@ def examples_strip(gt_path: Path, det_path: Path, images: Path, group_by: str, p
     return np.concatenate([np.pad(r, ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in rows], axis=0)
 
 
-def main(args: argparse.Namespace) -> int:
-    metrics_path = args.eval / "metrics.json"
-    if not metrics_path.is_file():
-        raise FileNotFoundError(f"{metrics_path}: not found (run `roadsynth evaluate --out {args.eval}` first)")
-    group_by = check_evaluated_inputs(args.eval, args.gt, args.detections, args.group_by)
-    metrics = json.loads(metrics_path.read_text())
-    for name, key in (("table", "rows"), ("coco", "stats")):
-        if key not in metrics.get(name, {}):
-            raise ValueError(f"{metrics_path}: {name}.{key} is missing ({name}: {metrics.get(name)!r}); "
-                             f"run `roadsynth evaluate` with --metrics including {name}")
-    score_threshold = float(metrics["table"]["score_threshold"])
+def named_paths(values: list[str], option: str) -> dict[str, Path]:
+    """``[NAME=]PATH`` values of a repeated option by name; one unnamed value is named ``detector``."""
+    out: dict[str, Path] = {}
+    for value in values:
+        name, sep, path = value.partition("=")
+        if not sep:
+            if len(values) > 1:
+                raise ValueError(f"{option} {value!r}: several detectors are given, so each needs NAME=PATH")
+            name, path = "detector", value
+        if not name or name in out:
+            raise ValueError(f"{option} {value!r}: {'empty' if not name else 'repeated'} detector name")
+        out[name] = Path(path)
+    return out
+
+
+def paper_markdown(ious: list[float], per_detector: dict[str, dict[str, dict[float, dict]]], group_by: str,
+                   paper: bool) -> str:
+    """Table 1 laid out as in the paper (precision block, recall block), one row per (condition, source)."""
+    head = " | ".join([*(f"P@{t:g}" for t in ious), *(f"R@{t:g}" for t in ious)])
+    lines = [f"## Table 1: precision and recall by IoU threshold, per {group_by}", "",
+             f"| {group_by} | source | {head} |", "|---" * (2 + 2 * len(ious)) + "|"]
+
+    def cell(value) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    groups = list(dict.fromkeys(g for table in per_detector.values() for g in table))
+    for group in groups:
+        if paper and group in PAPER_TABLE1:
+            ref = PAPER_TABLE1[group]
+            at = {t: i for i, t in enumerate(PAPER_IOUS)}
+            cells = [cell(ref[k][at[t]]) if t in at else "-" for k in ("precision", "recall") for t in ious]
+            lines.append(f"| {group} | {PAPER_SOURCE} | " + " | ".join(cells) + " |")
+        for name, table in per_detector.items():
+            if group in table:
+                cells = [cell(table[group][t][k]) for k in ("precision", "recall") for t in ious]
+                lines.append(f"| {group} | {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _detector_report(metrics: dict, gt: Path, detections: Path, group_by: str):
     ious, table, bins = _table(metrics)
-    coco = {"all": [float(s) for s in metrics["coco"]["stats"]], **coco_by_group(args.gt, args.detections, group_by)}
+    coco = {"all": [float(s) for s in metrics["coco"]["stats"]], **coco_by_group(gt, detections, group_by)}
+    flat = {group: {**{f"precision@{t:g}": by_iou[t]["precision"] for t in ious},
+                    **{f"recall@{t:g}": by_iou[t]["recall"] for t in ious},
+                    "coco_ap": coco.get(group, [None])[0], "coco_ap50": coco.get(group, [None, None])[1]}
+            for group, by_iou in table.items()}
+    return ious, table, bins, coco, flat
+
+
+def main(args: argparse.Namespace) -> int:
+    evals = named_paths(args.eval, "--eval")
+    dets = named_paths(args.detections, "--detections")
+    if set(evals) != set(dets):
+        raise ValueError(f"--eval names {sorted(evals)} and --detections names {sorted(dets)} differ")
+    reports, score_threshold, group_by = {}, None, None
+    for name, eval_dir in evals.items():
+        metrics_path = eval_dir / "metrics.json"
+        if not metrics_path.is_file():
+            raise FileNotFoundError(f"{metrics_path}: not found (run `roadsynth evaluate --out {eval_dir}` first)")
+        grouped = check_evaluated_inputs(eval_dir, args.gt, dets[name], args.group_by)
+        if group_by is not None and grouped != group_by:
+            raise ValueError(f"{eval_dir / 'meta.json'}: grouped by {grouped!r}, the other evaluations by "
+                             f"{group_by!r}; evaluate every detector with the same --group-by")
+        group_by = grouped
+        metrics = json.loads(metrics_path.read_text())
+        for section, key in (("table", "rows"), ("coco", "stats")):
+            if key not in metrics.get(section, {}):
+                raise ValueError(f"{metrics_path}: {section}.{key} is missing ({section}: {metrics.get(section)!r}); "
+                                 f"run `roadsynth evaluate` with --metrics including {section}")
+        score_threshold = float(metrics["table"]["score_threshold"]) if score_threshold is None else score_threshold
+        reports[name] = _detector_report(metrics, args.gt, dets[name], group_by)
     images = args.images or args.gt.parent / "images"
+    single = len(reports) == 1 and not args.paper
     with atomic_output_dir(args.out) as tmp:
-        (tmp / "report.md").write_text(_markdown(ious, table, bins, coco, group_by, score_threshold))
-        strip = examples_strip(args.gt, args.detections, images, group_by, args.examples, score_threshold)
+        if single:
+            ious, table, bins, coco, flat = next(iter(reports.values()))
+            text, flat_metrics = _markdown(ious, table, bins, coco, group_by, score_threshold), flat
+        else:
+            ious = next(iter(reports.values()))[0]
+            text = "# Detection report\n\n" + paper_markdown(ious, {n: r[1] for n, r in reports.items()},
+                                                               group_by, args.paper)
+            text += (f"\nScore >= {score_threshold:g}. Paper figures as published (CARLA frames, the paper's "
+                     "detector), for comparison, not recomputed.\n")
+            for name, (d_ious, table, bins, coco, _) in reports.items():
+                body = _markdown(d_ious, table, bins, coco, group_by, score_threshold)
+                body = body.replace("\n## ", "\n### ").replace("# Detection report", f"## Detector: {name}", 1)
+                text += "\n" + body
+            flat_metrics = {name: r[4] for name, r in reports.items()}
+        (tmp / "report.md").write_text(text)
+        first = next(iter(dets.values()))
+        strip = examples_strip(args.gt, first, images, group_by, args.examples, score_threshold)
         cv2.imwrite(str(tmp / "examples.png"), strip)
-        flat = {group: {**{f"precision@{t:g}": by_iou[t]["precision"] for t in ious},
-                        **{f"recall@{t:g}": by_iou[t]["recall"] for t in ious},
-                        "coco_ap": coco.get(group, [None])[0], "coco_ap50": coco.get(group, [None, None])[1]}
-                for group, by_iou in table.items()}
-        write_json(tmp / "metrics.json", flat)
-        write_meta(tmp, stage="report", config={"eval": str(args.eval), "group_by": group_by}, seed=None)
+        write_json(tmp / "metrics.json", flat_metrics)
+        shown = str(evals["detector"]) if single and "detector" in evals else {n: str(p) for n, p in evals.items()}
+        write_meta(tmp, stage="report", config={"eval": shown,
+                                                "group_by": group_by, "paper": args.paper}, seed=None)
     log.info("wrote %s", args.out)
     return 0

@@ -34,9 +34,10 @@ def test_xywh_stretch_coco80(tmp_path):
                        class_map=parse_class_map("coco80"), score_threshold=0.05)
     assert det.options.input_size == (100, 75) and det.options.layout == "nchw"
     (out,) = det.predict([np.zeros((150, 200, 3), np.uint8)])
-    assert len(out.boxes) == 1  # class 9 (traffic light) dropped
+    assert len(out.boxes) == 2  # class 9 (traffic light) kept as COCO id 10: evaluate counts it
     assert out.boxes[0].tolist() == pytest.approx([20, 40, 80, 120])
-    assert out.category_ids.tolist() == [3] and out.scores.tolist() == pytest.approx([0.9])
+    assert out.boxes[1].tolist() == pytest.approx([0, 0, 10, 10])
+    assert out.category_ids.tolist() == [3, 10] and out.scores.tolist() == pytest.approx([0.9, 0.8])
 
 
 def test_normalized_cxcywh_letterbox_and_nms(tmp_path):

@@ -178,3 +178,29 @@ def test_category_without_ground_truth_is_minus_one_like_pycocotools():
     assert (acc.precision[:, :, 1] == -1).all()
     assert summary["per_class"]["b"]["ap"] == -1 and not summary["per_class"]["b"]["valid"]
     assert summary["per_class"]["a"]["ap"] == 0.0
+
+
+def test_result_categories_the_gt_lacks_are_ignored_like_pycocotools(tmp_path):
+    """A COCO-80 detector on a 3-class dataset: stats equal pycocotools' on the full file and on the file
+    filtered to the ground truth's categories; the extra ones are counted per id in metrics.json."""
+    import json
+
+    from evaluation import evaluate
+
+    rng = np.random.default_rng(11)
+    gt, results = _random_problem(rng, 30)
+    extra = []
+    for r in results[::3]:  # same boxes and (tied) scores under categories the GT lacks, interleaved
+        extra.append({**r, "category_id": int(rng.choice([10, 44, 90]))})
+    mixed = [x for pair in zip(results, extra + [None] * len(results), strict=False) for x in pair if x is not None]
+    assert len(mixed) == len(results) + len(extra)
+    ev_mixed, ev_filtered = reference(gt, mixed), reference(gt, results)
+    np.testing.assert_allclose(ev_mixed.stats, ev_filtered.stats, rtol=0, atol=0)
+    assert_identical(gt, mixed)
+    (tmp_path / "gt.json").write_text(json.dumps(gt))
+    (tmp_path / "dt.json").write_text(json.dumps(mixed))
+    result = evaluate(tmp_path / "gt.json", tmp_path / "dt.json", metrics="coco")
+    np.testing.assert_allclose(result.metrics["coco"]["stats"], ev_filtered.stats, rtol=0, atol=1e-12)
+    counts = {str(c): sum(e["category_id"] == c for e in extra) for c in (10, 44, 90)}
+    assert result.metrics["ignored"]["detections_by_category_not_in_gt"] == {k: v for k, v in counts.items() if v}
+    assert result.metrics["ignored"]["detections_of_categories_not_in_gt"] == len(extra)

@@ -87,8 +87,11 @@ def test_missing_area_is_named():
         (bad_results(1, score=None), r"results\[1\]: missing field 'score'|results\[1\]: field 'score' is None"),
         (bad_results(0, score="high"), r"results\[0\]: field 'score' is 'high'"),
         (bad_results(1, image_id=7), r"results\[1\]: field 'image_id' is 7, not an id of the ground truth's images"),
-        (bad_results(0, category_id=2), r"results\[0\]: field 'category_id' is 2"),
+        (bad_results(0, category_id="car"), r"results\[0\]: field 'category_id' is 'car'"),
+        (bad_results(0, category_id=2.0), r"results\[0\]: field 'category_id' is 2.0"),
         (bad_results(0, category_id=0), r"results\[0\]: field 'category_id' is 0"),
+        (bad_results(1, image_id=True), r"results\[1\]: field 'image_id' is True"),  # JSON true is not 1
+        (bad_results(1, score=False), r"results\[1\]: field 'score' is False"),
         (bad_results(1, bbox=[0, 0, 5, -5]), r"results\[1\]: field 'bbox'"),
         (bad_results(1, bbox=[0, 0, 5, math.inf]), r"results\[1\]: field 'bbox'"),
         ({"annotations": []}, r"got a JSON dict \(is this a ground-truth file"),
@@ -99,6 +102,20 @@ def test_bad_results_name_file_entry_and_field(results, message):
     g = ground_truth_from_dict(GT, "gt.json")
     with pytest.raises(InputError, match=message):
         detections_from_list(results, g, "res.json")
+
+
+def test_results_of_categories_the_gt_lacks_are_counted_not_scored():
+    # pycocotools evaluates the ground truth's categories only; the others are counted per id.
+    results = [*copy.deepcopy(RESULTS), {"image_id": 1, "category_id": 2, "bbox": [0, 0, 3, 3], "score": 0.5},
+               {"image_id": 2, "category_id": 90, "bbox": [0, 0, 3, 3], "score": 0.4},
+               {"image_id": 2, "category_id": 2, "bbox": [1, 0, 3, 3], "score": 0.3}]
+    d = detections_from_list(results, ground_truth_from_dict(GT), "res.json")
+    assert d.not_in_gt == {2: 2, 90: 1}
+    assert len(d) == 2 and d.category_index.tolist() == [1, 0] and d.score.tolist() == [0.9, 0.1]
+    # an unknown image id stays an error, whatever the category
+    results[3]["image_id"] = 9
+    with pytest.raises(InputError, match=r"results\[3\]: field 'image_id' is 9"):
+        detections_from_list(results, ground_truth_from_dict(GT), "res.json")
 
 
 def test_missing_score_is_named():

@@ -95,3 +95,16 @@ def test_distance_and_occlusion_bins_report_recall_only():
     assert (near["recall"], mid["recall"], far["recall"]) == (1.0, 0.0, 1.0)
     assert near["precision"] is None and near["fp"] is None
     assert pick(rs, "occlusion:heavy")["fn"] == 1 and pick(rs, "occlusion:none")["tp"] == 1
+
+
+def test_box_height_bins_closed_on_the_left():
+    anns = [{"bbox": [0, 0, 10, 29.99]}, {"bbox": [20, 0, 10, 30]}, {"bbox": [40, 0, 10, 59.5]},
+            {"bbox": [60, 0, 10, 60]}, {"bbox": [80, 0, 10, 200]}]
+    rs = rows(anns, [det([0, 0, 10, 29.99], 0.9), det([40, 0, 10, 59.5], 0.9), det([80, 0, 10, 200], 0.9)])
+    small, mid, tall = (pick(rs, f"height_px:{b}") for b in ("<30", "30-60", "60+"))
+    assert (small["tp"], small["fn"]) == (1, 0)
+    assert (mid["tp"], mid["fn"], mid["recall"]) == (1, 1, 0.5)  # 30 and 59.5 px
+    assert (tall["tp"], tall["fn"], tall["recall"]) == (1, 1, 0.5)  # 60 and 200 px
+    assert small["precision"] is None and small["fp"] is None
+    order = [r["group"] for r in rs if r["group"].startswith("height_px:") and r["class"] == "all"]
+    assert list(dict.fromkeys(order)) == ["height_px:<30", "height_px:30-60", "height_px:60+"]

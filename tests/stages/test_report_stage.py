@@ -120,3 +120,36 @@ def test_report_needs_an_evaluation_meta_with_digests(scored, capsys, tmp_path):
     (fake / "meta.json").write_text(json.dumps(meta))
     code, first, _ = _report(root, capsys, eval_dir=fake)
     assert code == 2 and first.startswith(f"roadsynth report: error: {fake / 'meta.json'}: config.group_by is null")
+
+
+def test_two_detectors_side_by_side_with_the_papers_table(scored, tmp_path):
+    root, night_seen = scored
+    gt = root / "coco" / "annotations.json"
+    # a second "detector": the first one's detections of the morning images only
+    images = {img["id"]: img["condition"] for img in json.loads(gt.read_text())["images"]}
+    morning = [d for d in json.loads((root / "dets.json").read_text()) if images[d["image_id"]] == "morning"]
+    (tmp_path / "morning.json").write_text(json.dumps(morning))
+    assert cli(["evaluate", "--gt", str(gt), "--detections", str(tmp_path / "morning.json"), "--group-by",
+                "condition", "--metrics", "table,coco", "--out", str(tmp_path / "eval")]) == 0
+    assert cli(["report", "--eval", f"base={root / 'eval'}", "--eval", f"onnx={tmp_path / 'eval'}", "--gt", str(gt),
+                "--detections", f"base={root / 'dets.json'}", "--detections", f"onnx={tmp_path / 'morning.json'}",
+                "--paper", "--out", str(tmp_path / "report")]) == 0
+    text = (tmp_path / "report" / "report.md").read_text()
+    assert "| condition | source | P@0.5 | P@0.6 | P@0.7 | P@0.8 | R@0.5 | R@0.6 | R@0.7 | R@0.8 |" in text
+    assert "| morning | paper (Li et al., Table 1) | 0.82 | 0.81 | 0.79 | 0.47 | 0.41 | 0.40 | 0.40 | 0.28 |" in text
+    assert "| night | paper (Li et al., Table 1) | 0.81 | 0.79 | 0.70 | 0.37 | 0.23 | 0.23 | 0.21 | 0.12 |" in text
+    assert "| morning | base | 1.00 | 1.00 | 1.00 | 1.00 | 1.00 | 1.00 | 1.00 | 1.00 |" in text
+    assert "| night | onnx | - | - | - | - | 0.00 | 0.00 | 0.00 | 0.00 |" in text  # no detections: precision null
+    assert "## Detector: base" in text and "## Detector: onnx" in text and "height_px:" in text
+    metrics = json.loads((tmp_path / "report" / "metrics.json").read_text())
+    assert set(metrics) == {"base", "onnx"}
+    assert metrics["base"]["night"]["recall@0.5"] == pytest.approx(((night_seen + 1) // 2) / night_seen)
+    assert metrics["onnx"]["night"]["recall@0.5"] == 0.0 and metrics["onnx"]["morning"]["recall@0.5"] == 1.0
+
+
+def test_several_detectors_need_names(scored, tmp_path, capsys):
+    root, _ = scored
+    gt = root / "coco" / "annotations.json"
+    assert cli(["report", "--eval", str(root / "eval"), "--eval", str(root / "eval"), "--gt", str(gt),
+                "--detections", str(root / "dets.json"), "--out", str(tmp_path / "r")]) == 2
+    assert "each needs NAME=PATH" in capsys.readouterr().err
