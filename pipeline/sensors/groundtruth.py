@@ -73,9 +73,16 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
         raise ValueError(f"camera {camera.config.name!r} sees actors {scene.actors.track_id[left_out].tolist()} (track "
                          "ids) that the frame scene left out (FrameScene active); pass a mask "
                          "from pipeline.sensors.reach.actors_in_reach with this camera")
-    verts = world_to_cam.apply(geo.vertices)
-    tris = geo.triangles[in_view[geo.triangle_actor]].astype(np.int64)
-    vsel = np.flatnonzero(in_view[geo.vertex_actor])
+    # An actor wholly in front of the near plane projects within the projection of its convex hull's vertices
+    # (exactly: they are some of its vertices); one that crosses the plane (or any, through a distorting lens, whose
+    # edges project to curves) needs all its vertices and the points where its edges cross the plane.
+    whole = in_view & ((centre[:, 2] - radius > near) if not camera.has_distortion else np.zeros(k, bool))
+    clipped = in_view & ~whole
+    need = np.flatnonzero((whole[geo.vertex_actor] & geo.vertex_on_hull) | clipped[geo.vertex_actor])
+    verts = np.zeros((len(geo.vertices), 3))
+    verts[need] = world_to_cam.apply(geo.vertices[need])
+    tris = geo.triangles[clipped[geo.triangle_actor]].astype(np.int64)
+    vsel = need
     edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     z0, z1 = verts[edges[:, 0], 2], verts[edges[:, 1], 2]
     cross = (z0 > near) != (z1 > near)

@@ -168,6 +168,22 @@ class ActorMeshes:
             self.model_class += [object_class] * len(meshes)
             self._suits.append(np.asarray(suits, np.float64))
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
+        self._hulls: dict[int, np.ndarray] = {}
+
+    def hull_mask(self, model: int) -> np.ndarray:
+        """(V,) bool: the vertices of a model that are not strictly inside its convex hull (Qhull's vertices and the
+        points it finds coplanar with a facet). The extremes of any projection of the mesh from a point outside it,
+        perspective included, lie among them."""
+        if model not in self._hulls:
+            from scipy.spatial import ConvexHull
+
+            vertices = self.models[model].vertices
+            hull = ConvexHull(vertices, qhull_options="Qc")
+            mask = np.zeros(len(vertices), bool)
+            mask[hull.vertices] = True
+            mask[hull.coplanar[:, 0]] = True
+            self._hulls[model] = mask
+        return self._hulls[model]
 
     def __getitem__(self, object_class: ObjectClass) -> Mesh:
         """The class's first model."""
@@ -217,6 +233,8 @@ class ActorGeometry:
         triangle_actor: (T,) int32 dense actor index of each triangle.
         triangle_material: (T,) int32 material index.
         triangle_semantic: (T,) uint8 :class:`SemanticClass` value.
+        vertex_on_hull: (V,) bool, the vertex is on its model's convex hull (:meth:`ActorMeshes.hull_mask`): the
+            others never bound a projection of the actor seen from outside it.
     """
 
     vertices: np.ndarray
@@ -225,6 +243,7 @@ class ActorGeometry:
     triangle_actor: np.ndarray
     triangle_material: np.ndarray
     triangle_semantic: np.ndarray
+    vertex_on_hull: np.ndarray
 
 
 def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None
@@ -257,13 +276,14 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
                 np.repeat(idx, nt),
                 np.tile(mesh.material, len(idx)),
                 np.full(nt * len(idx), int(mesh.semantic), np.uint8),
+                np.tile(meshes.hull_mask(code), len(idx)),
             )
         )
         vertex_offset += nv * len(idx)
     if not parts:
         z = np.zeros
         return ActorGeometry(z((0, 3)), z((0, 3), np.uint32), z(0, np.int32), z(0, np.int32),
-                             z(0, np.int32), z(0, np.uint8))
+                             z(0, np.int32), z(0, np.uint8), z(0, bool))
     cols = list(zip(*parts, strict=True))
     return ActorGeometry(
         np.concatenate(cols[0]),
@@ -272,4 +292,5 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         np.concatenate(cols[3]).astype(np.int32),
         np.concatenate(cols[4]).astype(np.int32),
         np.concatenate(cols[5]),
+        np.concatenate(cols[6]),
     )

@@ -369,7 +369,9 @@ class FrameScene:
         # Holds the unit box grown by BOX_MARGIN: half its diagonal, grown, and a little more for rounding.
         self._radius = as_input(0.5 * np.linalg.norm(actors.boxes.size, axis=1) * (1.0 + 2.0 * BOX_MARGIN) + 1e-6,
                                 np.float64)
-        self._top_z = float(self.geometry.vertices[:, 2].max()) if len(self.geometry.vertices) else -np.inf
+        hull = self.geometry.vertex_on_hull  # every actor's extremes, in any direction, are among these
+        self._hull_vertices, self._hull_actor = self.geometry.vertices[hull], self.geometry.vertex_actor[hull]
+        self._top_z = float(self._hull_vertices[:, 2].max()) if len(self._hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
@@ -523,9 +525,9 @@ class FrameScene:
         onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
         key = tuple(slope.tolist())
         if key not in self._footprints:
-            flat = np.column_stack(along_sun(*self.geometry.vertices.T, slope))
+            flat = np.column_stack(along_sun(*self._hull_vertices.T, slope))
             # Each actor's vertices are one run (place_actors): bounds per run.
-            starts = np.flatnonzero(np.r_[True, np.diff(self.geometry.vertex_actor) != 0])
+            starts = np.flatnonzero(np.r_[True, np.diff(self._hull_actor) != 0])
             self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
         return self._footprints[key]
 
