@@ -255,13 +255,31 @@ def _cab(length_m: float, width_m: float, height_m: float, x_front: float) -> li
     return [(p[0] + shift, p[1], p[2]) for p in [(v, t, m), *_end_details((v, t, m), 0.5 * width_m, ends)]]
 
 
+def _cargo_details(x_rear: float, x_front: float, half_w: float, z0: float, z1: float) -> list[Part]:
+    """What makes a cargo box read as one: on its rear face (at ``x_rear``, facing -x) a dark frame, the seam between
+    two doors and four locking bars (metal, standing further out); along each side a rub rail at the bottom and a
+    rail at the top (dark)."""
+    d, e, w = 0.015, 0.035, 0.08
+    rear = [cuboid((x_rear - d, -half_w, z0), (x_rear, half_w, z0 + w), "trim"),
+            cuboid((x_rear - d, -half_w, z1 - w), (x_rear, half_w, z1), "trim"),
+            *mirrored(lambda y0, y1: cuboid((x_rear - d, y0, z0 + w), (x_rear, y1, z1 - w), "trim"), half_w - w,
+                      half_w),
+            cuboid((x_rear - d, -0.02, z0 + w), (x_rear, 0.02, z1 - w), "trim")]
+    bars = [cuboid((x_rear - e, y - 0.02, z0 + 0.2), (x_rear - d, y + 0.02, z1 - 0.2), "metal")
+            for y in (-0.72 * half_w, -0.28 * half_w, 0.28 * half_w, 0.72 * half_w)]
+    rails = [part for z_lo, z_hi in ((z0, z0 + 0.1), (z1 - 0.07, z1))
+             for part in mirrored(lambda y0, y1, z_lo=z_lo, z_hi=z_hi: cuboid((x_rear, y0, z_lo), (x_front, y1, z_hi),
+                                                                               "trim"), half_w, half_w + d)]
+    return [*rear, *bars, *rails]
+
+
 def box_truck() -> Mesh:
     """8.0 x 2.5 x 3.5 m rigid truck: a rounded cab with a big windscreen, a cargo box, six wheels."""
     chassis = cuboid((-3.9, -0.9, 0.5), (2.0, 0.9, 0.95), "trim")
     cargo = cuboid((-4.0, -1.25, 0.95), (1.85, 1.25, 3.5), "cargo")
     wheels = _wheels((4.0 - 2.1 + 0.55 * 2.1, -1.6, -2.8), 1.22, 0.5, 0.3)
-    return merge([*_cab(2.1, 2.4, 2.95, 4.0), chassis, cargo, *_truck_rear(-4.0, 0.7, 1.22), *wheels],
-                 ObjectClass.TRUCK)
+    return merge([*_cab(2.1, 2.4, 2.95, 4.0), chassis, cargo, *_cargo_details(-4.0, 1.85, 1.25, 0.95, 3.5),
+                  *_truck_rear(-4.0, 0.7, 1.22), *wheels], ObjectClass.TRUCK)
 
 
 def semi_trailer() -> Mesh:
@@ -270,8 +288,8 @@ def semi_trailer() -> Mesh:
     trailer = cuboid((-8.0, -1.275, 1.25), (4.6, 1.275, 4.0), "cargo")
     skirt = cuboid((-7.9, -1.0, 0.95), (4.6, 1.0, 1.25), "trim")
     wheels = _wheels((8.0 - 2.3 + 0.55 * 2.3, 4.0, 2.7, -5.2, -6.3, -7.4), 1.24, 0.52, 0.32)
-    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, skirt, *_truck_rear(-8.0, 1.05, 1.25), *wheels],
-                 ObjectClass.TRUCK)
+    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, skirt, *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0),
+                  *_truck_rear(-8.0, 1.05, 1.25), *wheels], ObjectClass.TRUCK)
 
 
 def bus() -> Mesh:
