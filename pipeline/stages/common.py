@@ -86,13 +86,12 @@ def command_line(argv: list[str] | None = None) -> list[str]:
 
 
 @contextlib.contextmanager
-def atomic_output_dir(out_dir: Path, *, overwrite: bool = True) -> Iterator[Path]:
+def atomic_output_dir(out_dir: Path) -> Iterator[Path]:
     """Yield a temporary sibling of ``out_dir``; rename it into place when the block succeeds.
 
-    On an exception the temporary folder is removed and ``out_dir`` is left as it was.
+    On an exception the temporary folder is removed and ``out_dir`` is left as it was. Whether ``out_dir`` may be
+    replaced at all is the CLI's check (:mod:`pipeline.core.outputs`), made before the stage runs.
     """
     out_dir = Path(out_dir)
-    if out_dir.exists() and not overwrite:
-        raise FileExistsError(f"{out_dir}: output exists (pass overwrite to replace it)")
     with atomic_dir(out_dir) as tmp:
         yield tmp

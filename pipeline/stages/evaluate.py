@@ -12,6 +12,7 @@ from pathlib import Path
 
 from pipeline.stages.common import atomic_output_dir, write_meta
 
+INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
 log = logging.getLogger(__name__)
 
@@ -36,7 +37,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kitti-mode", choices=("official", "exact"), default="official",
                         help="KITTI AP semantics: the devkit's (official) or with its known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
-    parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -51,7 +51,7 @@ def main(args: argparse.Namespace) -> int:
     config = {"gt": str(args.gt), "detections": str(args.detections), "iou": list(args.iou),
               "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
               "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
-    with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:
+    with atomic_output_dir(args.out) as tmp:
         result.write(tmp)
         write_meta(tmp, stage="evaluate", config=config, seed=None)
     table = result.metrics["table"]

@@ -12,8 +12,10 @@ import argparse
 import logging
 from pathlib import Path
 
+from pipeline.core.outputs import OutputSpec, json_file, mcap_file
 from pipeline.stages.common import command_line, config_hash, software_versions
 
+INPUT_ARGS = ("dataset",)
 HELP = "export dataset records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2"
 log = logging.getLogger(__name__)
 
@@ -43,6 +45,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lidar", help="KITTI: the LiDAR exported as velodyne (default: the first)")
     parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    """A folder; for a format written as one file (MCAP), that file and its Foxglove layout beside it."""
+    from exporters.base import get_exporter
+
+    if not get_exporter(args.format).writes_file:
+        return [OutputSpec(args.out)]
+    from exporters.foxglove_layout import layout_path
+
+    return [OutputSpec(args.out, folder=False, recognise=mcap_file, expected="an MCAP file"),
+            OutputSpec(layout_path(args.out), flag="--out's layout", folder=False,
+                       recognise=json_file(dict, ("configById", "layout")), expected="a Foxglove layout JSON file")]
 
 
 def options_from_args(args: argparse.Namespace):

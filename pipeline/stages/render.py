@@ -49,6 +49,8 @@ from pipeline.world.static import StaticWorld
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("sim", "condition", "rig")
+INTERRUPT_HINT = "the shards already rendered are kept; rerun the same command to resume"
 HELP = "render a simulated run's camera and LiDAR under one condition, with exact ground truth"
 WORKER_MODULES = ("pipeline.stages.render_frames", "pipeline.sensors.conditions")  # what a render worker imports
 SIM_FILES = ("trajectories.parquet", "tls_states.parquet", "meta.json", "roads/lanes.parquet")

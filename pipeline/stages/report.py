@@ -21,6 +21,7 @@ from pipeline.stages.common import atomic_output_dir, write_json, write_meta
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("eval", "gt", "detections", "images")
 HELP = "summarise an evaluation per condition: the paper's table, COCO AP, example frames"
 GT_BGR, DET_BGR = (60, 220, 60), (40, 40, 255)
 

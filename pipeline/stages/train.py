@@ -24,6 +24,7 @@ from pipeline.core.config import DetectorConfig, load_config
 from pipeline.core.config.loading import parse_config
 from pipeline.stages.common import atomic_output_dir, write_json, write_meta
 
+INPUT_ARGS = ("coco", "annotations", "config")
 HELP = "train the baseline detector (CenterNet-style, torch) on a COCO export"
 log = logging.getLogger(__name__)
 
