@@ -51,12 +51,19 @@ def write_ipc(table: pa.Table, path: Path) -> None:
         writer.write_table(table)
 
 
+def read_ipc(path: Path) -> pa.Table:
+    """An Arrow IPC file (:func:`write_ipc`), checked whole; a missing or damaged file fails naming it."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: table not found")
+    try:
+        with pa.OSFile(str(path)) as source:
+            table = pa.ipc.open_file(source).read_all()
+        table.validate(full=True)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise ValueError(f"{path}: not a readable Arrow IPC table ({exc})") from None
+    return table
+
+
 def read_ipc_files(paths: list[Path]) -> pd.DataFrame:
     """The rows of several Arrow IPC files of one schema (:func:`write_ipc`), in order, as one DataFrame."""
-    tables = []
-    for path in paths:
-        if not Path(path).is_file():
-            raise FileNotFoundError(f"{path}: table not found")
-        with pa.OSFile(str(path)) as source:
-            tables.append(pa.ipc.open_file(source).read_all())
-    return pa.concat_tables(tables).to_pandas()
+    return pa.concat_tables([read_ipc(path) for path in paths]).to_pandas()

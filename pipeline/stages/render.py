@@ -34,8 +34,8 @@ from tqdm import tqdm
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
-from pipeline.core.tables import read_ipc_files, read_parquet, write_parquet
-from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
+from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, write_parquet
+from pipeline.stages.common import config_hash, die_with_parent, software_versions, write_json, write_meta
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
@@ -108,7 +108,15 @@ def _check_sim(sim_dir: Path) -> dict:
         if not (sim_dir / name).is_file():
             raise FileNotFoundError(f"{sim_dir}: not a simulate output ({name} is missing); "
                                     "make one with `roadsynth simulate`")
-    return json.loads((sim_dir / "meta.json").read_text())
+    try:
+        meta = json.loads((sim_dir / "meta.json").read_text())
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"{sim_dir / 'meta.json'}: not valid JSON ({exc}); make the run again with "
+                         "`roadsynth simulate`") from None
+    missing = [k for k in ("config_hash", "seed", "config") if not isinstance(meta, dict) or k not in meta]
+    if missing:
+        raise ValueError(f"{sim_dir / 'meta.json'}: not a simulate run's meta.json (no {', '.join(missing)})")
+    return meta
 
 
 def _job_key(sim_meta: dict, sim_dir: Path, rig: RigConfig, condition: ConditionConfig, frames: list[int]) -> str:
@@ -131,9 +139,19 @@ def _prepare_work(work: Path, key: str) -> None:
 
 
 def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
-    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last)."""
+    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last) and its
+    tables read back whole; a damaged shard is rendered again."""
     done = shard_dir / f"done-{index:05d}"
-    return done.is_file() and done.read_text().split() == [str(f) for f in frames]
+    if not (done.is_file() and done.read_text().split() == [str(f) for f in frames]):
+        return False
+    for table in (f"frames-{index:05d}.arrow", f"labels-{index:05d}.arrow"):
+        try:
+            read_ipc(shard_dir / table)
+        except (OSError, ValueError) as exc:
+            log.warning("rendering shard %d again: %s", index, exc)
+            done.unlink()
+            return False
+    return True
 
 
 def _static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
@@ -248,10 +266,11 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
     queue = collections.deque(jobs)
     children = min(workers, len(jobs)) - 1
     # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
-    with _restored_opencv_threads(), cf.ProcessPoolExecutor(children, mp_context=context) as pool:
+    with _restored_opencv_threads(), _stopped_on_failure(cf.ProcessPoolExecutor(
+            children, mp_context=context, initializer=die_with_parent)) as pool:
         busy: dict[cf.Future, cf.Executor] = {pool.submit(render_shard, queue.popleft()): pool
                                               for _ in range(children)}
-        with progress() as bar, cf.ThreadPoolExecutor(1) as here:
+        with progress() as bar, _stopped_on_failure(cf.ThreadPoolExecutor(1)) as here:
             idle: list[cf.Executor] = [here]
             while queue or busy:
                 while queue and idle:
@@ -261,6 +280,23 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
                 for future in done:
                     idle.append(busy.pop(future))
                     bar.update(future.result())
+
+
+@contextlib.contextmanager
+def _stopped_on_failure(executor: cf.Executor) -> Iterator[cf.Executor]:
+    """``executor`` for the block; shut down at its end, and when the block fails (an error, Ctrl-C) without
+    starting its queued shards: a pool's workers are killed at once (a shard of theirs is lost, the rest of the
+    render is kept), this process's own shard in progress is waited for (a thread cannot be stopped), so that
+    nothing writes into the work folder once the render has returned and released its lock."""
+    try:
+        yield executor
+    except BaseException:
+        processes = getattr(executor, "_processes", None) or {}  # ProcessPoolExecutor's workers, by pid
+        for process in list(processes.values()):
+            process.kill()
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
 
 
 @contextlib.contextmanager
