@@ -83,7 +83,11 @@ def _outputs(module, args: argparse.Namespace) -> list[OutputSpec]:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
-    args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
+    try:  # importing a stage's modules takes seconds: Ctrl-C may come now
+        args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
+    except KeyboardInterrupt:
+        print(f"roadsynth {command or ''}: interrupted; nothing was written", file=sys.stderr)
+        return 130
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
     )
@@ -93,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
                              overwrite=args.overwrite):
             return int(module.main(args) or 0)
     except KeyboardInterrupt:
-        hint = getattr(module, "INTERRUPT_HINT", "nothing was written")
+        hint = getattr(module, "INTERRUPT_HINT", "the output is as it was")
         print(f"roadsynth {args.command}: interrupted; {hint}", file=sys.stderr)
         return 130
     except (ValueError, OSError, RuntimeError) as exc:
