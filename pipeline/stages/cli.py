@@ -34,9 +34,16 @@ STAGE_MODULES: dict[str, str] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line naming the flag (the usage is one ``--help`` away)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n(`{self.prog} --help` shows the usage)\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The CLI parser; with ``only``, just that sub-command's module is imported."""
-    parser = argparse.ArgumentParser(prog="roadsynth", description="Labelled synthetic driving data.")
+    parser = _Parser(prog="roadsynth", description="Labelled synthetic driving data.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging (tracebacks of errors)")
     parser.add_argument("--version", action="version", version=f"roadsynth {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

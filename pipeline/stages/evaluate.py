@@ -10,7 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.stages.common import atomic_output_dir, write_meta
+from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_meta
 
 INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
@@ -25,8 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detections", type=Path, required=True,
                         help="COCO results JSON, or a KITTI label directory with a 16th column (score)")
     parser.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
-    parser.add_argument("--iou", type=float, nargs="+", default=list(DEFAULT_IOU_THRESHOLDS), metavar="T",
-                        help="IoU thresholds of the precision/recall table (default: %(default)s)")
+    parser.add_argument("--iou", type=float_list, nargs="+", action=Flatten, default=list(DEFAULT_IOU_THRESHOLDS),
+                        metavar="T", help="IoU thresholds of the precision/recall table, separated by spaces or "
+                        "commas (default: %(default)s)")
     parser.add_argument("--group-by", metavar="KEY", help="image attribute giving one table row per value, "
                         "e.g. condition")
     parser.add_argument("--metrics", default=",".join(METRICS),
@@ -60,4 +61,7 @@ def main(args: argparse.Namespace) -> int:
             log.info("IoU %.2f: precision %s recall %s", row["iou"], row["precision"], row["recall"])
     if "stats" in result.metrics["coco"]:
         log.info("COCO AP %.4f AP50 %.4f", *result.metrics["coco"]["stats"][:2])
+        if result.metrics["coco"]["stats"][0] == -1:
+            log.warning("%s: no ground-truth objects to score (in the evaluated categories): COCO AP is undefined, "
+                        "written as -1 in metrics.json, and recall as null", args.gt)
     return 0

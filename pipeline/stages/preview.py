@@ -21,6 +21,7 @@ from pipeline.core.files import atomic_file
 from pipeline.core.geometry import Boxes3D
 from pipeline.core.outputs import OutputSpec, png_file
 from pipeline.core.record import CameraInfo, DatasetRecord, LidarInfo
+from pipeline.stages.common import int_at_least
 
 log = logging.getLogger(__name__)
 
@@ -40,8 +41,9 @@ for _cls in ObjectClass:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dataset", type=Path, required=True, help="a record folder from `roadsynth render`")
     parser.add_argument("--out", type=Path, required=True, help="PNG file to write (replaced atomically)")
-    parser.add_argument("--frames", type=int, default=4, help="frames shown, evenly spaced (default 4)")
-    parser.add_argument("--min-visible-px", type=int, default=20, help="hide boxes with fewer visible pixels")
+    parser.add_argument("--frames", type=int_at_least(1), default=4, help="frames shown, evenly spaced (default 4)")
+    parser.add_argument("--min-visible-px", type=int_at_least(0), default=20,
+                        help="hide boxes with fewer visible pixels")
 
 
 def outputs(args: argparse.Namespace) -> list[OutputSpec]:

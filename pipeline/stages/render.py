@@ -35,7 +35,14 @@ from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, write_parquet
-from pipeline.stages.common import config_hash, die_with_parent, software_versions, write_json, write_meta
+from pipeline.stages.common import (
+    config_hash,
+    die_with_parent,
+    int_at_least,
+    software_versions,
+    write_json,
+    write_meta,
+)
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
@@ -61,9 +68,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--condition", required=True, help="condition NAME (configs/conditions/) or YAML PATH")
     parser.add_argument("--rig", default="default", help="rig NAME (configs/rigs/) or YAML PATH")
     parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
-    parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run (default: all)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
-    parser.add_argument("--shard-size", type=int, default=4,
+    parser.add_argument("--frames", type=int_at_least(1),
+                        help="render N frames evenly spaced over the run (default: all)")
+    parser.add_argument("--workers", type=int_at_least(1), default=os.cpu_count() or 1,
+                        help="processes (default: all cores)")
+    parser.add_argument("--shard-size", type=int_at_least(1), default=4,
                         help="frames per shard, the unit of resumption (the last few shards are smaller)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 

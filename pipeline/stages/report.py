@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from evaluation import evaluate
-from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detections", type=Path, required=True, help="COCO results that were evaluated")
     parser.add_argument("--images", type=Path, help="folder of the GT's images (default: GT folder/images)")
     parser.add_argument("--group-by", default="condition", help="image attribute to report by (default condition)")
-    parser.add_argument("--examples", type=int, default=2, help="example frames per group (default 2)")
+    parser.add_argument("--examples", type=int_at_least(1), default=2, help="example frames per group (default 2)")
     parser.add_argument("--out", type=Path, required=True, help="report folder")
 
 

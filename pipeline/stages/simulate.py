@@ -22,7 +22,7 @@ from pipeline.core.config.loading import parse_config
 from pipeline.core.files import atomic_file
 from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.core.tables import write_parquet
-from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
 from pipeline.traffic.roadgeometry import write_road_geometry
@@ -36,7 +36,8 @@ HELP = "simulate traffic with SUMO and record every actor"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True, help="scenario NAME (configs/scenarios/) or YAML PATH")
-    parser.add_argument("--seed", type=int, required=True, help="run seed (every random draw derives from it)")
+    parser.add_argument("--seed", type=int_at_least(0), required=True,
+                        help="run seed (every random draw derives from it)")
     parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
     parser.add_argument("--vehicles", type=int, help="override demand.vehicles")
     parser.add_argument("--duration", type=float, help="override simulation.duration_s (recorded seconds)")

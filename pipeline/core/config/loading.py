@@ -44,6 +44,9 @@ def available_names(kind: str) -> list[str]:
 def resolve_config_path(name_or_path: str | Path, kind: str) -> Path:
     """Resolve a NAME under ``configs/<kind>/`` or return an existing PATH; fail listing the names."""
     candidate = Path(name_or_path)
+    if candidate.is_dir():
+        raise ConfigError(f"{candidate}: a folder; expected a {kind[:-1] if kind.endswith('s') else kind} YAML "
+                          f"file or a NAME from configs/{kind}/ ({', '.join(available_names(kind)) or 'none'})")
     if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
         if not candidate.is_file():
             raise ConfigError(f"{candidate}: config file not found")
