@@ -215,8 +215,8 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
     The lock file is removed (while still locked) at the end; a process that opened it just before finds, once it
     has the lock, that the file it locked is no longer the one at the path, and tries again.
     """
-    out = Path(os.path.abspath(out))
-    path = lock_path(out)
+    given = out
+    path = lock_path(Path(os.path.abspath(out)))
     path.parent.mkdir(parents=True, exist_ok=True)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -227,7 +227,7 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
             if exc.errno not in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK):
                 raise
             holder = _read_holder(path)
-            raise OutputBusy(f"{flag} {out}: another process is writing it ({holder}, lock {path}); wait for it to "
+            raise OutputBusy(f"{flag} {given}: another process is writing it ({holder}, lock {path}); wait for it to "
                              f"finish or choose another {flag}") from None
         try:
             same = os.fstat(fd).st_ino == os.stat(path).st_ino
