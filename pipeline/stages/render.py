@@ -34,7 +34,7 @@ from tqdm import tqdm
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
-from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, write_parquet
+from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
     config_hash,
     die_with_parent,
@@ -208,8 +208,10 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
         raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
     sim_meta = _check_sim(sim_dir)
     seed = int(sim_meta["seed"])
-    selection = select_frames(read_parquet(sim_dir / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
-                              frames)
+    trajectories = read_parquet(sim_dir / "trajectories.parquet")
+    require_finite(trajectories, str(sim_dir / "trajectories.parquet"))  # a NaN would drop actors, write NaN boxes
+    selection = select_frames(trajectories["frame"].to_numpy(), frames)
+    del trajectories
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
     _prepare_work(work, key)

@@ -69,8 +69,8 @@ RENDER = ["render", "--sim", "sim", "--condition", "noon", "--rig", "rig.yaml", 
 EXPORT = ["export", "--dataset", "rec", "--no-progress"]
 EVALUATE = ["evaluate", "--gt", "coco/annotations.json", "--detections", "dets.json"]
 REPORT = ["report", "--eval", "eval", "--gt", "coco/annotations.json", "--detections", "dets.json"]
-SIMULATE = ["simulate", "--scenario", "highway", "--seed", "1", "--vehicles", "5", "--duration", "0.2", "--warmup",
-            "1", "--no-progress"]
+SIMULATE = ["simulate", "--scenario", "highway", "--seed", "1", "--vehicles", "30", "--duration", "0.5", "--warmup",
+            "10", "--no-progress"]  # a run that succeeds where its output is allowed
 
 # (id, argv, what the error's first line must hold); every case exits 2 and changes nothing.
 REFUSED = [
@@ -124,6 +124,64 @@ def _first_error_line(err: str) -> str:
 
 @pytest.mark.parametrize(("argv", "names"), [case[1:] for case in REFUSED], ids=[case[0] for case in REFUSED])
 def test_bad_input_is_refused_naming_it_and_changes_nothing(workspace, capsys, argv, names):
+    before = snapshot(workspace)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert names in _first_error_line(err)
+    assert "Traceback" not in err
+    assert snapshot(workspace) == before
+
+
+def _truncate(rel: str) -> None:
+    data = Path(rel).read_bytes()
+    Path(rel).write_bytes(data[: len(data) // 2])
+
+
+def _flip_byte(rel: str) -> None:
+    data = bytearray(Path(rel).read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    Path(rel).write_bytes(bytes(data))
+
+
+def _set_nan(rel: str, column: str) -> None:
+    import pandas as pd
+
+    from pipeline.core.tables import write_parquet
+
+    table = pd.read_parquet(rel)
+    table.loc[len(table) // 2, column] = float("nan")
+    write_parquet(table, Path(rel))
+
+
+RGB, INSTANCE, SWEEP = "rec/cameras/front/rgb/000010.png", "rec/cameras/front/instance/000010.png", \
+    "rec/lidars/top/000010.parquet"
+# Corrupt inputs (issue 24, item 5): (id, how the input is damaged, argv, what the first error line must name).
+CORRUPT = [
+    ("truncated RGB PNG into COCO", lambda: _truncate(RGB), [*EXPORT, "--format", "coco", "--out", "c"],
+     f"{RGB}: truncated PNG"),
+    ("truncated RGB PNG into YOLO", lambda: _truncate(RGB), [*EXPORT, "--format", "yolo", "--out", "y"],
+     f"{RGB}: truncated PNG"),
+    ("truncated RGB PNG into MCAP", lambda: _truncate(RGB), [*EXPORT, "--format", "mcap", "--out", "m.mcap"],
+     f"{RGB}: truncated PNG"),
+    ("flipped byte in an RGB PNG into rosbag2", lambda: _flip_byte(RGB),
+     [*EXPORT, "--format", "rosbag2", "--out", "bag"], f"{RGB}: damaged PNG"),
+    ("truncated RGB PNG into preview", lambda: _truncate(RGB), ["preview", "--dataset", "rec", "--out", "p.png"],
+     f"{RGB}: truncated PNG"),
+    ("truncated instance PNG into COCO", lambda: _truncate(INSTANCE), [*EXPORT, "--format", "coco", "--out", "c"],
+     f"{INSTANCE}: truncated PNG"),
+    ("damaged LiDAR sweep into MCAP", lambda: _truncate(SWEEP), [*EXPORT, "--format", "mcap", "--out", "m.mcap"],
+     f"{SWEEP}: not a readable LiDAR sweep"),
+    ("NaN time in the record into MCAP", lambda: _set_nan("rec/frames.parquet", "time_s"),
+     [*EXPORT, "--format", "mcap", "--out", "m.mcap"], "rec/frames.parquet: field time_s is nan at frame"),
+    ("NaN position in the trajectories into render", lambda: _set_nan("sim/trajectories.parquet", "x_m"),
+     [*RENDER, "--out", "r"], "sim/trajectories.parquet: field x_m is nan at frame"),
+]
+
+
+@pytest.mark.parametrize(("damage", "argv", "names"), [case[1:] for case in CORRUPT], ids=[case[0] for case in CORRUPT])
+def test_a_corrupt_input_fails_naming_file_frame_and_field(workspace, capsys, damage, argv, names):
+    damage()
     before = snapshot(workspace)
     rc = main(argv)
     err = capsys.readouterr().err
