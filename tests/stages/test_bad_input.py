@@ -16,6 +16,7 @@ import yaml
 
 from pipeline.stages.cli import build_parser
 from pipeline.stages.cli import main as cli_main
+from tests.conftest import REPO
 
 NOTES = {"notes/a.txt": "my notes\n", "notes/b.txt": "more\n", "notes.txt": "a file of mine\n"}
 
@@ -188,6 +189,19 @@ def test_a_corrupt_input_fails_naming_file_frame_and_field(workspace, capsys, da
     assert rc == 2, err
     assert names in _first_error_line(err)
     assert "Traceback" not in err
+    assert snapshot(workspace) == before
+
+
+def test_a_config_error_is_not_buried_under_a_dump_of_the_config(workspace, capsys):
+    scenario = yaml.safe_load((REPO / "configs" / "scenarios" / "highway.yaml").read_text())
+    for spec in scenario["demand"]["classes"].values():
+        spec["share"] = 0
+    (workspace / "zero.yaml").write_text(yaml.safe_dump(scenario))
+    before = snapshot(workspace)
+    assert main([*SIMULATE[:2], "zero.yaml", *SIMULATE[3:], "--out", "s"]) == 2
+    err = capsys.readouterr().err
+    assert "zero.yaml" in _first_error_line(err) and "class shares must not all be zero" in err
+    assert len(err) < 400, err
     assert snapshot(workspace) == before
 
 

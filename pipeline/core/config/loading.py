@@ -69,12 +69,19 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
     return "".join(parts) or "(top level)"
 
 
+def _shown_input(value: Any, limit: int = 80) -> str:
+    """`` got VALUE:`` for the message, unless VALUE is long (a whole section, when a check across its fields fails):
+    the key path says where, and a dump of the section would bury the reason."""
+    text = repr(value)
+    return f" got {text}:" if len(text) <= limit else ""
+
+
 def format_validation_error(source: str, exc: ValidationError) -> str:
     lines = [f"{source}: invalid config ({exc.error_count()} error{'s' if exc.error_count() > 1 else ''})"]
     for err in exc.errors(include_url=False):
         # Tagged unions add the tag name to the location; it is not a key the user wrote.
         loc = tuple(p for p in err["loc"] if p not in ("constant", "uniform", "truncnormal", "lognormal"))
-        shown = "" if err["type"] == "missing" else f" got {err.get('input')!r}:"
+        shown = "" if err["type"] == "missing" else _shown_input(err.get("input"))
         lines.append(f"  {_format_loc(loc)}:{shown} {err['msg']}")
     return "\n".join(lines)
 
