@@ -217,7 +217,7 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
     """
     given = out
     path = lock_path(Path(os.path.abspath(out)))
-    path.parent.mkdir(parents=True, exist_ok=True)
+    created = _make_parents(path.parent)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -244,6 +244,21 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
         with contextlib.suppress(FileNotFoundError):
             path.unlink()
         os.close(fd)
+        for folder in created:  # folders made for an output that was not written
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; return those created, deepest first."""
+    missing = []
+    while not folder.exists():
+        missing.append(folder)
+        folder = folder.parent
+    for made in reversed(missing):
+        with contextlib.suppress(FileExistsError):
+            made.mkdir()
+    return missing
 
 
 def _read_holder(path: Path) -> str:

@@ -102,6 +102,8 @@ REFUSED = [
      "--out coco: is an input"),
     ("detect onto a text file", ["detect", "--onnx", "rig.yaml", "--annotations", "coco/annotations.json",
                                  "--out", "notes.txt"], "--out notes.txt"),
+    ("export of a missing record into new folders", ["export", "--dataset", "nope", "--format", "coco", "--out",
+                                                     "new/deeper/c"], "nope"),
     # unclear errors and tracebacks (item 8)
     ("preview to a .jpg", ["preview", "--dataset", "rec", "--out", "sheet.jpg"], "--out sheet.jpg"),
     ("preview --frames 0", ["preview", "--dataset", "rec", "--out", "p.png", "--frames", "0"], "--frames"),
