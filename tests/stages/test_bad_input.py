@@ -218,6 +218,8 @@ def test_a_broken_meta_json_is_named(workspace, capsys):
 # Reruns into an earlier output of the same stage (what `dvc repro` does), and --overwrite where nothing is an input.
 ACCEPTED = [
     ("export onto its earlier export", [*EXPORT, "--format", "coco", "--out", "coco"], "coco"),
+    ("render onto its earlier record", [*RENDER, "--out", "rec2"], "rec2"),
+    ("preview onto its earlier sheet", ["preview", "--dataset", "rec", "--out", "sheet.png"], "sheet.png"),
     ("evaluate onto its earlier evaluation, --iou with commas and spaces",
      [*EVALUATE, "--out", "eval", "--iou", "0.5,0.7", "0.9"], "eval"),
     ("export --overwrite onto a folder of other files", [*EXPORT, "--format", "yolo", "--out", "notes", "--overwrite"],
@@ -230,6 +232,8 @@ ACCEPTED = [
 @pytest.mark.parametrize(("argv", "output"), [case[1:] for case in ACCEPTED], ids=[case[0] for case in ACCEPTED])
 def test_an_earlier_output_of_the_stage_is_replaced(workspace, capsys, argv, output):
     (workspace / "empty.png").mkdir()
+    shutil.copytree(workspace / "rec", workspace / "rec2")  # an earlier render output
+    (workspace / "sheet.png").write_bytes(b"\x89PNG\r\n\x1a\n an earlier contact sheet")
     before = {k: v for k, v in snapshot(workspace).items() if k != output and not k.startswith(f"{output}/")}
     assert main(argv) == 0, capsys.readouterr().err
     after = {k: v for k, v in snapshot(workspace).items() if k != output and not k.startswith(f"{output}/")}
