@@ -5,7 +5,10 @@ shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the 
 determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
 when the whole record is complete (renamed into place). A shard counts as done only when its done file lists
 exactly the shard's frames: ``--shard-size`` is not part of the key, and a resume with another shard size gives
-the same shard index other frames. Layout of the record: pipeline/core/record.py and docs/dataset.md.
+the same shard index other frames; a done shard whose tables do not read back whole is rendered again. The CLI
+holds OUT's lock while it renders (:mod:`pipeline.core.outputs`), so no two renders share the work folder. Worker
+processes die with the render (:func:`pipeline.stages.common.die_with_parent`); on Ctrl-C they are killed and the
+shards done so far are kept for the resume. Layout of the record: pipeline/core/record.py and docs/dataset.md.
 """
 
 from __future__ import annotations
