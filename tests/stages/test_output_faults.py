@@ -144,7 +144,7 @@ def _stopped_mid_export(args: list[str], cwd: Path) -> subprocess.Popen:
     for _ in range(5):
         proc = _start(args, cwd)
         while proc.poll() is None and not any(p.name.startswith(".runs.mcap.tmp-") for p in cwd.iterdir()):
-            pass
+            time.sleep(0.001)  # the export writes for about 0.1 s
         if proc.poll() is None:
             proc.send_signal(signal.SIGSTOP)
             if proc.poll() is None and any(p.name.startswith(".runs.mcap.tmp-") for p in cwd.iterdir()):
