@@ -208,15 +208,23 @@ def lock_path(out: Path) -> Path:
     return out.with_name(f".{out.name}.lock")
 
 
+_HELD: set[tuple[int, str]] = set()  # (pid, lock file) this process holds; a forked child holds none of them
+
+
 @contextlib.contextmanager
 def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
     """Hold the exclusive lock of ``out`` for the block; :class:`OutputBusy` at once when another process holds it.
 
     The lock file is removed (while still locked) at the end; a process that opened it just before finds, once it
-    has the lock, that the file it locked is no longer the one at the path, and tries again.
+    has the lock, that the file it locked is no longer the one at the path, and tries again. A process that holds
+    the lock already (the CLI, around a stage function that takes it too) just enters the block.
     """
     given = out
     path = lock_path(Path(os.path.abspath(out)))
+    key = (os.getpid(), str(path))
+    if key in _HELD:
+        yield
+        return
     created = _make_parents(path.parent)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -236,11 +244,13 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
         if same:
             break
         os.close(fd)  # unlinked by its last holder after we opened it: lock the new one
+    _HELD.add(key)
     try:
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()} roadsynth {stage}\n".encode())
         yield
     finally:
+        _HELD.discard(key)
         with contextlib.suppress(FileNotFoundError):
             path.unlink()
         os.close(fd)

@@ -5,8 +5,8 @@ shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the 
 determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
 when the whole record is complete (renamed into place). A shard counts as done only when its done file lists
 exactly the shard's frames: ``--shard-size`` is not part of the key, and a resume with another shard size gives
-the same shard index other frames; a done shard whose tables do not read back whole is rendered again. The CLI
-holds OUT's lock while it renders (:mod:`pipeline.core.outputs`), so no two renders share the work folder. Worker
+the same shard index other frames; a done shard whose tables do not read back whole is rendered again. A render
+holds OUT's lock (:mod:`pipeline.core.outputs`), so no two renders share the work folder. Worker
 processes die with the render (:func:`pipeline.stages.common.die_with_parent`); on Ctrl-C they are killed and the
 shards done so far are kept for the resume. Layout of the record: pipeline/core/record.py and docs/dataset.md.
 """
@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
+from pipeline.core.outputs import output_lock
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
@@ -184,7 +185,7 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
     reuse_freed_memory()  # from the start: the static world build's large temporaries too
-    with _frozen_heap():
+    with output_lock(out, "render"), _frozen_heap():  # one writer of OUT and its work folder
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)
 

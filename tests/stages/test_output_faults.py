@@ -193,3 +193,22 @@ def test_a_second_render_into_the_same_out_fails_at_once(run_21_frames, rig_file
     assert first.wait(timeout=300) == 0, first.stderr.read()
     assert tree_hashes(tmp_path / "rec") == tree_hashes(reference_record)  # the first's output, whole
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+def test_the_render_function_takes_the_lock_too(run_21_frames, small_rig, noon_condition, tmp_path):
+    """Called from Python, not the CLI, a render still refuses an output another process is writing."""
+    from pipeline.core.outputs import OutputBusy
+    from pipeline.stages.render import render
+
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time\nfrom pipeline.core.outputs import output_lock\n"
+                               "with output_lock(sys.argv[1], 'render'):\n    print('held', flush=True)\n"
+                               "    time.sleep(60)", str(tmp_path / "rec")],
+                              env=_env(), stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(OutputBusy, match="another process is writing it"):
+            render(run_21_frames, noon_condition, small_rig, tmp_path / "rec", frames=1, progress=False)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not (tmp_path / ".rec.partial").exists()
