@@ -89,13 +89,15 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 
 # Options that only some formats read: given for another format, they would be ignored without a word.
-_FORMAT_OPTIONS = {"camera": ("kitti",), "lidar": ("kitti",), "compression": ("mcap", "rosbag2")}
+_FORMAT_OPTIONS = {"camera": ("kitti",), "lidar": ("kitti",), "compression": ("mcap", "rosbag2"),
+                   "copy_images": ("coco", "kitti", "yolo")}
 
 
 def _check_applicable(args: argparse.Namespace) -> None:
     for name, formats in _FORMAT_OPTIONS.items():
-        if getattr(args, name) is not None and args.format not in formats:
-            raise ValueError(f"--{name} applies to --format {' or '.join(formats)} only, not {args.format}")
+        if getattr(args, name) not in (None, False) and args.format not in formats:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} applies to --format {', '.join(formats)} only, not {args.format}")
 
 
 def main(args: argparse.Namespace) -> int:

@@ -115,6 +115,8 @@ REFUSED = [
     ("export --camera for coco", [*EXPORT, "--format", "coco", "--camera", "rear", "--out", "c"], "--camera"),
     ("export --compression for yolo", [*EXPORT, "--format", "yolo", "--compression", "lz4", "--out", "y"],
      "--compression"),
+    ("export --copy-images for mcap", [*EXPORT, "--format", "mcap", "--copy-images", "--out", "m.mcap"],
+     "--copy-images"),
     ("evaluate --iou not a number", [*EVALUATE, "--iou", "0.5,x", "--out", "e"], "--iou"),
 ]
 
