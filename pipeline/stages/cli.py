@@ -90,6 +90,9 @@ def _outputs(module, args: argparse.Namespace) -> list[OutputSpec]:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
+    if command is None and "--version" in argv:  # without importing every stage to list them
+        print(f"roadsynth {_version()}")
+        return 0
     try:  # importing a stage's modules takes seconds: Ctrl-C may come now
         args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
     except KeyboardInterrupt:
