@@ -1,7 +1,8 @@
 """Atomic outputs: write into a temporary sibling, rename into place only when complete.
 
 A failure leaves the destination as it was and removes the temporary, so nothing half-written is ever
-seen where DVC (or a user) looks. Used by every stage and exporter.
+seen where DVC (or a user) looks. Used by every stage and exporter. What a stage may replace, the lock of an
+output and the temporaries of killed runs: :mod:`pipeline.core.outputs`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ def _tmp_sibling(path: Path, tag: str) -> Path:
     return path.with_name(f".{path.name}.{tag}-{os.getpid()}")
 
 
-def _remove(path: Path) -> None:
+def remove_path(path: Path) -> None:
+    """Remove the file, link or folder ``path``."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
     elif path.exists() or path.is_symlink():
@@ -31,7 +33,7 @@ def _fresh_sibling(out: Path) -> Path:
     """The temporary sibling of ``out`` (parent folders created), cleared of any leftover."""
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = _tmp_sibling(out, "tmp")
-    _remove(tmp)
+    remove_path(tmp)
     return tmp
 
 
@@ -43,10 +45,10 @@ def atomic_dir(out: Path) -> Iterator[Path]:
     tmp.mkdir()
     try:
         yield tmp
+        replace_path(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    replace_path(tmp, out)
 
 
 @contextlib.contextmanager
@@ -56,10 +58,11 @@ def atomic_file(out: Path) -> Iterator[Path]:
     tmp = _fresh_sibling(out)
     try:
         yield tmp
+        replace_path(tmp, out)
     except BaseException:
-        _remove(tmp)
+        if tmp.exists() or tmp.is_symlink():
+            remove_path(tmp)
         raise
-    replace_path(tmp, out)
 
 
 @contextlib.contextmanager
@@ -80,9 +83,14 @@ def replace_path(tmp: Path, out: Path) -> None:
     """Move ``tmp`` onto ``out``; an existing ``out`` (file or folder) is set aside first, then deleted."""
     old = _tmp_sibling(out, "old")
     if out.exists() or out.is_symlink():
-        _remove(old)
+        remove_path(old)
         out.rename(old)
-    tmp.rename(out)
+    try:
+        tmp.rename(out)
+    except BaseException:
+        if (old.exists() or old.is_symlink()) and not (out.exists() or out.is_symlink()):
+            old.rename(out)  # put the earlier output back
+        raise
     if old.exists():
-        _remove(old)
+        remove_path(old)
     log.info("wrote %s", out)

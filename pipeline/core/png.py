@@ -74,3 +74,32 @@ def encode_png(image: np.ndarray, row_filter: str = "none", *, name: str = "imag
 def write_png(path: Path, image: np.ndarray, row_filter: str = "none") -> None:
     """Write ``image`` (see :func:`encode_png`) to ``path``."""
     Path(path).write_bytes(encode_png(image, row_filter, name=str(path)))
+
+
+def check_png(data: bytes, source: str, *, width: int | None = None, height: int | None = None) -> None:
+    """Raise ValueError naming ``source`` unless ``data`` is a whole PNG: the signature, then chunks each with a
+    matching CRC (a flipped or missing byte fails), IHDR first, IEND last, and the size ``width`` x ``height``
+    when given. Reads no pixel: a fraction of the cost of decoding."""
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{source}: not a PNG image (no PNG signature)")
+    at, first = 8, True
+    while True:
+        if at + 8 > len(data):
+            raise ValueError(f"{source}: truncated PNG (ends at byte {len(data)} without its IEND chunk)")
+        length, kind = struct.unpack(">I4s", data[at: at + 8])
+        end = at + 12 + length
+        if end > len(data):
+            raise ValueError(f"{source}: truncated PNG (its {kind.decode('latin-1')} chunk ends past byte {len(data)})")
+        (crc,) = struct.unpack(">I", data[end - 4: end])
+        if zlib.crc32(data[at + 4: end - 4]) != crc:
+            raise ValueError(f"{source}: damaged PNG (CRC mismatch in its {kind.decode('latin-1')} chunk at byte {at})")
+        if first:
+            if kind != b"IHDR":
+                raise ValueError(f"{source}: damaged PNG (first chunk {kind!r}, not IHDR)")
+            w, h = struct.unpack(">II", data[at + 8: at + 16])
+            if (width is not None and w != width) or (height is not None and h != height):
+                raise ValueError(f"{source}: PNG of {w}x{h} pixels, expected {width}x{height}")
+            first = False
+        if kind == b"IEND":
+            return
+        at = end

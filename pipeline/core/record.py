@@ -26,9 +26,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.core.tables import read_parquet
+from pipeline.core.png import check_png
+from pipeline.core.tables import read_parquet, require_finite
 
 SCHEMA_VERSION = 1
 RECORD_FILE = "record.json"
@@ -183,42 +185,61 @@ class DatasetRecord:
 
     @property
     def frames(self) -> pd.DataFrame:
-        return conform(read_parquet(self.root / "frames.parquet"), FRAME_COLUMNS, str(self.root / "frames.parquet"))
+        path = self.root / "frames.parquet"
+        frames = conform(read_parquet(path), FRAME_COLUMNS, str(path))
+        require_finite(frames, str(path), keys=("frame",))  # times and ego poses become every export's
+        return frames
 
     @property
     def labels(self) -> pd.DataFrame:
         return conform(read_parquet(self.root / "labels.parquet"), LABEL_COLUMNS, str(self.root / "labels.parquet"))
 
     def image_path(self, camera: str, channel: str, frame: int) -> Path:
+        """The path of an image, checked whole (every PNG chunk's CRC) and of the camera's size: exporters link or
+        copy the file without decoding it."""
         path = camera_path(self.root, camera, channel, frame)
         if not path.is_file():
             raise RecordError(f"{path}: missing from the record")
+        cam = self.info.camera(camera)
+        try:
+            check_png(path.read_bytes(), str(path), width=cam.width_px, height=cam.height_px)
+        except ValueError as exc:
+            raise RecordError(f"{exc} (frame {frame}, camera {camera}, {channel} image)") from None
         return path
+
+    def _decoded(self, camera: str, channel: str, frame: int, flags: int) -> np.ndarray:
+        import cv2
+
+        path = self.image_path(camera, channel, frame)
+        image = cv2.imread(str(path), flags)
+        if image is None:
+            raise RecordError(f"{path}: the image does not decode (frame {frame}, camera {camera}, {channel} image)")
+        return image
 
     def rgb(self, camera: str, frame: int) -> np.ndarray:
         """(H, W, 3) uint8 RGB."""
         import cv2
 
-        return cv2.imread(str(self.image_path(camera, "rgb", frame)), cv2.IMREAD_COLOR)[:, :, ::-1]
+        return self._decoded(camera, "rgb", frame, cv2.IMREAD_COLOR)[:, :, ::-1]
 
     def instance(self, camera: str, frame: int) -> np.ndarray:
         """(H, W) int32 track id per pixel, 0 where no object."""
         import cv2
 
-        return cv2.imread(str(self.image_path(camera, "instance", frame)), cv2.IMREAD_UNCHANGED).astype(np.int32)
+        return self._decoded(camera, "instance", frame, cv2.IMREAD_UNCHANGED).astype(np.int32)
 
     def semantic(self, camera: str, frame: int) -> np.ndarray:
         """(H, W) uint8 SemanticClass."""
         import cv2
 
-        return cv2.imread(str(self.image_path(camera, "semantic", frame)), cv2.IMREAD_UNCHANGED)
+        return self._decoded(camera, "semantic", frame, cv2.IMREAD_UNCHANGED)
 
     def depth_m(self, camera: str, frame: int) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) float32 z-depth in metres and (H, W) bool validity mask: no hit (0) and the saturated value
         (65535: 255.996 m or farther, not a measurement) are invalid."""
         import cv2
 
-        raw = cv2.imread(str(self.image_path(camera, "depth", frame)), cv2.IMREAD_UNCHANGED)
+        raw = self._decoded(camera, "depth", frame, cv2.IMREAD_UNCHANGED)
         return raw.astype(np.float32) / DEPTH_SCALE, (raw > 0) & (raw < np.iinfo(np.uint16).max)
 
     def points(self, lidar: str, frame: int) -> pd.DataFrame:
@@ -234,7 +255,15 @@ class DatasetRecord:
             raise RecordError(f"{path}: missing from the record")
         # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs. A plain
         # ParquetFile read skips read_table's dataset discovery (~20% of the CPU time of a 100k-point sweep).
-        with pq.ParquetFile(path) as parquet:
-            table = parquet.read()
+        try:
+            with pq.ParquetFile(path) as parquet:
+                table = parquet.read()
+        except (pa.ArrowException, OSError) as exc:
+            raise RecordError(f"{path}: not a readable LiDAR sweep (frame {frame}, LiDAR {lidar}): {exc}") from None
         require_columns(table.column_names, POINT_COLUMNS, str(path))
-        return {c: np.asarray(table.column(c).to_numpy(), dtype=dtype) for c, dtype in POINT_COLUMNS.items()}
+        columns = {c: np.asarray(table.column(c).to_numpy(), dtype=dtype) for c, dtype in POINT_COLUMNS.items()}
+        for name, values in columns.items():
+            if values.dtype.kind == "f" and not np.isfinite(values).all():
+                raise RecordError(f"{path}: field {name} is not finite in {int((~np.isfinite(values)).sum())} "
+                                  f"point(s) (frame {frame}, LiDAR {lidar})")
+        return columns

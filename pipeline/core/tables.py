@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -41,7 +42,25 @@ def write_sweep(table: pa.Table, path: Path) -> None:
 def read_parquet(path: Path, columns: list[str] | None = None) -> pd.DataFrame:
     if not Path(path).is_file():
         raise FileNotFoundError(f"{path}: table not found")
-    return pq.read_table(path, columns=columns).to_pandas()
+    try:
+        return pq.read_table(path, columns=columns).to_pandas()
+    except (pa.ArrowException, OSError) as exc:  # a damaged file: name it (pyarrow's message does not)
+        raise ValueError(f"{path}: not a readable Parquet table ({exc})") from None
+
+
+def require_finite(frame: pd.DataFrame, source: str, *, keys: tuple[str, ...] = ("frame", "track_id")) -> None:
+    """Raise ValueError naming ``source``, the field and the first row (by its ``keys`` columns) when a float column
+    of ``frame`` holds NaN or an infinity."""
+    for column in frame.columns:
+        values = frame[column].to_numpy()
+        if values.dtype.kind != "f":
+            continue
+        bad = ~np.isfinite(values)
+        if bad.any():
+            row = int(np.argmax(bad))
+            where = ", ".join(f"{k} {frame[k].iloc[row]}" for k in keys if k in frame.columns) or f"row {row}"
+            raise ValueError(f"{source}: field {column} is {values[row]} at {where} ({int(bad.sum())} row(s) "
+                             "not finite)")
 
 
 def write_ipc(table: pa.Table, path: Path) -> None:
@@ -51,12 +70,19 @@ def write_ipc(table: pa.Table, path: Path) -> None:
         writer.write_table(table)
 
 
+def read_ipc(path: Path) -> pa.Table:
+    """An Arrow IPC file (:func:`write_ipc`), checked whole; a missing or damaged file fails naming it."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: table not found")
+    try:
+        with pa.OSFile(str(path)) as source:
+            table = pa.ipc.open_file(source).read_all()
+        table.validate(full=True)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise ValueError(f"{path}: not a readable Arrow IPC table ({exc})") from None
+    return table
+
+
 def read_ipc_files(paths: list[Path]) -> pd.DataFrame:
     """The rows of several Arrow IPC files of one schema (:func:`write_ipc`), in order, as one DataFrame."""
-    tables = []
-    for path in paths:
-        if not Path(path).is_file():
-            raise FileNotFoundError(f"{path}: table not found")
-        with pa.OSFile(str(path)) as source:
-            tables.append(pa.ipc.open_file(source).read_all())
-    return pa.concat_tables(tables).to_pandas()
+    return pa.concat_tables([read_ipc(path) for path in paths]).to_pandas()

@@ -1,8 +1,14 @@
 """The ``roadsynth`` command line: a thin shell over the stage modules.
 
-Each stage module in :data:`STAGE_MODULES` defines ``HELP`` (one line), ``add_arguments(parser)``
-and ``main(args) -> int``. Modules are imported only when their sub-command runs (or when ``--help``
-lists them), so ``roadsynth evaluate`` never imports libsumo, open3d or torch.
+Each stage module in :data:`STAGE_MODULES` defines ``HELP`` (one line), ``add_arguments(parser)``,
+``main(args) -> int`` and ``INPUT_ARGS`` (the arguments naming its input paths); ``outputs(args)`` when its
+outputs are other than one folder ``--out``; ``INTERRUPT_HINT`` when an interrupted run can be resumed.
+Modules are imported only when their sub-command runs (or when ``--help`` lists them), so ``roadsynth
+evaluate`` never imports libsumo, open3d or torch.
+
+Every stage's outputs follow one rule, checked here before the stage runs, and are locked while it runs
+(:mod:`pipeline.core.outputs`): an output is never an input or inside one; an existing output that is not an
+earlier output of the same stage is replaced only with ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -11,6 +17,10 @@ import argparse
 import importlib
 import logging
 import sys
+from importlib import metadata
+from pathlib import Path
+
+from pipeline.core.outputs import OVERWRITE_FLAG, OutputSpec, claimed_outputs
 
 STAGE_MODULES: dict[str, str] = {
     "simulate": "pipeline.stages.simulate",
@@ -24,10 +34,18 @@ STAGE_MODULES: dict[str, str] = {
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line naming the flag (the usage is one ``--help`` away)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n(`{self.prog} --help` shows the usage)\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The CLI parser; with ``only``, just that sub-command's module is imported."""
-    parser = argparse.ArgumentParser(prog="roadsynth", description="Labelled synthetic driving data.")
-    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    parser = _Parser(prog="roadsynth", description="Labelled synthetic driving data.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging (tracebacks of errors)")
+    parser.add_argument("--version", action="version", version=f"roadsynth {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, module_name in STAGE_MODULES.items():
         if only is not None and name != only:
@@ -36,19 +54,66 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         module = importlib.import_module(module_name)
         stage_parser = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(stage_parser)
+        stage_parser.add_argument(OVERWRITE_FLAG, action="store_true",
+                                  help="replace an existing output even when it is not an earlier output of this "
+                                  "stage (never an input)")
+        # Also after the sub-command; SUPPRESS keeps a -v given before it.
+        stage_parser.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                                  help="debug logging (tracebacks of errors)")
         stage_parser.set_defaults(_module=module)
     return parser
+
+
+def _version() -> str:
+    try:
+        return metadata.version("roadsynth")
+    except metadata.PackageNotFoundError:
+        return "(not installed)"
+
+
+def _inputs(module, args: argparse.Namespace) -> list[Path]:
+    """The input paths of a stage run: its ``INPUT_ARGS`` that name existing files or folders (a config NAME
+    is not a path; a ``NAME=PATH`` value, as report's, names PATH)."""
+    found = []
+    for name in module.INPUT_ARGS:
+        value = getattr(args, name, None)
+        for item in value if isinstance(value, list) else [value]:
+            if item is None:
+                continue
+            if not Path(item).exists() and "=" in str(item):
+                item = str(item).partition("=")[2]
+            if Path(item).exists():
+                found.append(Path(item))
+    return found
+
+
+def _outputs(module, args: argparse.Namespace) -> list[OutputSpec]:
+    return module.outputs(args) if hasattr(module, "outputs") else [OutputSpec(args.out)]
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
-    args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
+    if command is None and "--version" in argv:  # without importing every stage to list them
+        print(f"roadsynth {_version()}")
+        return 0
+    try:  # importing a stage's modules takes seconds: Ctrl-C may come now
+        args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
+    except KeyboardInterrupt:
+        print(f"roadsynth {command or ''}: interrupted; nothing was written", file=sys.stderr)
+        return 130
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
     )
+    module = args._module
     try:
-        return int(args._module.main(args) or 0)
+        with claimed_outputs(_outputs(module, args), stage=args.command, inputs=_inputs(module, args),
+                             overwrite=args.overwrite):
+            return int(module.main(args) or 0)
+    except KeyboardInterrupt:
+        hint = getattr(module, "INTERRUPT_HINT", "the output is as it was")
+        print(f"roadsynth {args.command}: interrupted; {hint}", file=sys.stderr)
+        return 130
     except (ValueError, OSError, RuntimeError) as exc:
         # Input and run errors: the message names the file, the field and what was expected;
         # -v shows the traceback.

@@ -6,13 +6,19 @@ finished, so a crash never leaves a half-written folder that DVC would hash.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
+import ctypes
 import hashlib
 import json
 import logging
 import math
+import os
+import signal
 import sys
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -111,13 +117,70 @@ def command_line(argv: list[str] | None = None) -> list[str]:
 
 
 @contextlib.contextmanager
-def atomic_output_dir(out_dir: Path, *, overwrite: bool = True) -> Iterator[Path]:
+def atomic_output_dir(out_dir: Path) -> Iterator[Path]:
     """Yield a temporary sibling of ``out_dir``; rename it into place when the block succeeds.
 
-    On an exception the temporary folder is removed and ``out_dir`` is left as it was.
+    On an exception the temporary folder is removed and ``out_dir`` is left as it was. Whether ``out_dir`` may be
+    replaced at all is the CLI's check (:mod:`pipeline.core.outputs`), made before the stage runs.
     """
     out_dir = Path(out_dir)
-    if out_dir.exists() and not overwrite:
-        raise FileExistsError(f"{out_dir}: output exists (pass overwrite to replace it)")
     with atomic_dir(out_dir) as tmp:
         yield tmp
+
+
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def die_with_parent() -> None:
+    """Initializer of a stage's worker processes: leave Ctrl-C to the main process (which stops the
+    pool and reports), and die when the worker's parent dies, even by ``kill -9``, instead of waiting forever for
+    work that will not come. On Linux the kernel kills it (PR_SET_PDEATHSIG; with a forkserver the parent is the
+    server, which exits with the main process); elsewhere a thread watches the parent's pid."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
+            if os.getppid() != parent:  # the parent died before the request
+                os._exit(1)
+            return
+        log.debug("prctl(PR_SET_PDEATHSIG) failed (errno %d); watching the parent instead", ctypes.get_errno())
+    threading.Thread(target=_exit_when_orphaned, args=(parent,), name="parent-watch", daemon=True).start()
+
+
+def _exit_when_orphaned(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(1)
+
+
+def int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse ``type``: an integer >= ``minimum`` (argparse names the flag in its error)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {minimum}"
+    return parse
+
+
+def float_list(text: str) -> list[float]:
+    """An argparse ``type`` for list flags: comma-separated numbers (``0.5,0.7``); with ``nargs="+"`` and
+    :class:`Flatten`, space-separated ones too (``0.5 0.7``), as the other list flags take commas."""
+    try:
+        return [float(item) for item in text.split(",") if item.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas or spaces, got {text!r}") from None
+
+
+class Flatten(argparse.Action):
+    """Store the items of the lists an ``nargs="+"`` list type (:func:`float_list`) gives, as one list."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        setattr(namespace, self.dest, [item for chunk in values for item in chunk])

@@ -23,8 +23,10 @@ import logging
 import os
 from pathlib import Path
 
+from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.stages.train import annotations_path
 
+INPUT_ARGS = ("model", "onnx", "coco", "annotations", "names")
 HELP = "detect objects in a COCO export's images with our model or an ONNX model; write COCO results"
 log = logging.getLogger(__name__)
 
@@ -73,6 +75,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     onnx.add_argument("--nms-iou", type=float, help="class-wise NMS IoU (family's: YOLOX 0.65, YOLOv5 0.45, "
                       "YOLOv8 0.7, decoded none; 1 turns it off)")
     onnx.add_argument("--max-detections", type=int, help="per image (default: 100)")
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    return [OutputSpec(args.out, folder=False, recognise=json_file(list, ("image_id", "category_id", "bbox", "score")),
+                       expected="a COCO results JSON file")]
 
 
 def _onnx_detector(args: argparse.Namespace):

@@ -11,8 +11,9 @@ import logging
 from pathlib import Path
 
 from pipeline.core.digests import path_sha256
-from pipeline.stages.common import atomic_output_dir, write_meta
+from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_meta
 
+INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
 log = logging.getLogger(__name__)
 
@@ -25,8 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detections", type=Path, required=True,
                         help="COCO results JSON, or a KITTI label directory with a 16th column (score)")
     parser.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
-    parser.add_argument("--iou", type=float, nargs="+", default=list(DEFAULT_IOU_THRESHOLDS), metavar="T",
-                        help="IoU thresholds of the precision/recall table (default: %(default)s)")
+    parser.add_argument("--iou", type=float_list, nargs="+", action=Flatten, default=list(DEFAULT_IOU_THRESHOLDS),
+                        metavar="T", help="IoU thresholds of the precision/recall table, separated by spaces or "
+                        "commas (default: %(default)s)")
     parser.add_argument("--group-by", metavar="KEY", help="image attribute giving one table row per value, "
                         "e.g. condition")
     parser.add_argument("--metrics", default=",".join(METRICS),
@@ -39,7 +41,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
     parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
-    parser.add_argument("--no-overwrite", action="store_true", help="fail if --out exists")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -57,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
               "iou": list(args.iou),
               "group_by": args.group_by, "metrics": list(metrics), "score_threshold": args.score_threshold,
               "kitti_mode": args.kitti_mode, "calib": None if args.calib is None else str(args.calib)}
-    with atomic_output_dir(args.out, overwrite=not args.no_overwrite) as tmp:
+    with atomic_output_dir(args.out) as tmp:
         result.write(tmp, png=args.png)
         write_meta(tmp, stage="evaluate", config=config, seed=None)
     table = result.metrics["table"]
@@ -66,4 +67,7 @@ def main(args: argparse.Namespace) -> int:
             log.info("IoU %.2f: precision %s recall %s", row["iou"], row["precision"], row["recall"])
     if "stats" in result.metrics["coco"]:
         log.info("COCO AP %.4f AP50 %.4f", *result.metrics["coco"]["stats"][:2])
+        if result.metrics["coco"]["stats"][0] == -1:
+            log.warning("%s: no ground-truth objects to score (in the evaluated categories): COCO AP is undefined, "
+                        "written as -1 in metrics.json, and recall as null", args.gt)
     return 0

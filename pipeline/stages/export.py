@@ -12,8 +12,10 @@ import argparse
 import logging
 from pathlib import Path
 
-from pipeline.stages.common import command_line, config_hash, software_versions
+from pipeline.core.outputs import OutputSpec, json_file, mcap_file
+from pipeline.stages.common import command_line, config_hash, int_at_least, software_versions
 
+INPUT_ARGS = ("dataset",)
 HELP = "export dataset records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2"
 log = logging.getLogger(__name__)
 
@@ -33,16 +35,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--splits", metavar="SPEC",
                         help="splits by whole runs: fractions 'train=0.8,val=0.2' or runs "
                         "'val=highway:3+urban:1,train=*' (default: one split)")
-    parser.add_argument("--min-visible-px", type=int, default=DEFAULT_MIN_VISIBLE_PX, metavar="N",
+    parser.add_argument("--min-visible-px", type=int_at_least(0), default=DEFAULT_MIN_VISIBLE_PX, metavar="N",
                         help="objects with fewer visible pixels become ignore regions (default: %(default)s)")
     parser.add_argument("--max-occlusion", type=float, default=DEFAULT_MAX_OCCLUSION, metavar="F",
                         help="objects more occluded than F become ignore regions (default: %(default)s)")
-    parser.add_argument("--compression", choices=[c.value for c in Compression], default=Compression.ZSTD.value,
-                        help="MCAP/rosbag2 chunk compression (default: %(default)s)")
+    parser.add_argument("--compression", choices=[c.value for c in Compression],
+                        help=f"MCAP/rosbag2 chunk compression (default: {Compression.ZSTD.value})")
     parser.add_argument("--camera", help="KITTI: the camera exported as image_2 (default: the first)")
     parser.add_argument("--lidar", help="KITTI: the LiDAR exported as velodyne (default: the first)")
     parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    """A folder; for a format written as one file (MCAP), that file and its Foxglove layout beside it."""
+    from exporters.base import get_exporter
+
+    if not get_exporter(args.format).writes_file:
+        return [OutputSpec(args.out)]
+    from exporters.foxglove_layout import layout_path
+
+    return [OutputSpec(args.out, folder=False, recognise=mcap_file, expected="an MCAP file"),
+            OutputSpec(layout_path(args.out), flag="--out's layout", folder=False,
+                       recognise=json_file(dict, ("configById", "layout")), expected="a Foxglove layout JSON file")]
 
 
 def options_from_args(args: argparse.Namespace):
@@ -53,7 +68,7 @@ def options_from_args(args: argparse.Namespace):
     return ExportOptions(
         box=BoxMode(args.box), splits=SplitSpec.parse(args.splits) if args.splits else None,
         filter=ObjectFilter(min_visible_px=args.min_visible_px, max_occlusion=args.max_occlusion),
-        compression=Compression(args.compression), camera=args.camera, lidar=args.lidar,
+        compression=Compression(args.compression or Compression.ZSTD.value), camera=args.camera, lidar=args.lidar,
         link_images=not args.copy_images, progress=not args.no_progress)
 
 
@@ -73,10 +88,23 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
     return out
 
 
+# Options that only some formats read: given for another format, they would be ignored without a word.
+_FORMAT_OPTIONS = {"camera": ("kitti",), "lidar": ("kitti",), "compression": ("mcap", "rosbag2"),
+                   "copy_images": ("coco", "kitti", "yolo")}
+
+
+def _check_applicable(args: argparse.Namespace) -> None:
+    for name, formats in _FORMAT_OPTIONS.items():
+        if getattr(args, name) not in (None, False) and args.format not in formats:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{flag} applies to --format {', '.join(formats)} only, not {args.format}")
+
+
 def main(args: argparse.Namespace) -> int:
     from exporters.base import get_exporter
     from pipeline.core.memory import keep_freed_memory
 
+    _check_applicable(args)
     keep_freed_memory()  # this process ends with the export: keep freed buffers mapped (pipeline.core.memory)
     args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)

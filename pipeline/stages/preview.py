@@ -17,11 +17,15 @@ import cv2
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
+from pipeline.core.files import atomic_file
 from pipeline.core.geometry import Boxes3D
+from pipeline.core.outputs import OutputSpec, png_file
 from pipeline.core.record import CameraInfo, DatasetRecord, LidarInfo
+from pipeline.stages.common import int_at_least
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("dataset",)
 HELP = "draw a contact sheet of a dataset record: boxes on images and a bird's-eye LiDAR view"
 CLASS_BGR = {"car": (60, 200, 60), "van": (200, 200, 60), "truck": (40, 140, 255), "bus": (255, 120, 40),
              "motorcycle": (200, 60, 200), "bicycle": (255, 60, 160), "pedestrian": (60, 60, 255)}
@@ -36,9 +40,14 @@ for _cls in ObjectClass:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dataset", type=Path, required=True, help="a record folder from `roadsynth render`")
-    parser.add_argument("--out", type=Path, required=True, help="PNG to write")
-    parser.add_argument("--frames", type=int, default=4, help="frames shown, evenly spaced (default 4)")
-    parser.add_argument("--min-visible-px", type=int, default=20, help="hide boxes with fewer visible pixels")
+    parser.add_argument("--out", type=Path, required=True, help="PNG file to write (replaced atomically)")
+    parser.add_argument("--frames", type=int_at_least(1), default=4, help="frames shown, evenly spaced (default 4)")
+    parser.add_argument("--min-visible-px", type=int_at_least(0), default=20,
+                        help="hide boxes with fewer visible pixels")
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    return [OutputSpec(args.out, folder=False, recognise=png_file, expected="a PNG image")]
 
 
 def _camera_panel(record: DatasetRecord, camera: str, frame: int, labels, min_px: int) -> np.ndarray:
@@ -163,9 +172,15 @@ def contact_sheet(record: DatasetRecord, frames: int = 4, min_visible_px: int = 
 
 
 def main(args: argparse.Namespace) -> int:
+    if args.out.suffix.lower() != ".png":
+        raise ValueError(f"--out {args.out}: expected a .png file name, got {args.out.suffix or 'no extension'!r}")
+    if args.frames < 1:
+        raise ValueError(f"--frames must be >= 1, got {args.frames}")
     sheet = contact_sheet(DatasetRecord(args.dataset), args.frames, args.min_visible_px)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(args.out), sheet):
-        raise OSError(f"{args.out}: could not write the contact sheet")
+    ok, png = cv2.imencode(".png", sheet)  # the bytes cv2.imwrite would write, written atomically
+    if not ok:
+        raise OSError(f"{args.out}: could not encode the contact sheet")
+    with atomic_file(args.out) as tmp:
+        tmp.write_bytes(png.tobytes())
     log.info("wrote %s (%dx%d)", args.out, sheet.shape[1], sheet.shape[0])
     return 0

@@ -5,7 +5,10 @@ shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the 
 determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
 when the whole record is complete (renamed into place). A shard counts as done only when its done file lists
 exactly the shard's frames: ``--shard-size`` is not part of the key, and a resume with another shard size gives
-the same shard index other frames. Layout of the record: pipeline/core/record.py and docs/dataset.md.
+the same shard index other frames; a done shard whose tables do not read back whole is rendered again. A render
+holds OUT's lock (:mod:`pipeline.core.outputs`), so no two renders share the work folder. Worker
+processes die with the render (:func:`pipeline.stages.common.die_with_parent`); on Ctrl-C they are killed and the
+shards done so far are kept for the resume. Layout of the record: pipeline/core/record.py and docs/dataset.md.
 """
 
 from __future__ import annotations
@@ -33,9 +36,17 @@ from tqdm import tqdm
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
+from pipeline.core.outputs import output_lock
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
-from pipeline.core.tables import read_ipc_files, read_parquet, write_parquet
-from pipeline.stages.common import config_hash, software_versions, write_json, write_meta
+from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
+from pipeline.stages.common import (
+    config_hash,
+    die_with_parent,
+    int_at_least,
+    software_versions,
+    write_json,
+    write_meta,
+)
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
@@ -49,6 +60,8 @@ from pipeline.world.static import StaticWorld
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("sim", "condition", "rig")
+INTERRUPT_HINT = "the shards already rendered are kept; rerun the same command to resume"
 HELP = "render a simulated run's camera and LiDAR under one condition, with exact ground truth"
 WORKER_MODULES = ("pipeline.stages.render_frames", "pipeline.sensors.conditions")  # what a render worker imports
 SIM_FILES = ("trajectories.parquet", "tls_states.parquet", "meta.json", "roads/lanes.parquet")
@@ -59,9 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--condition", required=True, help="condition NAME (configs/conditions/) or YAML PATH")
     parser.add_argument("--rig", default="default", help="rig NAME (configs/rigs/) or YAML PATH")
     parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
-    parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run (default: all)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
-    parser.add_argument("--shard-size", type=int, default=4,
+    parser.add_argument("--frames", type=int_at_least(1),
+                        help="render N frames evenly spaced over the run (default: all)")
+    parser.add_argument("--workers", type=int_at_least(1), default=os.cpu_count() or 1,
+                        help="processes (default: all cores)")
+    parser.add_argument("--shard-size", type=int_at_least(1), default=4,
                         help="frames per shard, the unit of resumption (the last few shards are smaller)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -106,7 +121,15 @@ def _check_sim(sim_dir: Path) -> dict:
         if not (sim_dir / name).is_file():
             raise FileNotFoundError(f"{sim_dir}: not a simulate output ({name} is missing); "
                                     "make one with `roadsynth simulate`")
-    return json.loads((sim_dir / "meta.json").read_text())
+    try:
+        meta = json.loads((sim_dir / "meta.json").read_text())
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ValueError(f"{sim_dir / 'meta.json'}: not valid JSON ({exc}); make the run again with "
+                         "`roadsynth simulate`") from None
+    missing = [k for k in ("config_hash", "seed", "config") if not isinstance(meta, dict) or k not in meta]
+    if missing:
+        raise ValueError(f"{sim_dir / 'meta.json'}: not a simulate run's meta.json (no {', '.join(missing)})")
+    return meta
 
 
 def _job_key(sim_meta: dict, sim_dir: Path, rig: RigConfig, condition: ConditionConfig, frames: list[int]) -> str:
@@ -129,9 +152,19 @@ def _prepare_work(work: Path, key: str) -> None:
 
 
 def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
-    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last)."""
+    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last) and its
+    tables read back whole; a damaged shard is rendered again."""
     done = shard_dir / f"done-{index:05d}"
-    return done.is_file() and done.read_text().split() == [str(f) for f in frames]
+    if not (done.is_file() and done.read_text().split() == [str(f) for f in frames]):
+        return False
+    for table in (f"frames-{index:05d}.arrow", f"labels-{index:05d}.arrow"):
+        try:
+            read_ipc(shard_dir / table)
+        except (OSError, ValueError) as exc:
+            log.warning("rendering shard %d again: %s", index, exc)
+            done.unlink()
+            return False
+    return True
 
 
 def _static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
@@ -152,7 +185,7 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
     reuse_freed_memory()  # from the start: the static world build's large temporaries too
-    with _frozen_heap():
+    with output_lock(out, "render"), _frozen_heap():  # one writer of OUT and its work folder
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)
 
@@ -179,8 +212,10 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
         raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
     sim_meta = _check_sim(sim_dir)
     seed = int(sim_meta["seed"])
-    selection = select_frames(read_parquet(sim_dir / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
-                              frames)
+    trajectories = read_parquet(sim_dir / "trajectories.parquet")
+    require_finite(trajectories, str(sim_dir / "trajectories.parquet"))  # a NaN would drop actors, write NaN boxes
+    selection = select_frames(trajectories["frame"].to_numpy(), frames)
+    del trajectories
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
     _prepare_work(work, key)
@@ -246,10 +281,11 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
     queue = collections.deque(jobs)
     children = min(workers, len(jobs)) - 1
     # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
-    with _restored_opencv_threads(), cf.ProcessPoolExecutor(children, mp_context=context) as pool:
+    with _restored_opencv_threads(), _stopped_on_failure(cf.ProcessPoolExecutor(
+            children, mp_context=context, initializer=die_with_parent)) as pool:
         busy: dict[cf.Future, cf.Executor] = {pool.submit(render_shard, queue.popleft()): pool
                                               for _ in range(children)}
-        with progress() as bar, cf.ThreadPoolExecutor(1) as here:
+        with progress() as bar, _stopped_on_failure(cf.ThreadPoolExecutor(1)) as here:
             idle: list[cf.Executor] = [here]
             while queue or busy:
                 while queue and idle:
@@ -259,6 +295,23 @@ def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.Ba
                 for future in done:
                     idle.append(busy.pop(future))
                     bar.update(future.result())
+
+
+@contextlib.contextmanager
+def _stopped_on_failure(executor: cf.Executor) -> Iterator[cf.Executor]:
+    """``executor`` for the block; shut down at its end, and when the block fails (an error, Ctrl-C) without
+    starting its queued shards: a pool's workers are killed at once (a shard of theirs is lost, the rest of the
+    render is kept), this process's own shard in progress is waited for (a thread cannot be stopped), so that
+    nothing writes into the work folder once the render has returned and released its lock."""
+    try:
+        yield executor
+    except BaseException:
+        processes = getattr(executor, "_processes", None) or {}  # ProcessPoolExecutor's workers, by pid
+        for process in list(processes.values()):
+            process.kill()
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
 
 
 @contextlib.contextmanager

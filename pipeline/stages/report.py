@@ -26,11 +26,12 @@ import numpy as np
 
 from evaluation import evaluate
 from evaluation.table import MISSING_GROUP
-from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 from pipeline.stages.evaluated import check_evaluated_inputs
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("eval", "gt", "detections", "images")
 HELP = "summarise an evaluation per condition: the paper's table, COCO AP, example frames"
 GT_BGR, DET_BGR = (60, 220, 60), (40, 40, 255)
 # Li, Kusari & LeBlanc, Table 1 (a detector trained on real photos, run on CARLA frames of SUMO traffic):
@@ -54,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--images", type=Path, help="folder of the GT's images (default: GT folder/images)")
     parser.add_argument("--group-by", help="image attribute to report by; must be the evaluation's --group-by "
                         "(default: that one)")
-    parser.add_argument("--examples", type=int, default=2, help="example frames per group (default 2)")
+    parser.add_argument("--examples", type=int_at_least(1), default=2, help="example frames per group (default 2)")
     parser.add_argument("--out", type=Path, required=True, help="report folder")
 
 

@@ -19,8 +19,10 @@ import pandas as pd
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ScenarioConfig, load_config
 from pipeline.core.config.loading import parse_config
+from pipeline.core.files import atomic_file
+from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.core.tables import write_parquet
-from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
 from pipeline.traffic.roadgeometry import write_road_geometry
@@ -28,18 +30,30 @@ from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
 
 log = logging.getLogger(__name__)
 
+INPUT_ARGS = ("scenario",)
 HELP = "simulate traffic with SUMO and record every actor"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True, help="scenario NAME (configs/scenarios/) or YAML PATH")
-    parser.add_argument("--seed", type=int, required=True, help="run seed (every random draw derives from it)")
+    parser.add_argument("--seed", type=int_at_least(0), required=True,
+                        help="run seed (every random draw derives from it)")
     parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
     parser.add_argument("--vehicles", type=int, help="override demand.vehicles")
     parser.add_argument("--duration", type=float, help="override simulation.duration_s (recorded seconds)")
     parser.add_argument("--warmup", type=float, help="override simulation.warmup_s")
     parser.add_argument("--metrics-out", type=Path, help="also write the run's summary stats here (for dvc metrics)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    """The run folder, and the stats file of ``--metrics-out``."""
+    specs = [OutputSpec(args.out)]
+    if args.metrics_out is not None:
+        specs.append(OutputSpec(args.metrics_out, flag="--metrics-out", folder=False,
+                                recognise=json_file(dict, ("frames", "collisions", "teleports")),
+                                expected="a JSON file of run stats"))
+    return specs
 
 
 def resolve_scenario(name_or_path: str | Path, *, vehicles: int | None = None, duration_s: float | None = None,
@@ -110,9 +124,9 @@ def main(args: argparse.Namespace) -> int:
     log.info("scenario %s from %s, seed %d", config.name, path, args.seed)
     stats = simulate(config, args.seed, args.out, progress=not args.no_progress)
     if args.metrics_out is not None:
-        args.metrics_out.parent.mkdir(parents=True, exist_ok=True)
         summary = {k: v for k, v in stats.items() if k not in ("collision_events", "ego_id")}
-        write_json(args.metrics_out, summary)
+        with atomic_file(args.metrics_out) as tmp:
+            write_json(tmp, summary)
     log.info("recorded %d frames, %d actor states; %d collisions, %d teleports -> %s", stats["frames"],
              stats["recorded_actor_states"], stats["collisions"], stats["teleports"], args.out)
     return 0

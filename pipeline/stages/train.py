@@ -22,8 +22,9 @@ from pathlib import Path
 
 from pipeline.core.config import DetectorConfig, load_config
 from pipeline.core.config.loading import parse_config
-from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 
+INPUT_ARGS = ("coco", "annotations", "config")
 HELP = "train the baseline detector (CenterNet-style, torch) on a COCO export"
 log = logging.getLogger(__name__)
 
@@ -37,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="detector config NAME (configs/detector/) or YAML PATH (default: %(default)s)")
     parser.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
                         help="training device (default: %(default)s; auto: CUDA when available)")
-    parser.add_argument("--steps", type=int, metavar="N", help="override train.steps")
-    parser.add_argument("--seed", type=int, default=0, help="run seed (default: %(default)s)")
+    parser.add_argument("--steps", type=int_at_least(1), metavar="N", help="override train.steps")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="run seed (default: %(default)s)")
     parser.add_argument("--conditions", metavar="A,B",
                         help="override train.conditions: comma-separated conditions, or 'all'")
     parser.add_argument("--export-onnx", action="store_true", help="also write model.onnx (network + decoding)")

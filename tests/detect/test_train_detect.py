@@ -100,5 +100,7 @@ def test_onnx_gives_the_torch_boxes(trained, tiny_coco, torch_results, tmp_path)
 
 
 def test_missing_model_is_an_error(tiny_coco, tmp_path, capsys):
-    assert cli(["detect", "--model", str(tmp_path), "--coco", str(tiny_coco), "--out", str(tmp_path / "r.json")]) == 2
+    (tmp_path / "model").mkdir()  # --out may not go inside the --model folder (an input)
+    assert cli(["detect", "--model", str(tmp_path / "model"), "--coco", str(tiny_coco), "--out",
+                str(tmp_path / "r.json")]) == 2
     assert "model.pt" in capsys.readouterr().err

@@ -44,6 +44,9 @@ def available_names(kind: str) -> list[str]:
 def resolve_config_path(name_or_path: str | Path, kind: str) -> Path:
     """Resolve a NAME under ``configs/<kind>/`` or return an existing PATH; fail listing the names."""
     candidate = Path(name_or_path)
+    if candidate.is_dir():
+        raise ConfigError(f"{candidate}: a folder; expected a {kind[:-1] if kind.endswith('s') else kind} YAML "
+                          f"file or a NAME from configs/{kind}/ ({', '.join(available_names(kind)) or 'none'})")
     if candidate.suffix in (".yaml", ".yml") or candidate.is_file():
         if not candidate.is_file():
             raise ConfigError(f"{candidate}: config file not found")
@@ -66,6 +69,13 @@ def _format_loc(loc: tuple[Any, ...]) -> str:
     return "".join(parts) or "(top level)"
 
 
+def _shown_input(value: Any, limit: int = 80) -> str:
+    """`` got VALUE:`` for the message, unless VALUE is long (a whole section, when a check across its fields fails):
+    the key path says where, and a dump of the section would bury the reason."""
+    text = repr(value)
+    return f" got {text}:" if len(text) <= limit else ""
+
+
 def format_validation_error(source: str, exc: ValidationError) -> str:
     """One line per error, each naming the key path, the value given and what is expected; the first
     line also names the file, so that a one-line report (a log, a CLI error) says where to look."""
@@ -73,7 +83,7 @@ def format_validation_error(source: str, exc: ValidationError) -> str:
     for err in exc.errors(include_url=False):
         # Tagged unions add the tag name to the location; it is not a key the user wrote.
         loc = tuple(p for p in err["loc"] if p not in ("constant", "uniform", "truncnormal", "lognormal"))
-        shown = "" if err["type"] == "missing" else f" got {err.get('input')!r}:"
+        shown = "" if err["type"] == "missing" else _shown_input(err.get("input"))
         lines.append(f"{_format_loc(loc)}:{shown} {err['msg']}")
     more = f" (and {len(lines) - 1} more below)" if len(lines) > 1 else ""
     return "\n".join([f"{source}: invalid config: {lines[0]}{more}"] + [f"  {line}" for line in lines[1:]])
