@@ -27,6 +27,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
 from pipeline.world.mesh import Mesh
+from pipeline.world.smooth_normals import corner_normals
 
 
 @dataclass(frozen=True)
@@ -117,9 +118,19 @@ def normalise_to_unit_box(mesh: Mesh) -> Mesh:
 
 
 @functools.cache
+def _family(family) -> tuple[Mesh, np.ndarray]:
+    mesh = family()
+    return normalise_to_unit_box(mesh), mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)
+
+
 def family_mesh(family) -> Mesh:
     """The built-in procedural mesh of one body family in the unit box frame (vertices span exactly [-0.5, 0.5]^3)."""
-    return normalise_to_unit_box(family())
+    return _family(family)[0]
+
+
+def family_extent(family) -> np.ndarray:
+    """(3,) float64 the family's size in metres as modelled (what its unit-box mesh was scaled by)."""
+    return _family(family)[1]
 
 
 def canonical_mesh(object_class: ObjectClass) -> Mesh:
@@ -138,7 +149,8 @@ class ActorMeshes:
     Attributes:
         models: every model's mesh, classes in ObjectClass order, each class's families in FAMILIES order.
         model_class: (M,) the class of each model; model_names: (M,) its family's name ("sedan", ...; the class's
-            name for an override).
+            name for an override); model_extent: (M,) its size in metres as modelled, (3,) each (ones for an
+            override).
         scene_cache: per-model scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
@@ -151,6 +163,7 @@ class ActorMeshes:
         self.models: list[Mesh] = []
         self.model_class: list[ObjectClass] = []
         self.model_names: list[str] = []
+        self.model_extent: list[np.ndarray] = []
         # Per class code: the first model index, and each model's (low, high) suitable length in metres.
         self._first = np.zeros(len(ObjectClass), np.int64)
         self._suits: list[np.ndarray] = []
@@ -158,17 +171,29 @@ class ActorMeshes:
             self._first[code] = len(self.models)
             if object_class in overrides:
                 meshes, suits, names = [overrides[object_class]], [(0.0, np.inf)], [object_class.value]
+                extents = [np.ones(3)]
             else:
                 families = FAMILIES[object_class]
                 meshes = [family_mesh(f) for f in families]
                 suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in families]
                 names = [f.__name__ for f in families]
+                extents = [family_extent(f) for f in families]
             self.model_names += names
+            self.model_extent += extents
             self.models += meshes
             self.model_class += [object_class] * len(meshes)
             self._suits.append(np.asarray(suits, np.float64))
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
         self._hulls: dict[int, np.ndarray] = {}
+        self._corners: dict[int, np.ndarray] = {}
+
+    def corner_normals(self, model: int) -> np.ndarray:
+        """(T, 3, 3) float32 smooth shading normals per triangle corner of a model, unit-box frame
+        (:func:`pipeline.world.smooth_normals.corner_normals`)."""
+        if model not in self._corners:
+            mesh = self.models[model]
+            self._corners[model] = corner_normals(mesh.vertices, mesh.triangles, self.model_extent[model])
+        return self._corners[model]
 
     def hull_mask(self, model: int) -> np.ndarray:
         """(V,) bool: the vertices of a model that are not strictly inside its convex hull (Qhull's vertices and the

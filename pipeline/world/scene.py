@@ -39,6 +39,7 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.jit import as_input, as_view_input, fma32, kernel
+from pipeline.world import smooth_normals
 from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, nearest_actor_hits, unit_frame_rays
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
@@ -122,11 +123,13 @@ _NO_HITS = (np.zeros(0, np.float32), np.zeros(0, np.uint32), np.zeros((0, 3), np
 
 
 def _cast(
-    scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, threads: int = 0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """t (N,) float32 (inf = miss), primitive id (N,) uint32, normal (N, 3) float32 (0 on a miss)."""
+    scene: o3d.t.geometry.RaycastingScene, rays: np.ndarray, threads: int = 0, uv: bool = False
+) -> tuple[np.ndarray, ...]:
+    """t (N,) float32 (inf = miss), primitive id (N,) uint32, normal (N, 3) float32 (0 on a miss); with ``uv``
+    also the hits' barycentric (u, v) (N, 2) float32 (the point is (1 - u - v) p0 + u p1 + v p2)."""
     out = scene.cast_rays(o3d.core.Tensor.from_numpy(np.ascontiguousarray(rays)), nthreads=threads)
-    return out["t_hit"].numpy(), out["primitive_ids"].numpy(), out["primitive_normals"].numpy()
+    hits = (out["t_hit"].numpy(), out["primitive_ids"].numpy(), out["primitive_normals"].numpy())
+    return (*hits, out["primitive_uvs"].numpy()) if uv else hits
 
 
 def rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -474,7 +477,13 @@ class FrameScene:
         offsets = _class_tables(self.meshes).offsets
         for model, sel in self._pairs_by_model(pair_actor):
             scene = _canonical_scene(self.meshes, model)
-            t[sel], model_prim, normal[sel] = _cast(scene, np.take(local, sel, axis=0), self.threads)
+            model_rays = np.take(local, sel, axis=0)
+            t[sel], model_prim, face, uv = _cast(scene, model_rays, self.threads, uv=True)
+            # Shading normals: the model's corner normals interpolated at the hits (pipeline.world.smooth_normals).
+            hit = np.flatnonzero(np.isfinite(t[sel]))
+            face[hit] = smooth_normals.interpolate(self.meshes.corner_normals(model)[model_prim[hit]], uv[hit],
+                                                   face[hit], model_rays[hit, 3:])
+            normal[sel] = face
             prim[sel] = model_prim + np.uint32(offsets[model])  # hits only are read
         return nearest_actor_hits(len(sub), pair_row, pair_actor, t, prim, normal, self._inv_linear)
 
