@@ -12,6 +12,7 @@ import yaml
 from pipeline.core.classes import SemanticClass
 from pipeline.core.record import DatasetRecord
 from pipeline.stages.cli import main as cli
+from tests.conftest import tree_hashes
 from tests.world.user_assets import UNIT_CABIN_HI, UNIT_CABIN_LO, write_obj
 
 BODY_TOP_UNIT = UNIT_CABIN_LO[2]  # the body's top face, where the cabin stands
@@ -79,3 +80,26 @@ def test_a_bad_mesh_fails_before_any_output_naming_rig_mesh_and_key(dense_highwa
     err = capsys.readouterr().err
     assert f"{rig_path}: {obj}: actor_meshes[0].material: unknown material 'glas'; known: asphalt" in err
     assert not out.exists() and not list(tmp_path.glob(".*partial"))
+
+
+def test_workers_read_the_rigs_meshes_too(dense_highway_run, tmp_path):
+    """Rendered by a pool (after a render in this process started Embree, so its workers come from a forkserver
+    and read the meshes from the pickled rig), the record is the one rendered here, byte for byte."""
+    from pipeline.core.config import ConditionConfig, RigConfig, load_config
+    from pipeline.stages.render import render
+    from pipeline.world.scene import embree_started
+
+    write_obj(tmp_path)
+    rig_path = tmp_path / "rig.yaml"
+    rig_path.write_text(yaml.safe_dump({
+        "name": "mine", "lidars": [{"name": "top", "channels": 16, "horizontal_resolution_deg": 0.8,
+                                    "mount": {"xyz_m": [0.0, 0.0, 1.05]}}],
+        "actor_meshes": [{"cls": c, "path": "wedge.obj", "material": {"glass": "glass"}} for c in ("car", "van")]}))
+    rig = load_config(RigConfig, rig_path, "rigs")[0]
+    noon = load_config(ConditionConfig, "noon", "conditions")[0]
+    render(dense_highway_run, noon, rig, tmp_path / "here", frames=2, workers=1, shard_size=1, progress=False)
+    assert embree_started()
+    render(dense_highway_run, noon, rig, tmp_path / "pool", frames=2, workers=2, shard_size=1, progress=False)
+    assert tree_hashes(tmp_path / "here", skip=("meta.json",)) == tree_hashes(tmp_path / "pool", skip=("meta.json",))
+    labels = DatasetRecord(tmp_path / "pool").labels
+    assert (labels["lidar_points"] > 0).any()
