@@ -60,7 +60,7 @@ class ActorMeshConfig(ConfigModel):
         if not file.is_file():
             raise ValueError(f"path {data['path']!r}: no such file {file}")
         digest = path_sha256(file)
-        if "sha256" in data and data["sha256"] != digest:
+        if data.get("sha256") is not None and data["sha256"] != digest:
             raise ValueError(f"sha256: {file} has digest {digest}, the config pins {data['sha256']!r} "
                              "(the asset changed)")
         return {**data, "sha256": digest}
