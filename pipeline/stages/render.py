@@ -53,6 +53,7 @@ from pipeline.stages.render_frames import (
     remembered_world,
     render_shard,
     reuse_freed_memory,
+    rig_actor_meshes,
 )
 from pipeline.stages.rig import build_sensors, camera_info, lidar_info
 from pipeline.world.scene import embree_started
@@ -211,6 +212,7 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     if shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
     sim_meta = _check_sim(sim_dir)
+    rig_actor_meshes(rig)  # read the rig's mesh files now: a bad one fails before any work, and workers inherit them
     seed = int(sim_meta["seed"])
     trajectories = read_parquet(sim_dir / "trajectories.parquet")
     require_finite(trajectories, str(sim_dir / "trajectories.parquet"))  # a NaN would drop actors, write NaN boxes
@@ -355,6 +357,10 @@ def main(args: argparse.Namespace) -> int:
     condition, cpath = load_config(ConditionConfig, args.condition, "conditions")
     rig, rpath = load_config(RigConfig, args.rig, "rigs")
     log.info("rendering %s under %s (%s) with rig %s", args.sim, condition.name, cpath, rpath)
+    try:
+        rig_actor_meshes(rig)  # the rig's mesh files: an error names the rig file too
+    except ValueError as exc:
+        raise ValueError(f"{rpath}: {exc}") from exc
     summary = render(args.sim, condition, rig, args.out, frames=args.frames, workers=args.workers,
                      shard_size=args.shard_size, progress=not args.no_progress)
     log.info("wrote %s: %d frames, %d labels (%d visible in cameras)", args.out, summary["frames"], summary["labels"],

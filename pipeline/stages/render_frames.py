@@ -32,8 +32,8 @@ from pipeline.core.tables import read_parquet, write_ipc, write_sweep
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
-from pipeline.stages.rig import build_sensors
-from pipeline.world.actors import Actors, actor_variants, srgb8_to_linear
+from pipeline.stages.rig import build_actor_meshes, build_sensors
+from pipeline.world.actors import ActorMeshes, Actors, actor_variants, srgb8_to_linear
 from pipeline.world.materials import material_index
 from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
@@ -234,9 +234,22 @@ class _WorkerState:
     condition: object
     trajectories: _Trajectories
     signals: _SignalState
+    meshes: ActorMeshes
 
 
 _STATE: dict[tuple, _WorkerState] = {}
+_MESHES: dict[str, ActorMeshes] = {}  # the actor models of the last rig (its JSON) this process built them for
+
+
+def rig_actor_meshes(rig: RigConfig) -> ActorMeshes:
+    """The rig's actor models (:func:`pipeline.stages.rig.build_actor_meshes`), read once per process and rig:
+    the render stage reads them before it starts its workers (bad files fail early), and workers forked from it
+    find them here."""
+    key = rig.model_dump_json()
+    if key not in _MESHES:
+        _MESHES.clear()
+        _MESHES[key] = build_actor_meshes(rig)
+    return _MESHES[key]
 _WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by the path it was pickled to
 
 
@@ -287,7 +300,8 @@ def _state(job: ShardJob) -> _WorkerState:
         cameras, lidars = build_sensors(job.rig)
         _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.condition_from_config(job.condition),
                                    _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
-                                   _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")))
+                                   _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
+                                   rig_actor_meshes(job.rig))
     return _STATE[key]
 
 
@@ -312,7 +326,7 @@ def render_shard(job: ShardJob) -> int:
         ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
         active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
                                  street_lights_m=world.street_lights, ego_size_m=ego_size_m)
-        scene = FrameScene(static, actors, threads=job.threads, active=active)
+        scene = FrameScene(static, actors, state.meshes, threads=job.threads, active=active)
         lidar_points = np.zeros(len(scene.actors), np.int64)
         for k, lidar in enumerate(lidars):
             sweep = render_lidar(scene, lidar, ego_pose, frame_rng(job.seed, condition.name, frame, 1000 + k),

@@ -1,8 +1,9 @@
-"""Adapter from the validated rig config (pipeline.core.config) to the renderer's sensor models."""
+"""Adapter from the validated rig config (pipeline.core.config) to the renderer's sensor models and actor meshes."""
 
 from __future__ import annotations
 
 import zlib
+from pathlib import Path
 
 import numpy as np
 
@@ -10,10 +11,12 @@ from pipeline.core.config import RigConfig
 from pipeline.core.config.sensors import CameraConfig as CameraSpec
 from pipeline.core.config.sensors import LidarConfig as LidarSpec
 from pipeline.core.config.sensors import MountPose
+from pipeline.core.digests import path_sha256
 from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
 from pipeline.core.record import CameraInfo, LidarInfo
 from pipeline.sensors.camera import Camera, CameraConfig
 from pipeline.sensors.lidar import Lidar, LidarConfig
+from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Model
 
 
 def _mount(pose: MountPose) -> Transform:
@@ -46,6 +49,26 @@ def lidar_from_spec(spec: LidarSpec) -> Lidar:
 
 def build_sensors(rig: RigConfig) -> tuple[list[Camera], list[Lidar]]:
     return [camera_from_spec(c) for c in rig.cameras], [lidar_from_spec(lidar) for lidar in rig.lidars]
+
+
+def build_actor_meshes(rig: RigConfig) -> ActorMeshes:
+    """The actor models of a rig: its ``actor_meshes`` files (pipeline.world.user_meshes) replacing or joining
+    their classes' built-in body families, the built-in library (shared) where it names none. Each model is named
+    by its file's stem."""
+    if not rig.actor_meshes:
+        return DEFAULT_MESHES
+    from pipeline.world.user_meshes import load_user_mesh
+
+    replace: dict = {}
+    extra: dict = {}
+    for i, entry in enumerate(rig.actor_meshes):
+        if path_sha256(entry.file) != entry.sha256:  # the config (so the record's meta) must describe these bytes
+            raise ValueError(f"{entry.file}: actor_meshes[{i}]: the file changed since the rig was read "
+                             f"(sha256 {entry.sha256})")
+        mesh = load_user_mesh(entry.file, entry.cls, forward_axis=entry.forward_axis, up_axis=entry.up_axis,
+                              material=entry.material, where=f"actor_meshes[{i}]")
+        (replace if entry.replace else extra).setdefault(entry.cls, []).append(Model(Path(entry.path).stem, mesh))
+    return ActorMeshes(replace, extra)
 
 
 def _rows(matrix: np.ndarray) -> list[list[float]]:

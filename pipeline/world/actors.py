@@ -12,6 +12,8 @@ Conventions:
   mesh fills its 3D box exactly and 3D labels and 2D projections agree.
 - Shapes are modelled in metres at a typical size of the class and normalised once (cached); scaling
   to another size stretches the parts (a long truck gets longer wheels) — acceptable for detection data.
+- Users' own meshes (:mod:`pipeline.world.user_meshes`) are :class:`Model` s that replace or join a class's
+  families (:class:`ActorMeshes`); they suit actors of any length.
 - Body paint is the material ``paint``; its colour is per actor (:attr:`Actors.color_rgb`), not in the
   material table. Brake lights are lit where :attr:`Actors.brake` is set (the renderer's concern).
 """
@@ -19,6 +21,7 @@ Conventions:
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -138,28 +141,48 @@ def canonical_mesh(object_class: ObjectClass) -> Mesh:
     return family_mesh(FAMILIES[ObjectClass(object_class)][0])
 
 
+@dataclass(frozen=True)
+class Model:
+    """A named canonical mesh for :class:`ActorMeshes` (a user's asset, say): ``mesh`` in the unit box frame,
+    spanning exactly [-0.5, 0.5] on every axis (:func:`normalise_to_unit_box`). It suits actors of any length."""
+
+    name: str
+    mesh: Mesh
+    extent_m: tuple[float, float, float] | None = None  # its size as modelled, for smooth normals' crease angle
+
+
 class ActorMeshes:
     """The canonical meshes (models) of every class: the built-in body families unless overridden.
 
     Args:
-        overrides: class -> one mesh in the unit box frame that replaces all of the class's families; each must
-            span exactly [-0.5, 0.5] on every axis (use :func:`normalise_to_unit_box`), so that placed meshes fill
-            their 3D boxes.
+        overrides: class -> one mesh, or named models, in the unit box frame that replace all of the class's
+            families.
+        extra: class -> named models that join the class's families (after them), picked like them.
+        Every mesh must span exactly [-0.5, 0.5] on every axis (use :func:`normalise_to_unit_box`), so that placed
+        meshes fill their 3D boxes.
 
     Attributes:
-        models: every model's mesh, classes in ObjectClass order, each class's families in FAMILIES order.
-        model_class: (M,) the class of each model; model_names: (M,) its family's name ("sedan", ...; the class's
-            name for an override); model_extent: (M,) its size in metres as modelled, (3,) each (ones for an
-            override).
+        models: every model's mesh, classes in ObjectClass order, each class's families in FAMILIES order, then its
+            extra models.
+        model_class: (M,) the class of each model; model_names: (M,) its family's or model's name ("sedan", ...;
+            the class's name for an override given as a bare mesh); model_extent: (M,) its size in metres as
+            modelled, (3,) each (a given model's :attr:`Model.extent_m`).
         scene_cache: per-model scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
-    def __init__(self, overrides: dict[ObjectClass, Mesh] | None = None) -> None:
-        overrides = {ObjectClass(c): m for c, m in (overrides or {}).items()}
-        for object_class, mesh in overrides.items():
-            lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
-            if not (np.all(lo == -0.5) and np.all(hi == 0.5)):
-                raise ValueError(f"mesh for {object_class!s} must span exactly [-0.5, 0.5]^3, got {lo} .. {hi}")
+    def __init__(self, overrides: Mapping[ObjectClass, Mesh | Sequence[Model]] | None = None,
+                 extra: Mapping[ObjectClass, Sequence[Model]] | None = None) -> None:
+        replaced = {ObjectClass(c): [Model(ObjectClass(c).value, m)] if isinstance(m, Mesh) else list(m)
+                    for c, m in (overrides or {}).items()}
+        added = {ObjectClass(c): list(m) for c, m in (extra or {}).items()}
+        for object_class, models in [*replaced.items(), *added.items()]:
+            if not models:
+                raise ValueError(f"no models given for {object_class!s}")
+            for model in models:
+                lo, hi = model.mesh.vertices.min(axis=0), model.mesh.vertices.max(axis=0)
+                if not (np.all(lo == -0.5) and np.all(hi == 0.5)):
+                    raise ValueError(f"mesh {model.name!r} for {object_class!s} must span exactly [-0.5, 0.5]^3, "
+                                     f"got {lo} .. {hi}")
         self.models: list[Mesh] = []
         self.model_class: list[ObjectClass] = []
         self.model_names: list[str] = []
@@ -169,15 +192,17 @@ class ActorMeshes:
         self._suits: list[np.ndarray] = []
         for code, object_class in enumerate(ObjectClass):
             self._first[code] = len(self.models)
-            if object_class in overrides:
-                meshes, suits, names = [overrides[object_class]], [(0.0, np.inf)], [object_class.value]
-                extents = [np.ones(3)]
+            if object_class in replaced:
+                meshes, suits, names, extents = [], [], [], []
             else:
                 families = FAMILIES[object_class]
                 meshes = [family_mesh(f) for f in families]
                 suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in families]
                 names = [f.__name__ for f in families]
                 extents = [family_extent(f) for f in families]
+            for model in replaced.get(object_class, []) + added.get(object_class, []):
+                meshes, suits, names = [*meshes, model.mesh], [*suits, (0.0, np.inf)], [*names, model.name]
+                extents = [*extents, np.ones(3) if model.extent_m is None else np.asarray(model.extent_m, float)]
             self.model_names += names
             self.model_extent += extents
             self.models += meshes

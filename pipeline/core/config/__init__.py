@@ -1,5 +1,6 @@
 """Validated configuration models. YAML under ``configs/`` only deserialises into these."""
 
+from pipeline.core.config.actor_meshes import ActorMeshConfig
 from pipeline.core.config.detector import (
     AugmentConfig,
     BackboneConfig,
@@ -23,6 +24,7 @@ from pipeline.core.config.scenario import (
 from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
 
 __all__ = [
+    "ActorMeshConfig",
     "AugmentConfig",
     "BackboneConfig",
     "CameraConfig",

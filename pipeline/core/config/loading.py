@@ -89,10 +89,13 @@ def format_validation_error(source: str, exc: ValidationError) -> str:
     return "\n".join([f"{source}: invalid config: {lines[0]}{more}"] + [f"  {line}" for line in lines[1:]])
 
 
-def parse_config(model: type[M], data: Any, source: str) -> M:
-    """Validate already-parsed data into ``model``; errors name ``source`` and the key path."""
+def parse_config(model: type[M], data: Any, source: str, path: Path | None = None) -> M:
+    """Validate already-parsed data into ``model``; errors name ``source`` and the key path. ``path``: the file
+    the data came from, against whose folder the config's relative file paths resolve (the current folder if
+    None; see pipeline.core.config.actor_meshes)."""
     try:
-        return model.model_validate(data if data is not None else {})
+        context = {"config_file": str(path)} if path is not None else None
+        return model.model_validate(data if data is not None else {}, context=context)
     except ValidationError as exc:
         raise ConfigError(format_validation_error(source, exc)) from None
 
@@ -106,4 +109,4 @@ def load_config(model: type[M], name_or_path: str | Path, kind: str) -> tuple[M,
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None
     if data is not None and not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
-    return parse_config(model, data, str(path)), path
+    return parse_config(model, data, str(path), path), path

@@ -10,6 +10,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
+from pipeline.core.config.actor_meshes import ActorMeshConfig
 from pipeline.core.config.base import ConfigModel
 
 
@@ -69,9 +70,13 @@ class LidarConfig(_Model):
 
 
 class RigConfig(_Model):
+    """The ego's sensors, and optionally the users' own meshes for actor classes (``actor_meshes``, see
+    :mod:`pipeline.core.config.actor_meshes`; procedural bodies draw the rest)."""
+
     name: str
     cameras: list[CameraConfig] = Field(default_factory=list)
     lidars: list[LidarConfig] = Field(default_factory=list)
+    actor_meshes: list[ActorMeshConfig] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _check_names(self) -> RigConfig:
@@ -81,6 +86,11 @@ class RigConfig(_Model):
             raise ValueError(f"sensor names must be unique; repeated: {', '.join(duplicates)}")
         if not names:
             raise ValueError("a rig needs at least one camera or LiDAR")
+        for entry in self.actor_meshes:
+            first = next(e for e in self.actor_meshes if e.cls == entry.cls)
+            if entry.replace != first.replace:
+                raise ValueError(f"actor_meshes: the entries of class {entry.cls.value} disagree on replace "
+                                 f"({first.path}: {first.replace}, {entry.path}: {entry.replace})")
         return self
 
 
