@@ -45,8 +45,8 @@ MATERIALS: dict[str, Material] = {
     "bark": Material((0.20, 0.13, 0.08), reflectivity=0.30),
     "metal": Material((0.40, 0.41, 0.43), specular=0.4, shininess=32.0, reflectivity=0.50),
     "barrier": Material((0.40, 0.40, 0.38), specular=0.1, reflectivity=0.60),  # weathered concrete
-    "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=48.0, reflectivity=0.45, fresnel_f0=0.05),
-    "glass": Material((0.04, 0.05, 0.06), specular=0.8, shininess=96.0, reflectivity=0.05, fresnel_f0=0.05),
+    "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=256.0, reflectivity=0.45, fresnel_f0=0.05),
+    "glass": Material((0.03, 0.035, 0.04), specular=0.8, shininess=1024.0, reflectivity=0.05, fresnel_f0=0.05),
     "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
     "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
     "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80,  # clear lens
