@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from evaluation import evaluate
@@ -55,6 +55,15 @@ NASTY = st.sampled_from([
 ])
 
 
+# Values the readers accept, at the edges of what scoring must survive (zero-size and astronomically large boxes,
+# extreme scores): drawn as often as the nasty ones, so that many examples reach the metrics.
+EDGE = st.sampled_from([
+    0, 0.0, 1e-300, 1e300, -1e300, 1e308, 10**30, [0, 0, 0, 0], [-5, -5, 1e-9, 1e-9], [1e300, 1e300, 1e300, 1e300],
+    [0, 0, 1e308, 1e308], [-1e308, -1e308, 1e308, 1e308], 1, 2, 3,
+])
+VALUES = st.one_of(NASTY, EDGE)
+
+
 def _containers(data: Any) -> list[Any]:
     """Every non-empty dict and list in a parsed JSON document, the document first."""
     found = [data] if isinstance(data, (dict, list)) and data else []
@@ -67,7 +76,7 @@ def _mutate(data: Any, draw) -> Any:
     replace or duplicate an entry."""
     containers = _containers(data)
     if not containers:
-        return copy.deepcopy(draw(NASTY))  # a copy: later mutations must not change the strategy's own values
+        return copy.deepcopy(draw(VALUES))  # a copy: later mutations must not change the strategy's own values
     target = draw(st.sampled_from(containers))
     key = draw(st.sampled_from(list(target) if isinstance(target, dict) else range(len(target))))
     action = draw(st.sampled_from(["drop", "replace", "replace", "duplicate"]))
@@ -76,7 +85,7 @@ def _mutate(data: Any, draw) -> Any:
     elif action == "duplicate" and isinstance(target, list):
         target.append(copy.deepcopy(target[key]))
     else:
-        target[key] = copy.deepcopy(draw(NASTY))
+        target[key] = copy.deepcopy(draw(VALUES))
     return data
 
 
@@ -84,12 +93,12 @@ def _mutate(data: Any, draw) -> Any:
 def _document(draw, base: Any) -> bytes:
     """A mutated ``base``, serialised; sometimes damaged at the byte level afterwards."""
     data = copy.deepcopy(base)
-    for _ in range(draw(st.integers(0, 3))):
+    for _ in range(draw(st.integers(1, 3))):
         data = _mutate(data, draw)
-    if draw(st.booleans()) and draw(st.booleans()):
+    if draw(st.integers(0, 7)) == 0:
         data = draw(st.sampled_from([data, {"images": data}, [data], "text", 3, None]))
     raw = json.dumps(data).encode()  # NaN and Infinity as Python's json writes them (and json.load reads)
-    damage = draw(st.sampled_from(["none", "none", "none", "truncate", "flip", "garbage"]))
+    damage = draw(st.sampled_from(["none"] * 5 + ["truncate", "flip", "garbage"]))
     if damage == "truncate":
         raw = raw[: draw(st.integers(0, max(len(raw) - 1, 0)))]
     elif damage == "flip" and raw:
@@ -108,15 +117,57 @@ def _evaluate_or_clear_error(gt: Path, det: Path) -> None:
             evaluate(gt, det, group_by="condition" if gt.suffix == ".json" else None)
         except VALID_ERRORS as exc:
             assert str(exc).strip(), "an empty error message"
+            event("refused")  # --hypothesis-show-statistics: how many examples reach the metrics
+        else:
+            event("scored")
+
+
+def _one_or_both(document: st.SearchStrategy[bytes], valid: bytes) -> st.SearchStrategy[bytes]:
+    """Each input is the valid one half the time, so that the other input's mutations are what is tested."""
+    return st.one_of(st.just(valid), document)
 
 
 @SETTINGS
-@given(gt=_document(GT), results=_document(RESULTS))
+@given(gt=_one_or_both(_document(GT), json.dumps(GT).encode()),
+       results=_one_or_both(_document(RESULTS), json.dumps(RESULTS).encode()))
 def test_coco_readers_accept_or_fail_clearly(gt: bytes, results: bytes) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "gt.json").write_bytes(gt)
         (Path(tmp) / "res.json").write_bytes(results)
         _evaluate_or_clear_error(Path(tmp) / "gt.json", Path(tmp) / "res.json")
+
+
+FINITE = st.floats(allow_nan=False, allow_infinity=False)
+SIZE = st.floats(min_value=0.0, allow_infinity=False)
+BOX = st.tuples(FINITE, FINITE, SIZE, SIZE).map(list)
+
+
+@st.composite
+def _valid_pair(draw) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """GT and results the readers accept, with any finite coordinates, sizes (zero, subnormal, near 1.8e308),
+    areas and scores, and up to 30 more results: what scoring must survive without an error."""
+    gt, results = copy.deepcopy(GT), copy.deepcopy(RESULTS)
+    for ann in gt["annotations"]:
+        if draw(st.booleans()):
+            ann["bbox"], ann["area"] = draw(BOX), draw(SIZE)
+    results += draw(st.lists(st.fixed_dictionaries({"image_id": st.sampled_from([1, 2]),
+                                                    "category_id": st.sampled_from([1, 3, 44]),
+                                                    "bbox": BOX, "score": FINITE}), max_size=30))
+    for res in results:
+        if draw(st.booleans()):
+            res["bbox"], res["score"] = draw(BOX), draw(FINITE)
+    return gt, results
+
+
+@SETTINGS
+@given(pair=_valid_pair())
+def test_accepted_coco_inputs_at_the_edges_are_scored_without_an_error(pair) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "gt.json").write_text(json.dumps(pair[0]))
+        (Path(tmp) / "res.json").write_text(json.dumps(pair[1]))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # overflowing areas give inf/NaN IoUs: scored as such
+            evaluate(Path(tmp) / "gt.json", Path(tmp) / "res.json", group_by="condition")
 
 
 KITTI_GT = ["Car 0.00 0 -1.58 587.01 173.33 614.12 200.12 1.65 1.67 3.64 -0.65 1.71 46.70 -1.59",
@@ -148,7 +199,7 @@ def _kitti_file(draw, base: list[str]) -> bytes:
         else:
             rows.append(list(rows[r]))
     raw = "\n".join(" ".join(row) for row in rows).encode()
-    damage = draw(st.sampled_from(["none", "none", "none", "truncate", "flip", "garbage", "empty"]))
+    damage = draw(st.sampled_from(["none"] * 5 + ["truncate", "flip", "garbage", "empty"]))
     if damage == "truncate":
         raw = raw[: draw(st.integers(0, max(len(raw) - 1, 0)))]
     elif damage == "flip" and raw:
@@ -162,7 +213,8 @@ def _kitti_file(draw, base: list[str]) -> bytes:
 
 
 @SETTINGS
-@given(gt=_kitti_file(KITTI_GT), det=_kitti_file(KITTI_DET))
+@given(gt=_one_or_both(_kitti_file(KITTI_GT), "\n".join(KITTI_GT).encode()),
+       det=_one_or_both(_kitti_file(KITTI_DET), "\n".join(KITTI_DET).encode()))
 def test_kitti_readers_accept_or_fail_clearly(gt: bytes, det: bytes) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, raw in (("gt", gt), ("det", det)):
