@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.validate import InputError, where
+from evaluation.validate import InputError, is_number, where
 
 DISTANCE_EDGES_M = (0.0, 30.0, 50.0)
 DISTANCE_LABELS = ("0-30", "30-50", "50+")
@@ -48,7 +48,7 @@ def occlusion_levels(values: Sequence[Any], path: str, section: str) -> tuple[np
     if not given:
         return labels, present
     for i, v in given:
-        if type(v) not in (int, float) or not np.isfinite(v):
+        if not is_number(v):
             raise InputError(f"{where(path, section, i)}: field 'occlusion' is {v!r} (expected a number)")
     if all(type(v) is int for _, v in given):
         for i, v in given:

@@ -35,13 +35,16 @@ _IMAGE_STRUCTURAL_KEYS = {"id"}
 
 
 def load_json(path: str | Path) -> Any:
-    """Parse a JSON file; syntax errors name the file, line and column."""
+    """Parse a JSON file (UTF-8, or the UTF-16/32 that JSON allows); syntax errors name the file, line and column."""
     path = Path(path)
     try:
-        with path.open() as f:
-            return json.load(f)
+        return json.loads(path.read_bytes())
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON: {exc}") from None
+    except UnicodeDecodeError as exc:  # binary garbage, or text in another encoding
+        raise InputError(f"{path}: not valid JSON: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid JSON: nested too deeply") from None
 
 
 def _section(data: Mapping[str, Any], key: str, path: str) -> list[Any]:

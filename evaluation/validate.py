@@ -8,6 +8,7 @@ on a million detections while the message stays exact.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -26,11 +27,14 @@ def where(path: str, section: str, index: int) -> str:
     return f"{path}: {section}[{index}]"
 
 
-def _first_bad(entries: Sequence[Any], field: str, path: str, section: str, check, expected: str) -> InputError:
+def _first_bad(entries: Sequence[Any], field: str, path: str, section: str, check, expected: str, *,
+               optional: bool = False) -> InputError:
     for i, entry in enumerate(entries):
         if not isinstance(entry, dict):
             return InputError(f"{where(path, section, i)}: expected a JSON object, got {type(entry).__name__}")
         value = entry.get(field, _MISSING)
+        if value is _MISSING and optional:
+            continue
         if value is _MISSING:
             return InputError(f"{where(path, section, i)}: missing field '{field}' (expected {expected})")
         if not check(value):
@@ -38,16 +42,22 @@ def _first_bad(entries: Sequence[Any], field: str, path: str, section: str, chec
     return InputError(f"{path}: {section}: field '{field}': invalid values (expected {expected})")
 
 
+_INT64 = (-(2**63), 2**63 - 1)
+_FLOAT_MAX = sys.float_info.max
+
+
 def _is_int(v: Any) -> bool:
-    return type(v) is int
+    """A JSON integer that fits int64 (JSON itself allows any size)."""
+    return type(v) is int and _INT64[0] <= v <= _INT64[1]
 
 
-def _is_number(v: Any) -> bool:
-    return type(v) in (int, float) and math.isfinite(v)
+def is_number(v: Any) -> bool:
+    """A finite JSON number that fits a float64 (an integer beyond ~1.8e308 does not; comparing is exact)."""
+    return (type(v) is float and math.isfinite(v)) or (type(v) is int and -_FLOAT_MAX <= v <= _FLOAT_MAX)
 
 
 def _is_box(v: Any) -> bool:
-    return type(v) is list and len(v) == 4 and all(_is_number(x) for x in v) and v[2] >= 0 and v[3] >= 0
+    return type(v) is list and len(v) == 4 and all(is_number(x) for x in v) and v[2] >= 0 and v[3] >= 0
 
 
 def _values(entries: Sequence[Any], field: str, path: str, section: str, expected: str, default: Any) -> list[Any]:
@@ -59,12 +69,23 @@ def _values(entries: Sequence[Any], field: str, path: str, section: str, expecte
         raise _first_bad(entries, field, path, section, lambda v: True, expected) from None
 
 
+def _array(values: list[Any], empty: np.ndarray) -> np.ndarray | None:
+    """``np.array(values)`` (``empty`` when there are none), or None where numpy cannot make one array of them (a
+    list among numbers: 'inhomogeneous shape'): the caller then names the first offending entry."""
+    if not values:
+        return empty
+    try:
+        return np.array(values)
+    except (ValueError, TypeError, OverflowError):
+        return None
+
+
 def int_column(entries: Sequence[Any], field: str, path: str, section: str, *, nonzero: bool = True) -> np.ndarray:
     """(N,) int64 of a required integer field; 0 is refused when ``nonzero`` (pycocotools reads 0 as 'none')."""
-    expected = "a non-zero integer" if nonzero else "an integer"
+    expected = "a non-zero 64-bit integer" if nonzero else "a 64-bit integer"
     values = _values(entries, field, path, section, expected, _MISSING)
-    arr = np.array(values) if values else np.zeros(0, np.int64)
-    if arr.dtype.kind != "i" or arr.ndim != 1 or bool in set(map(type, values)):
+    arr = _array(values, np.zeros(0, np.int64))
+    if arr is None or arr.dtype.kind != "i" or arr.ndim != 1 or bool in set(map(type, values)):
         raise _first_bad(entries, field, path, section, _is_int, expected)
     arr = arr.astype(np.int64, copy=False)
     if nonzero and (arr == 0).any():
@@ -92,19 +113,22 @@ def number_column(
     if default is _MISSING and not present.all():
         raise _first_bad(entries, field, path, section, lambda v: v is not None, expected)
     filled = [v if v is not None else 0.0 for v in values] if not present.all() else values
-    arr = np.array(filled) if values else np.zeros(0)
+    arr = _array(filled, np.zeros(0))
 
     def ok(v: Any) -> bool:
-        return v is None or (_is_number(v) and (minimum is None or v >= minimum))
+        return v is None or (is_number(v) and (minimum is None or v >= minimum))
 
-    if arr.dtype.kind not in "if" or arr.ndim != 1 or bool in set(map(type, values)):
-        raise _first_bad(entries, field, path, section, ok, expected)
+    optional = default is not _MISSING
+    if arr is None or arr.dtype.kind not in "if" or arr.ndim != 1 or bool in set(map(type, values)):
+        if not all(map(ok, values)):
+            raise _first_bad(entries, field, path, section, ok, expected, optional=optional)
+        arr = np.array(filled, dtype=np.float64)  # numbers all, but an integer beyond int64 made numpy keep objects
     arr = arr.astype(np.float64, copy=False)
     bad = ~np.isfinite(arr)
     if minimum is not None:
         bad |= arr < minimum
     if bad.any():
-        raise _first_bad(entries, field, path, section, ok, expected)
+        raise _first_bad(entries, field, path, section, ok, expected, optional=optional)
     return arr, present
 
 
@@ -117,7 +141,9 @@ def box_column(entries: Sequence[Any], path: str, section: str) -> np.ndarray:
     except (ValueError, TypeError):
         raise _first_bad(entries, "bbox", path, section, _is_box, expected) from None
     if arr.dtype.kind not in "if" or arr.shape != (len(values), 4):
-        raise _first_bad(entries, "bbox", path, section, _is_box, expected)
+        if not all(map(_is_box, values)):
+            raise _first_bad(entries, "bbox", path, section, _is_box, expected)
+        arr = np.array(values, dtype=np.float64)  # numbers all, but an integer beyond int64 made numpy keep objects
     arr = arr.astype(np.float64, copy=False)
     if not np.isfinite(arr).all() or (arr[:, 2:] < 0).any():
         raise _first_bad(entries, "bbox", path, section, _is_box, expected)

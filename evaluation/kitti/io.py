@@ -17,6 +17,7 @@ Every error names the file, the 1-based line number and the field.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +31,13 @@ FIELDS = (
     "height", "width", "length", "location_x", "location_y", "location_z", "rotation_y", "score",
 )  # fmt: skip
 N_COLUMNS = 15
+# 0 fully visible, 1 partly occluded, 2 largely occluded, 3 unknown; detections and DontCare write -1. A level
+# beyond these would silently move an object out of every difficulty; the int64 cast of 1e300 is undefined.
+OCCLUSION_LEVELS = (-1.0, 0.0, 1.0, 2.0, 3.0)
+# What a KITTI number looks like: the plain decimal and exponent forms (and inf/nan, refused as not finite) that
+# numpy's fast parser reads too. Python's float() also takes "1_000" and non-ASCII digits; refused here, so that
+# both parsers agree on every file.
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(inf|infinity|nan)", re.IGNORECASE | re.ASCII)
 
 
 class KittiFormatError(ValueError):
@@ -85,11 +93,18 @@ def _fail(path: Path, line: int, field: str, message: str) -> KittiFormatError:
     return KittiFormatError(f"{path}:{line}: field '{field}': {message}")
 
 
-def _parse_float(path: Path, line: int, field: str, token: str) -> float:
+def _read_text(path: Path) -> str:
+    """A label or calibration file's text (UTF-8; KITTI files are ASCII): binary garbage fails naming the file."""
     try:
-        value = float(token)
-    except ValueError:
-        raise _fail(path, line, field, f"expected a number, got {token!r}") from None
+        return path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise KittiFormatError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
+
+
+def _parse_float(path: Path, line: int, field: str, token: str) -> float:
+    if not _NUMBER.fullmatch(token):
+        raise _fail(path, line, field, f"expected a number, got {token!r}")
+    value = float(token)
     if not math.isfinite(value):
         raise _fail(path, line, field, f"expected a finite number, got {token!r}")
     return value
@@ -125,9 +140,8 @@ def _check_line(path: Path, line: int, tokens: list[str], with_score: bool) -> l
     values: list[object] = [tokens[0]]
     for field, token in zip(FIELDS[1:expected], tokens[1:], strict=True):
         values.append(_parse_float(path, line, field, token))
-    occluded = values[2]
-    if occluded != int(occluded):  # type: ignore[call-overload]
-        raise _fail(path, line, "occluded", f"expected an integer, got {tokens[2]!r}")
+    if values[2] not in OCCLUSION_LEVELS:
+        raise _fail(path, line, "occluded", f"expected an integer level 0-3 (-1 = unknown), got {tokens[2]!r}")
     x1, y1, x2, y2 = values[4:8]
     if x2 < x1 or y2 < y1:  # type: ignore[operator]
         raise _fail(path, line, "bbox", f"negative size: x1={x1} y1={y1} x2={x2} y2={y2}")
@@ -150,7 +164,7 @@ def read_label_file(path: str | Path, *, with_score: bool) -> KittiFrame:
         KittiFormatError: naming the file, the line and the field.
     """
     path = Path(path)
-    lines = [(no, text.split()) for no, text in enumerate(path.read_text().splitlines(), start=1) if text.strip()]
+    lines = [(no, text.split()) for no, text in enumerate(_read_text(path).splitlines(), start=1) if text.strip()]
     if not lines:
         return KittiFrame.empty(with_score=with_score)
     expected = N_COLUMNS + int(with_score)
@@ -159,9 +173,8 @@ def read_label_file(path: str | Path, *, with_score: bool) -> KittiFrame:
             _check_line(path, line_no, tokens, with_score)  # raises with the precise message
     numbers = _parse_numbers([tokens[1:] for _, tokens in lines], expected - 1)
     if numbers is None or not _all_valid(numbers):
-        for line_no, tokens in lines:
-            _check_line(path, line_no, tokens, with_score)
-        raise KittiFormatError(f"{path}: invalid content")  # unreachable: some line fails above
+        # the strict per-line parser raises naming the line; should it accept every line, its values are the truth
+        numbers = np.array([_check_line(path, no, tokens, with_score)[1:] for no, tokens in lines], dtype=np.float64)
     return _frame(np.array([tokens[0] for _, tokens in lines]), numbers, with_score)
 
 
@@ -183,7 +196,7 @@ def _all_valid(numbers: np.ndarray) -> bool:
     occluded, bbox, dims = numbers[:, 1], numbers[:, 3:7], numbers[:, 7:10]
     sentinel = np.all(dims == -1.0, axis=1)
     return bool(
-        np.all(occluded == np.round(occluded))
+        np.all(np.isin(occluded, OCCLUSION_LEVELS))
         and np.all(bbox[:, 2] >= bbox[:, 0])
         and np.all(bbox[:, 3] >= bbox[:, 1])
         and np.all((dims >= 0) | sentinel[:, None])
@@ -244,7 +257,7 @@ def read_calib(path: str | Path) -> KittiCalib:
     """
     path = Path(path)
     found: dict[str, np.ndarray] = {}
-    for line_no, text in enumerate(path.read_text().splitlines(), start=1):
+    for line_no, text in enumerate(_read_text(path).splitlines(), start=1):
         if not text.strip():
             continue
         key, sep, rest = text.partition(":")

@@ -27,10 +27,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from pipeline.core.png import check_png
-from pipeline.core.tables import read_parquet, require_finite
+from pipeline.core.tables import damage_message, open_parquet, read_parquet, require_finite
 
 SCHEMA_VERSION = 1
 RECORD_FILE = "record.json"
@@ -256,10 +255,10 @@ class DatasetRecord:
         # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs. A plain
         # ParquetFile read skips read_table's dataset discovery (~20% of the CPU time of a 100k-point sweep).
         try:
-            with pq.ParquetFile(path) as parquet:
+            with open_parquet(path) as parquet:
                 table = parquet.read()
         except (pa.ArrowException, OSError) as exc:
-            raise RecordError(f"{path}: not a readable LiDAR sweep (frame {frame}, LiDAR {lidar}): {exc}") from None
+            raise RecordError(f"{damage_message(path, exc, 'LiDAR sweep')} (frame {frame}, LiDAR {lidar})") from None
         require_columns(table.column_names, POINT_COLUMNS, str(path))
         columns = {c: np.asarray(table.column(c).to_numpy(), dtype=dtype) for c, dtype in POINT_COLUMNS.items()}
         for name, values in columns.items():

@@ -60,7 +60,8 @@ def test_valid_inputs_read():
         (bad_gt("annotations", 1, area=-3.0), r"annotations\[1\]: field 'area' is -3.0"),
         (bad_gt("annotations", 1, area=math.nan), r"annotations\[1\]: field 'area' is nan"),
         (bad_gt("annotations", 1, iscrowd=2), r"annotations\[1\]: field 'iscrowd' is 2"),
-        (bad_gt("annotations", 1, id="2"), r"annotations\[1\]: field 'id' is '2' \(expected a non-zero integer\)"),
+        (bad_gt("annotations", 1, id="2"),
+         r"annotations\[1\]: field 'id' is '2' \(expected a non-zero 64-bit integer\)"),
         (bad_gt("annotations", 1, image_id=2.0), r"annotations\[1\]: field 'image_id' is 2.0"),
         (bad_gt("annotations", 0, distance_m=-1.0), r"annotations\[0\]: field 'distance_m' is -1.0"),
         (bad_gt("annotations", 0, occlusion=1.5), r"annotations\[0\]: field 'occlusion' is 1.5"),
@@ -137,3 +138,41 @@ def test_files_round_trip_and_bad_json_names_the_file(tmp_path):
 
 def test_empty_results_are_zero_detections():
     assert len(detections_from_list([], ground_truth_from_dict(GT))) == 0
+
+
+# Found by the fuzz (tests/evaluation/test_reader_fuzz.py); each raised a bare numpy/Python error before.
+@pytest.mark.parametrize(
+    ("gt", "results", "message"),
+    [
+        # a list among the numbers: numpy's "inhomogeneous shape" ValueError, naming no file
+        (bad_gt("images", 0, id=[]), RESULTS, r"gt.json: images\[0\]: field 'id' is \[\]"),
+        (GT, bad_results(1, score=[0.5, 1]), r"res.json: results\[1\]: field 'score' is \[0.5, 1\]"),
+        (bad_gt("annotations", 1, area=[1, 2]), RESULTS, r"annotations\[1\]: field 'area' is \[1, 2\]"),
+        # an integer beyond float64: OverflowError (bbox, area, score), TypeError from np.isfinite (occlusion)
+        (GT, bad_results(0, bbox=[10**400, 0, 1, 1]), r"results\[0\]: field 'bbox' is \[1000"),
+        (GT, bad_results(0, score=10**400), r"results\[0\]: field 'score' is 1000"),
+        (bad_gt("annotations", 0, area=10**400), RESULTS, r"annotations\[0\]: field 'area' is 1000"),
+        (bad_gt("annotations", 0, occlusion=10**400), RESULTS, r"annotations\[0\]: field 'occlusion' is 1000"),
+        # an integer beyond int64: "invalid values" naming no entry
+        (GT, bad_results(1, image_id=2**63), r"results\[1\]: field 'image_id' is 9223372036854775808"),
+        # a bad optional field was blamed on an entry that merely lacks it
+        (bad_gt("annotations", 1, distance_m=-1.0), RESULTS, r"annotations\[1\]: field 'distance_m' is -1.0"),
+    ],
+)
+def test_fuzz_findings_fail_naming_file_entry_and_field(gt, results, message):
+    with pytest.raises(InputError, match=message):
+        detections_from_list(results, ground_truth_from_dict(gt, "gt.json"), "res.json")
+
+
+def test_integers_beyond_int64_that_are_valid_numbers_read_as_floats():
+    g = ground_truth_from_dict(bad_gt("annotations", 0, area=10**30, distance_m=10**20), "gt.json")
+    d = detections_from_list(bad_results(0, bbox=[0, 0, 10**30, 5]), g, "res.json")
+    assert g.area[0] == 1e30 and g.distance_m[0] == 1e20 and g.distance_valid.tolist() == [True, False]
+    assert d.bbox[0].tolist() == [0.0, 0.0, 1e30, 5.0]
+
+
+@pytest.mark.parametrize("raw", [b"\xff\xfe\x00garbage", b"\x89PNG\r\n\x1a\n", b"[" * 100_000])
+def test_binary_or_absurd_json_names_the_file(tmp_path, raw):
+    (tmp_path / "gt.json").write_bytes(raw)
+    with pytest.raises(InputError, match=r"gt.json: not valid JSON"):
+        read_coco_gt(tmp_path / "gt.json")

@@ -53,6 +53,14 @@ def test_detections_read_score_and_empty_files(tmp_path: Path) -> None:
         (GOOD.replace("614.12", "500.00"), False, 1, "bbox"),
         (GOOD.replace("Car 0.00 0", "Car 0.00 0.5"), False, 1, "occluded"),
         (GOOD + "\nCar 0 0", False, 2, "<columns>"),
+        # found by the fuzz (tests/evaluation/test_reader_fuzz.py): Python's float() reads these, numpy's fast
+        # parser does not, and the reader ended in "invalid content" naming no line
+        (GOOD.replace("-0.65", "-0_65"), False, 1, "location_x"),
+        (GOOD.replace("-0.65", "\u0661"), False, 1, "location_x"),  # an Arabic-Indic digit one
+        # an occlusion level beyond -1..3 dropped the object from every difficulty; 1e300 cast to int64 is undefined
+        (GOOD.replace("Car 0.00 0", "Car 0.00 7"), False, 1, "occluded"),
+        (GOOD.replace("Car 0.00 0", "Car 0.00 1e300"), False, 1, "occluded"),
+        (GOOD.replace("Car 0.00 0", "Car 0.00 -2"), False, 1, "occluded"),
     ],
 )
 def test_errors_name_file_line_and_field(tmp_path: Path, text: str, with_score: bool, line: int, field: str) -> None:
@@ -63,6 +71,17 @@ def test_errors_name_file_line_and_field(tmp_path: Path, text: str, with_score: 
     message = str(err.value)
     assert f"{path}:{line}:" in message
     assert f"'{field}'" in message
+
+
+@pytest.mark.parametrize("raw", [b"\x80", b"Car \xff\xfe 0 0", b"\x89PNG\r\n\x1a\n\x00\x00"])
+def test_a_binary_file_names_the_file(tmp_path: Path, raw: bytes) -> None:
+    """Found by the fuzz: a UnicodeDecodeError that named no file."""
+    path = tmp_path / "000007.txt"
+    path.write_bytes(raw)
+    with pytest.raises(KittiFormatError, match=f"{path}: not a text file"):
+        read_label_file(path, with_score=True)
+    with pytest.raises(KittiFormatError, match=f"{path}: not a text file"):
+        read_calib(path)
 
 
 def test_missing_directory_is_an_error(tmp_path: Path) -> None:

@@ -149,6 +149,24 @@ def _flip_byte(rel: str) -> None:
     Path(rel).write_bytes(bytes(data))
 
 
+def _column_ends(path: Path) -> dict[str, int]:
+    """Per column of the first row group, the offset just past its last page (whose last bytes are values); an empty
+    table has no pages."""
+    import pyarrow.parquet as pq
+
+    group = pq.ParquetFile(path).metadata.row_group(0)
+    chunks = [group.column(i) for i in range(group.num_columns)]
+    return {c.path_in_schema: (c.dictionary_page_offset if c.has_dictionary_page else c.data_page_offset)
+            + c.total_compressed_size for c in chunks if c.total_compressed_size}
+
+
+def _flip_value_byte(rel: str, column: str) -> None:
+    """Flip the last byte of ``column``'s data page: a value's byte, which without a page checksum reads silently."""
+    data = bytearray(Path(rel).read_bytes())
+    data[_column_ends(Path(rel))[column] - 1] ^= 0x01
+    Path(rel).write_bytes(bytes(data))
+
+
 def _set_nan(rel: str, column: str) -> None:
     import pandas as pd
 
@@ -181,6 +199,13 @@ CORRUPT = [
      [*EXPORT, "--format", "mcap", "--out", "m.mcap"], "rec/frames.parquet: field time_s is nan at frame"),
     ("NaN position in the trajectories into render", lambda: _set_nan("sim/trajectories.parquet", "x_m"),
      [*RENDER, "--out", "r"], "sim/trajectories.parquet: field x_m is nan at frame"),
+    ("flipped byte in a position of the trajectories into render",
+     lambda: _flip_value_byte("sim/trajectories.parquet", "x_m"), [*RENDER, "--out", "r"],
+     "sim/trajectories.parquet: corrupt (page checksum mismatch"),
+    ("flipped byte in a label of the record into COCO", lambda: _flip_value_byte("rec/labels.parquet", "x1"),
+     [*EXPORT, "--format", "coco", "--out", "c"], "rec/labels.parquet: corrupt (page checksum mismatch"),
+    ("flipped byte in a LiDAR point into MCAP", lambda: _flip_value_byte(SWEEP, "x_m"),
+     [*EXPORT, "--format", "mcap", "--out", "m.mcap"], f"{SWEEP}: corrupt (page checksum mismatch"),
 ]
 
 
@@ -194,6 +219,27 @@ def test_a_corrupt_input_fails_naming_file_frame_and_field(workspace, capsys, da
     assert names in _first_error_line(err)
     assert "Traceback" not in err
     assert snapshot(workspace) == before
+
+
+def test_every_table_simulate_and_render_write_carries_page_checksums(run_21_frames, small_record, tmp_path):
+    """Trajectories, signals, vehicles, road geometry, frames, labels and LiDAR sweeps: a byte flipped in any
+    column's values fails naming the file (without a checksum most such flips read as another value)."""
+    from pipeline.core.tables import read_parquet
+
+    paths = [p for source in (run_21_frames, small_record) for p in sorted(source.rglob("*.parquet"))]
+    assert {"trajectories", "tls_states", "vehicles", "lanes", "frames", "labels"} <= {p.stem for p in paths}
+    assert any(p.parent.parent.name == "lidars" for p in paths)
+    flipped = 0
+    for path in paths:
+        copy = tmp_path / "copy.parquet"
+        for end in _column_ends(path).values():
+            data = bytearray(path.read_bytes())
+            data[end - 1] ^= 0x01
+            copy.write_bytes(bytes(data))
+            with pytest.raises(ValueError, match=r"copy.parquet: corrupt \(page checksum mismatch"):
+                read_parquet(copy)
+            flipped += 1
+    assert flipped > 100
 
 
 def test_a_config_error_is_not_buried_under_a_dump_of_the_config(workspace, capsys):
