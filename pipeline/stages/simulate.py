@@ -23,6 +23,7 @@ from pipeline.core.tables import write_parquet
 from pipeline.stages.common import atomic_output_dir, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
+from pipeline.traffic.parking import PARKED_FILE, parked_rows, place_parked
 from pipeline.traffic.roadgeometry import write_road_geometry
 from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
 
@@ -70,8 +71,12 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
         candidates = demand.vehicles.loc[demand.vehicles["cls"] == config.ego.cls.value, "vehicle_id"].tolist()
         vehicles, persons, tls_rows, counters, ego_id = run(sumocfg, config.simulation, config.ego, candidates, seed,
                                                              progress=progress)
-        trajectories = to_trajectories(vehicles, persons, demand.actor_table(), ego_id)
+        actors = demand.actor_table()
+        parked = place_parked(config.demand, net_file, seed)
+        trajectories = with_parked(to_trajectories(vehicles, persons, actors, ego_id), parked,
+                                   int(actors["track_id"].max()) + 1)
         write_parquet(trajectories, tmp / "trajectories.parquet")
+        write_parquet(parked, tmp / PARKED_FILE)
         tls = pd.DataFrame(tls_rows, columns=["frame", "time_s", "tls_id", "state"]).astype({"frame": np.int32})
         write_parquet(tls, tmp / "tls_states.parquet")
         write_parquet(demand.vehicles, tmp / "vehicles.parquet")
@@ -82,8 +87,23 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
     return stats
 
 
+def with_parked(traj: pd.DataFrame, parked: pd.DataFrame, first_track_id: int) -> pd.DataFrame:
+    """The trajectories with a ``parked`` column and the parked vehicles' rows in every frame, sorted by
+    (frame, track_id); parked track ids follow the moving actors' (from ``first_track_id``)."""
+    traj = traj.assign(parked=False)
+    if len(parked) == 0:
+        return traj
+    frames = traj[["frame", "time_s"]].drop_duplicates("frame")
+    rows = parked_rows(parked, frames, first_track_id)
+    table = pd.concat([traj, rows[traj.columns]], ignore_index=True)
+    table = table.sort_values(["frame", "track_id"], kind="stable").reset_index(drop=True)
+    return table.astype({"frame": np.int32, "track_id": np.int32, "signals": np.int32,
+                         **{c: np.uint8 for c in ("color_r", "color_g", "color_b")}})
+
+
 def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: str, net: dict) -> dict[str, object]:
-    vehicles = traj[traj["cls"] != ObjectClass.PEDESTRIAN.value]
+    vehicles = traj[(traj["cls"] != ObjectClass.PEDESTRIAN.value) & ~traj["parked"]]
+    parked = traj[traj["parked"] & (traj["frame"] == traj["frame"].min())]
     per_frame = traj.groupby("frame").size()
     return {
         "ego_id": ego_id,
@@ -95,6 +115,8 @@ def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: s
         "vehicles_inserted": int(counters.get("departed", 0)),
         "vehicles_arrived": int(counters.get("arrived", 0)),
         "persons_inserted": int(counters.get("persons_departed", 0)),
+        "parked_vehicles": len(parked),
+        "parked_by_class": {str(k): int(v) for k, v in sorted(parked["cls"].value_counts().items())},
         "collisions": int(counters.get("collisions", 0)),
         "collision_events": counters.get("collision_events", []),
         "teleports": int(counters.get("teleports", 0)),
