@@ -122,6 +122,9 @@ def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: s
         "teleports": int(counters.get("teleports", 0)),
         "ego_left_early": bool(counters.get("ego_left_early", 0)),
         "mean_speed_mps": round(float(vehicles["speed_mps"].mean()), 4) if len(vehicles) else 0.0,
+        # Moving vehicles per km of driving lane at the first recorded frame (what the ego drives through).
+        "density_veh_per_lane_km": round(float(((vehicles["frame"] == vehicles["frame"].min()).sum())
+                                               / max(net["driving_lane_length_m"] / 1000.0, 1e-9)), 3),
         "network": net,
     }
 

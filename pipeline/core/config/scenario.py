@@ -197,11 +197,19 @@ class SimulationConfig(_Model):
 
 
 class EgoConfig(_Model):
-    """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``."""
+    """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``.
+
+    ``min_neighbours`` > 0 narrows the random choice to candidates with at least that many other vehicles
+    within ``neighbour_radius_m`` ahead of them (in the half-plane in front of their heading) at the end of
+    the warm-up: the ego still is a random vehicle, drawn among those that have traffic to look at. When no
+    candidate has that many, those with the most are used (logged). 0 keeps the paper's plain random ego.
+    """
 
     vehicle_id: str | None = None
     route_margin: float = Field(1.2, ge=1.0, description="remaining route >= margin x duration x max speed")
     cls: ObjectClass = ObjectClass.CAR
+    min_neighbours: int = Field(0, ge=0)
+    neighbour_radius_m: float = Field(40.0, gt=0.0)
 
 
 class ScenarioConfig(_Model):
