@@ -328,7 +328,7 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
     shutil.rmtree(work)
     visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
     # Per camera: the share of frames nearly repeating the one before (pipeline/core/scene_content.py).
-    near_dup = {c.name: round(near_duplicate_rate(frames, labels, c.name), 4) for c in cameras}
+    near_dup = {c.name: round(near_duplicate_rate(frames, labels, c.name), 4) for c in rig.cameras}
     return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible),
             "near_duplicate_rate": near_dup}
 
