@@ -81,14 +81,15 @@ class Demand:
 
 
 def _random_routes(net_file: Path, count: int, seed: int, min_distance_m: float, work: Path, *, prefix: str,
-                   extra: list[str]) -> list[tuple[str, list[str]]]:
-    """``count`` or more validated routes from randomTrips, as (trip id, edge list)."""
+                   extra: list[str], fringe_factor: str = "max") -> list[tuple[str, list[str]]]:
+    """``count`` or more validated routes from randomTrips, as (trip id, edge list). ``fringe_factor`` weighs
+    origins and destinations on the network's fringe (randomTrips' --fringe-factor; "max": only there)."""
     trips, routes = work / f"{prefix}.trips.xml", work / f"{prefix}.rou.xml"
     # Ask for twice as many as needed: validation drops trips without a route.
     period = 1.0 / (2 * count)
     run_python_tool("randomTrips.py", ["-n", str(net_file), "-o", trips.name, "-r", routes.name, "--seed", str(seed),
                                        "-b", "0", "-e", "1", "-p", f"{period:.9f}", "--prefix", prefix,
-                                       "--min-distance", f"{min_distance_m:.1f}", "--fringe-factor", "max",
+                                       "--min-distance", f"{min_distance_m:.1f}", "--fringe-factor", fringe_factor,
                                        "--validate", *extra], cwd=work)
     root = ET.parse(routes).getroot()
     out = []
@@ -173,8 +174,10 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
         return pd.DataFrame({"person_id": pd.Series(dtype=str), "depart_s": pd.Series(dtype=float),
                              "route": pd.Series(dtype=str), "speed_mps": pd.Series(dtype=float),
                              **{f"color_{c}": pd.Series(dtype=np.uint8) for c in "rgb"}})
+    # Walks start and end anywhere (not on the fringe like vehicles'): people come out of the buildings, and
+    # a walker covers only ~100 m during the warm-up, so fringe origins would leave the inner streets empty.
     walks = _random_routes(net_file, config.pedestrians, seed + 1, 50.0, work, prefix="ped",
-                           extra=["--pedestrians", "--max-distance", "1500"])
+                           extra=["--pedestrians", "--max-distance", "1500"], fringe_factor="1")
     if len(walks) < config.pedestrians:
         raise DemandError(f"{net_file}: only {len(walks)} valid walks for {config.pedestrians} pedestrians "
                           "(does the network have sidewalks?)")
