@@ -61,7 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--condition", required=True, help="condition NAME (configs/conditions/) or YAML PATH")
     parser.add_argument("--rig", default="default", help="rig NAME (configs/rigs/) or YAML PATH")
     parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
-    parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run (default: all)")
+    parser.add_argument("--frames", type=int, help="render N frames evenly spaced over the run, standing-ego repeats "
+                        "skipped (default: all frames but those; see select_frames)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
     parser.add_argument("--shard-size", type=int, default=4,
                         help="frames per shard, the unit of resumption (the last few shards are smaller)")
