@@ -131,13 +131,13 @@ def bushes(placer: PropPlacer) -> None:
     """Low bushes in the strip between town sidewalks and the buildings, where it is free."""
     spots, zs = [], []
     for _edge, walk in town_sidewalks(placer):
-        line = offset_polyline(lane_points(walk), -(walk.width_m / 2 + placer.rng.uniform(1.0, 2.0)))
+        line = offset_polyline(lane_points(walk), -(walk.width_m / 2 + placer.rng.uniform(1.4, 2.2)))
         length = cumulative_length(line)[-1]
         s = np.arange(placer.rng.uniform(2.0, 6.0), length - 2.0, placer.rng.uniform(4.0, 9.0))
         s = s[placer.rng.random(len(s)) < 0.45]
         if len(s):
             pos, _ = interpolate(line, s)
-            ok = (~placer.grid.near(placer.paved, pos, 0.6, outside=True)
+            ok = (~placer.grid.near(placer.paved, pos, 1.3, outside=True)
                   & ~placer.grid.near(placer.taken, pos, 0.8, outside=True))
             spots.append(pos[ok, :2])
             zs.append(pos[ok, 2])
@@ -145,8 +145,9 @@ def bushes(placer: PropPlacer) -> None:
         return
     xy, z = np.concatenate(spots), np.concatenate(zs)
     n = len(xy)
-    r = placer.rng.uniform(0.45, 0.9, n)
-    radii = np.stack([r * placer.rng.uniform(1.0, 1.8, n), r, r * placer.rng.uniform(0.6, 0.9, n)], 1)
+    # At most 1.1 m across from the centre: they stay off the sidewalk (>= 1.3 m away, checked above).
+    r = placer.rng.uniform(0.45, 0.8, n)
+    radii = np.stack([r * placer.rng.uniform(1.0, 1.4, n), r, r * placer.rng.uniform(0.6, 0.9, n)], 1)
     centre = np.stack([xy[:, 0], xy[:, 1], z + radii[:, 2] * 0.8], 1)
     placer.parts["vegetation"].add(*blobs(centre, radii, placer.rng.uniform(0, np.pi, n)), "foliage")
     placer.take(xy[:, None, :] + np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])[None])
