@@ -122,28 +122,34 @@ def choose_ego(sumo, candidates: list[str], ego: EgoConfig, sim: SimulationConfi
                               "lengthen the warm-up, or name ego.vehicle_id")
     if ego.min_neighbours > 0:
         xy = {vid: np.array(sumo.vehicle.getPosition(vid)) for vid in running}
-        heading = {vid: np.radians(90.0 - sumo.vehicle.getAngle(vid)) for vid in eligible}
+        heading = {vid: np.radians(90.0 - sumo.vehicle.getAngle(vid)) for vid in running}
         counts = neighbours_ahead(np.array([xy[v] for v in eligible]), np.array([heading[v] for v in eligible]),
-                                  np.array([xy[v] for v in running]), ego.neighbour_radius_m)
+                                  np.array([xy[v] for v in running]), np.array([heading[v] for v in running]),
+                                  ego.neighbour_radius_m)
         enough = [v for v, c in zip(eligible, counts, strict=True) if c >= ego.min_neighbours]
         if not enough:
             most = int(counts.max())
             log.warning("no ego candidate has %d vehicles within %g m ahead; choosing among the %d with the most (%d)",
                         ego.min_neighbours, ego.neighbour_radius_m, int((counts == most).sum()), most)
             enough = [v for v, c in zip(eligible, counts, strict=True) if c == most]
-        log.info("ego: %d of %d candidates have >= %d vehicles within %g m ahead", len(enough), len(eligible),
+        log.info("ego: %d of %d candidates have >= %d vehicles driving their way within %g m ahead", len(enough),
+                 len(eligible),
                  ego.min_neighbours, ego.neighbour_radius_m)
         eligible = enough
     return eligible[int(rng.integers(len(eligible)))]
 
 
-def neighbours_ahead(xy: np.ndarray, yaw_rad: np.ndarray, others_xy: np.ndarray, radius_m: float) -> np.ndarray:
-    """(N,) int: for each of N vehicles at ``xy`` (N, 2) heading ``yaw_rad`` (N,), the number of points of
-    ``others_xy`` (M, 2) within ``radius_m`` of it and strictly in front of it (positive projection on its
-    heading). A vehicle's own position (distance 0) is not in front of it, so it never counts itself."""
+def neighbours_ahead(xy: np.ndarray, yaw_rad: np.ndarray, others_xy: np.ndarray, others_yaw_rad: np.ndarray,
+                     radius_m: float) -> np.ndarray:
+    """(N,) int: for each of N vehicles at ``xy`` (N, 2) heading ``yaw_rad`` (N,), the number of the M others
+    (positions ``others_xy`` (M, 2), headings ``others_yaw_rad`` (M,)) within ``radius_m`` of it, strictly in
+    front of it (positive projection on its heading) and driving its way (headings less than 90 deg apart):
+    oncoming traffic passes in a second or two. A vehicle's own position (distance 0) is not in front of it, so
+    it never counts itself."""
     d = others_xy[None, :, :] - xy[:, None, :]
     ahead = d[..., 0] * np.cos(yaw_rad)[:, None] + d[..., 1] * np.sin(yaw_rad)[:, None]
-    return ((np.hypot(d[..., 0], d[..., 1]) <= radius_m) & (ahead > 0)).sum(axis=1)
+    same_way = np.cos(others_yaw_rad[None, :] - yaw_rad[:, None]) > 0
+    return ((np.hypot(d[..., 0], d[..., 1]) <= radius_m) & (ahead > 0) & same_way).sum(axis=1)
 
 
 def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: list[str], seed: int, *,

@@ -135,10 +135,12 @@ def test_parked_classes_need_a_size_distribution():
         DemandConfig.model_validate(data)
 
 
-def test_neighbours_ahead_counts_only_points_in_front_within_the_radius():
+def test_neighbours_ahead_counts_only_traffic_in_front_driving_the_same_way_within_the_radius():
     xy = np.array([[0.0, 0.0], [10.0, 0.0]])
     yaw = np.array([0.0, np.pi])  # east, west
-    others = np.array([[0.0, 0.0], [5.0, 0.0], [-5.0, 0.0], [0.0, 5.0], [30.0, 0.0], [10.0, 0.0]])
-    # Vehicle 0 (east): (5, 0) ahead; (0, 5) is beside (projection 0); (30, 0) beyond 20 m; (10, 0) ahead.
-    # Vehicle 1 (west, at x=10): (0,0), (5,0), (-5,0) ahead within 20 m; (0,5) too (projection 10, distance 11.2).
-    np.testing.assert_array_equal(neighbours_ahead(xy, yaw, others, 20.0), [2, 4])
+    others = np.array([[0.0, 0.0], [5.0, 0.0], [-5.0, 0.0], [0.0, 5.0], [30.0, 0.0], [10.0, 0.0], [8.0, 1.0]])
+    others_yaw = np.array([0.0, 0.0, np.pi, 0.0, 0.0, np.pi, 0.0])
+    # Vehicle 0 (east): (5, 0) ahead, same way; (0, 5) is beside (projection 0); (30, 0) beyond 20 m; (10, 0)
+    # ahead but oncoming; (8, 1) ahead, same way.
+    # Vehicle 1 (west, at x=10): ahead within 20 m are (0,0), (5,0), (-5,0), (0,5), (8,1); only (-5,0) drives west.
+    np.testing.assert_array_equal(neighbours_ahead(xy, yaw, others, others_yaw, 20.0), [2, 1])

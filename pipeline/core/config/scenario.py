@@ -200,9 +200,10 @@ class EgoConfig(_Model):
     """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``.
 
     ``min_neighbours`` > 0 narrows the random choice to candidates with at least that many other vehicles
-    within ``neighbour_radius_m`` ahead of them (in the half-plane in front of their heading) at the end of
-    the warm-up: the ego still is a random vehicle, drawn among those that have traffic to look at. When no
-    candidate has that many, those with the most are used (logged). 0 keeps the paper's plain random ego.
+    driving their way within ``neighbour_radius_m`` ahead of them (in the half-plane in front of their heading,
+    headings less than 90 deg apart) at the end of the warm-up: the ego still is a random vehicle, drawn among
+    those that have traffic to look at. When no candidate has that many, those with the most are used (logged).
+    0 keeps the paper's plain random ego.
     """
 
     vehicle_id: str | None = None
