@@ -23,7 +23,7 @@ from pipeline.core.tables import write_parquet
 from pipeline.stages.common import atomic_output_dir, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
-from pipeline.traffic.parking import PARKED_FILE, parked_rows, place_parked
+from pipeline.traffic.parking import PARKED_FILE, place_parked, with_parked
 from pipeline.traffic.roadgeometry import write_road_geometry
 from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
 
@@ -85,20 +85,6 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
         write_json(tmp / "stats.json", stats)
         write_meta(tmp, stage="simulate", config=config.model_dump(mode="json"), seed=seed)
     return stats
-
-
-def with_parked(traj: pd.DataFrame, parked: pd.DataFrame, first_track_id: int) -> pd.DataFrame:
-    """The trajectories with a ``parked`` column and the parked vehicles' rows in every frame, sorted by
-    (frame, track_id); parked track ids follow the moving actors' (from ``first_track_id``)."""
-    traj = traj.assign(parked=False)
-    if len(parked) == 0:
-        return traj
-    frames = traj[["frame", "time_s"]].drop_duplicates("frame")
-    rows = parked_rows(parked, frames, first_track_id)
-    table = pd.concat([traj, rows[traj.columns]], ignore_index=True)
-    table = table.sort_values(["frame", "track_id"], kind="stable").reset_index(drop=True)
-    return table.astype({"frame": np.int32, "track_id": np.int32, "signals": np.int32,
-                         **{c: np.uint8 for c in ("color_r", "color_g", "color_b")}})
 
 
 def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: str, net: dict) -> dict[str, object]:

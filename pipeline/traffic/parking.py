@@ -120,3 +120,17 @@ def parked_rows(parked: pd.DataFrame, frames: pd.DataFrame, first_track_id: int)
     rep.insert(0, "frame", np.repeat(frames["frame"].to_numpy(), n).astype(np.int32))
     rep.insert(1, "time_s", np.repeat(frames["time_s"].to_numpy(), n))
     return rep.assign(is_ego=False, speed_mps=0.0, accel_mps2=0.0, signals=np.int32(0), braking=False, parked=True)
+
+
+def with_parked(traj: pd.DataFrame, parked: pd.DataFrame, first_track_id: int) -> pd.DataFrame:
+    """The trajectories with a ``parked`` column and the parked vehicles' rows in every frame, sorted by
+    (frame, track_id); parked track ids follow the moving actors' (from ``first_track_id``)."""
+    traj = traj.assign(parked=False)
+    if len(parked) == 0:
+        return traj
+    frames = traj[["frame", "time_s"]].drop_duplicates("frame")
+    rows = parked_rows(parked, frames, first_track_id)
+    table = pd.concat([traj, rows[traj.columns]], ignore_index=True)
+    table = table.sort_values(["frame", "track_id"], kind="stable").reset_index(drop=True)
+    return table.astype({"frame": np.int32, "track_id": np.int32, "signals": np.int32,
+                         **{c: np.uint8 for c in ("color_r", "color_g", "color_b")}})
