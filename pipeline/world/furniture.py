@@ -7,6 +7,7 @@ props.py: world frame, metres, yaw CCW from +x; every draw from the placer's gen
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -17,6 +18,8 @@ from pipeline.world.roadmesh import lane_points
 
 if TYPE_CHECKING:
     from pipeline.world.props import PropPlacer
+
+log = logging.getLogger(__name__)
 
 
 def town_sidewalks(placer: PropPlacer) -> list[tuple[str, object]]:
@@ -55,7 +58,7 @@ def vertical_plates(centre: np.ndarray, yaw: np.ndarray, outline: np.ndarray, fo
 
 def signs(placer: PropPlacer) -> None:
     """Traffic signs on posts at the kerb side of town sidewalks, facing their edge's traffic."""
-    spots, yaws = [], []
+    spots, yaws, tried = [], [], 0
     for _edge, walk in town_sidewalks(placer):
         line = offset_polyline(lane_points(walk), walk.width_m / 2 - 0.35)  # the kerb side
         length = cumulative_length(line)[-1]
@@ -66,12 +69,14 @@ def signs(placer: PropPlacer) -> None:
             continue
         pos, direction = interpolate(line, s)
         ok = ~placer.grid.lookup(placer.driving, pos) & ~placer.grid.near(placer.taken, pos, 0.5, outside=True)
+        tried += len(ok)
         spots.append(pos[ok])
         yaws.append(np.arctan2(-direction[ok, 1], -direction[ok, 0]))  # facing the oncoming traffic
     if not spots:
         return
     pos, yaw = np.concatenate(spots), np.concatenate(yaws)
     n = len(pos)
+    log.info("traffic signs: %d placed, %d of the spots tried were taken or on a carriageway", n, tried - n)
     kind = placer.rng.integers(0, len(_SIGN_OUTLINES), n)
     height = placer.rng.uniform(2.2, 2.6, n)
     placer.parts["pole"].add(*prisms(pos, np.full(n, 0.035), height + 0.3, 6), "metal")
@@ -93,6 +98,7 @@ def signs(placer: PropPlacer) -> None:
 def bus_shelters(placer: PropPlacer, share: float = 0.2, min_edge_m: float = 60.0) -> None:
     """A bus shelter behind the sidewalk (away from the road) at the middle of some town edges."""
     length_m, depth_m, height_m = 4.0, 1.5, 2.4
+    placed = blocked = 0
     for _edge, walk in town_sidewalks(placer):
         if placer.rng.random() >= share:
             continue
@@ -107,7 +113,9 @@ def bus_shelters(placer: PropPlacer, share: float = 0.2, min_edge_m: float = 60.
         u, v = np.meshgrid(np.linspace(-length_m / 2, length_m / 2, 9), np.linspace(-depth_m / 2, depth_m / 2, 4))
         pts = centre[:2] + u.reshape(-1, 1) * along + v.reshape(-1, 1) * left
         if not placer.free(pts).all():
+            blocked += 1
             continue
+        placed += 1
         z = centre[2]
         corners = np.array([centre[:2] + a * along * (length_m / 2 - 0.1) + b * left * (depth_m / 2 - 0.1)
                             for a in (-1, 1) for b in (-1, 1)])
@@ -125,6 +133,7 @@ def bus_shelters(placer: PropPlacer, share: float = 0.2, min_edge_m: float = 60.
         placer.parts["building"].add(*boxes(bench, np.array([[2.0, 0.4, 0.45]]), yaws), "concrete")
         placer.take(np.array([[centre[:2] + a * along * (length_m / 2 + 0.5) + b * left * (depth_m / 2 + 0.3)
                              for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]]))
+    log.info("bus shelters: %d placed, %d not (the ground behind the sidewalk was taken)", placed, blocked)
 
 
 def bushes(placer: PropPlacer) -> None:
@@ -145,6 +154,7 @@ def bushes(placer: PropPlacer) -> None:
         return
     xy, z = np.concatenate(spots), np.concatenate(zs)
     n = len(xy)
+    log.info("bushes: %d placed", n)
     # At most 1.1 m across from the centre: they stay off the sidewalk (>= 1.3 m away, checked above).
     r = placer.rng.uniform(0.45, 0.8, n)
     radii = np.stack([r * placer.rng.uniform(1.0, 1.4, n), r, r * placer.rng.uniform(0.6, 0.9, n)], 1)
