@@ -114,12 +114,13 @@ def choose_ego(sumo, candidates: list[str], ego: EgoConfig, sim: SimulationConfi
         last = route[-1]
         remaining = sumo.vehicle.getDrivingDistance(vid, last, sumo.lane.getLength(f"{last}_0"))
         speed = max(sumo.vehicle.getSpeed(vid), sumo.vehicle.getAllowedSpeed(vid))
-        if remaining >= ego.route_margin * sim.duration_s * speed:
+        if remaining >= ego.route_margin * sim.duration_s * speed and sumo.vehicle.getSpeed(vid) >= ego.min_speed_mps:
             eligible.append(vid)
     if not eligible:
         raise SimulationError(f"no {ego.cls.value} driving at the end of the warm-up ({sim.warmup_s} s) has a route "
-                              f"long enough for {sim.duration_s} s of recording; shorten simulation.duration_s, "
-                              "lengthen the warm-up, or name ego.vehicle_id")
+                              f"long enough for {sim.duration_s} s of recording and a speed >= ego.min_speed_mps "
+                              f"({ego.min_speed_mps:g} m/s); shorten simulation.duration_s, lengthen the warm-up, "
+                              "lower ego.min_speed_mps, or name ego.vehicle_id")
     if ego.min_neighbours > 0:
         xy = {vid: np.array(sumo.vehicle.getPosition(vid)) for vid in running}
         heading = {vid: np.radians(90.0 - sumo.vehicle.getAngle(vid)) for vid in running}

@@ -144,3 +144,20 @@ def test_neighbours_ahead_counts_only_traffic_in_front_driving_the_same_way_with
     # ahead but oncoming; (8, 1) ahead, same way.
     # Vehicle 1 (west, at x=10): ahead within 20 m are (0,0), (5,0), (-5,0), (0,5), (8,1); only (-5,0) drives west.
     np.testing.assert_array_equal(neighbours_ahead(xy, yaw, others, others_yaw, 20.0), [2, 1])
+
+
+def test_highway_ego_drives_with_traffic_ahead(dense_highway_run):
+    """highway.yaml: the ego drives >= 15 m/s with >= 3 vehicles its way within 60 m ahead at frame 0 (the state
+    it was chosen in), or, where no candidate has 3, as many as any candidate has (logged)."""
+    traj = pd.read_parquet(dense_highway_run / "trajectories.parquet")
+    first = traj[traj["frame"] == 0]
+    ego = first[first["is_ego"]].iloc[0]
+    assert ego["speed_mps"] >= 15.0
+    others = first[~first["is_ego"] & (first["cls"] != "pedestrian")]
+    # Trajectories hold box centres; the rule used front bumpers, so allow the half-lengths' difference.
+    front = lambda r: np.c_[r["x_m"] + np.cos(r["yaw_rad"]) * r["length_m"] / 2,  # noqa: E731
+                            r["y_m"] + np.sin(r["yaw_rad"]) * r["length_m"] / 2]
+    count = neighbours_ahead(front(ego.to_frame().T.astype({"x_m": float, "y_m": float, "yaw_rad": float,
+                                                              "length_m": float})),
+                             np.array([ego["yaw_rad"]], dtype=float), front(others), others["yaw_rad"].to_numpy(), 60.0)
+    assert count[0] >= 3

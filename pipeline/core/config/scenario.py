@@ -203,7 +203,8 @@ class EgoConfig(_Model):
     driving their way within ``neighbour_radius_m`` ahead of them (in the half-plane in front of their heading,
     headings less than 90 deg apart) at the end of the warm-up: the ego still is a random vehicle, drawn among
     those that have traffic to look at. When no candidate has that many, those with the most are used (logged).
-    0 keeps the paper's plain random ego.
+    0 keeps the paper's plain random ego. ``min_speed_mps`` > 0 also leaves out candidates slower than that at
+    the end of the warm-up (on the highway: cars just inserted at an entry, still queued, have neighbours too).
     """
 
     vehicle_id: str | None = None
@@ -211,6 +212,7 @@ class EgoConfig(_Model):
     cls: ObjectClass = ObjectClass.CAR
     min_neighbours: int = Field(0, ge=0)
     neighbour_radius_m: float = Field(40.0, gt=0.0)
+    min_speed_mps: float = Field(0.0, ge=0.0)
 
 
 class ScenarioConfig(_Model):
