@@ -164,7 +164,7 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
     vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])
     persons = _pedestrians(config, net_file, work_dir, seed, rng)
     path = out_dir / ROUTES_FILE
-    _write_routes(vehicles, persons, path)
+    _write_routes(vehicles, persons, path, config.depart_pos.value)
     return Demand(vehicles, persons, path)
 
 
@@ -210,7 +210,7 @@ def _vtype(row) -> dict[str, str]:
     return attrs
 
 
-def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path) -> None:
+def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, depart_pos: str) -> None:
     root = ET.Element("routes")
     root.append(ET.Comment(" roadsynth: one vType per background vehicle, parameters sampled per vehicle "))
     for row in vehicles.itertuples(index=False):
@@ -224,7 +224,7 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path) -> 
     for depart, kind, ident, row in sorted(entries, key=lambda e: (e[0], e[1], e[2])):
         if kind == 0:
             veh = ET.SubElement(root, "vehicle", id=ident, type=f"t_{ident}", depart=f"{depart:.2f}",
-                                departLane="best", departSpeed="max", departPos="base")
+                                departLane="best", departSpeed="max", departPos=depart_pos)
             ET.SubElement(veh, "route", edges=row.route)
         else:
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}")

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.core.config.scenario import DemandConfig, ParkedConfig
+from pipeline.core.config.scenario import DemandConfig, DepartPosition, ParkedConfig
 from pipeline.stages.simulate import resolve_scenario, simulate
 from pipeline.traffic.parking import ParkingError, parking_lanes, place_parked
 from pipeline.traffic.simulation import neighbours_ahead
@@ -161,3 +161,15 @@ def test_highway_ego_drives_with_traffic_ahead(dense_highway_run):
                                                               "length_m": float})),
                              np.array([ego["yaw_rad"]], dtype=float), front(others), others["yaw_rad"].to_numpy(), 60.0)
     assert count[0] >= 3
+
+
+def test_random_free_departures_let_all_200_highway_vehicles_in(dense_highway_run, tmp_path):
+    """highway.yaml inserts at a random free place of the first edge: nearly all 200 vehicles are in by the end
+    of the warm-up; from the edge start (base) the entries hold a quarter of them back."""
+    stats = json.loads((dense_highway_run / "stats.json").read_text())
+    routes = ET.parse(dense_highway_run / "demand.rou.xml").getroot()
+    assert {v.get("departPos") for v in routes.iter("vehicle")} == {"random_free"}
+    assert stats["vehicles_inserted"] >= 190
+    config, _ = resolve_scenario("highway", vehicles=200, duration_s=1.0, warmup_s=90.0)
+    base = config.model_copy(update={"demand": config.demand.model_copy(update={"depart_pos": DepartPosition.BASE})})
+    assert simulate(base, 3, tmp_path / "base", progress=False)["vehicles_inserted"] < 170

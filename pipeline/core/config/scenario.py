@@ -143,12 +143,21 @@ class ParkedConfig(_Model):
         return classes
 
 
+class DepartPosition(str, enum.Enum):
+    """Where on its first edge a vehicle is inserted (SUMO ``departPos``)."""
+
+    BASE = "base"  # at the start of the edge: one entry lane inserts a vehicle per safe headway at most
+    RANDOM_FREE = "random_free"  # at a random free position along the edge
+
+
 class DemandConfig(_Model):
     """Background traffic. ``vehicles`` vehicles depart in ``[0, depart_window_s]`` on random routes."""
 
     vehicles: int = Field(200, ge=1, le=20000)
     depart_window_s: float = Field(60.0, gt=0.0)
     departure: DeparturePattern = DeparturePattern.RANDOM
+    depart_pos: DepartPosition = Field(DepartPosition.BASE,
+                                       description="where on its first edge a vehicle is inserted (departPos)")
     min_route_length_m: float = Field(300.0, ge=0.0)
     classes: dict[ObjectClass, ClassSpec]
     driver: DriverModel
