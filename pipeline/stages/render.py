@@ -32,12 +32,14 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pandas as pd
 from tqdm import tqdm
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.outputs import output_lock
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
+from pipeline.core.scene_content import near_duplicate_rate
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
     config_hash,
@@ -73,8 +75,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--condition", required=True, help="condition NAME (configs/conditions/) or YAML PATH")
     parser.add_argument("--rig", default="default", help="rig NAME (configs/rigs/) or YAML PATH")
     parser.add_argument("--out", type=Path, required=True, help="record folder to write (replaced when complete)")
-    parser.add_argument("--frames", type=int_at_least(1),
-                        help="render N frames evenly spaced over the run (default: all)")
+    parser.add_argument("--frames", type=int_at_least(1), help="render N frames evenly spaced over the run, "
+                        "standing-ego repeats skipped (default: all frames but those; see select_frames)")
     parser.add_argument("--workers", type=int_at_least(1), default=os.cpu_count() or 1,
                         help="processes (default: all cores)")
     parser.add_argument("--shard-size", type=int_at_least(1), default=4,
@@ -82,14 +84,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def select_frames(available: np.ndarray, count: int | None) -> list[int]:
-    """``count`` frames evenly spaced over the recorded ones (all of them when None)."""
+STANDING_MIN_TRAVEL_M = 1.0  # a frame counts as new once the ego has moved this far since the last one ...
+STANDING_MAX_WAIT_S = 2.0  # ... or this long has passed (traffic around a waiting ego still changes)
+
+
+def select_frames(available: np.ndarray, count: int | None, ego: pd.DataFrame | None = None) -> list[int]:
+    """``count`` frames evenly spaced over the recorded ones that are not standing repeats (all of them when None).
+
+    With ``ego`` (columns frame, time_s, x_m, y_m: the ego's rows), a frame is a standing repeat when the ego has
+    moved less than STANDING_MIN_TRAVEL_M since the last frame kept and less than STANDING_MAX_WAIT_S have
+    passed since it (walking the frames in order from the first, which is kept): an ego waiting at a red light
+    then gives one frame every 2 s instead of a run of near-identical ones. An ego faster than 10 m/s at the
+    simulation's 10 Hz loses no frame, so its selection is the evenly spaced one. The frames skipped are logged.
+    """
     available = np.sort(np.unique(available))
+    if count is not None and count < 1:
+        raise ValueError(f"--frames must be >= 1, got {count}")
+    if ego is not None and len(available) > 1:
+        kept = _not_standing(ego.set_index("frame").loc[available])
+        if len(kept) < len(available):
+            log.info("skipping %d of %d recorded frames where the ego stands (moved < %g m within %g s of the "
+                     "last frame kept)", len(available) - len(kept), len(available), STANDING_MIN_TRAVEL_M,
+                     STANDING_MAX_WAIT_S)
+        available = kept
     if count is None or count >= len(available):
         return available.tolist()
-    if count < 1:
-        raise ValueError(f"--frames must be >= 1, got {count}")
     return available[np.round(np.linspace(0, len(available) - 1, count)).astype(int)].tolist()
+
+
+def _not_standing(ego: pd.DataFrame) -> np.ndarray:
+    """Frames (index of ``ego``, sorted) kept by the standing rule of :func:`select_frames`."""
+    frames, t = ego.index.to_numpy(), ego["time_s"].to_numpy()
+    xy = ego[["x_m", "y_m"]].to_numpy()
+    keep = [0]
+    for i in range(1, len(frames)):
+        j = keep[-1]
+        if np.hypot(*(xy[i] - xy[j])) >= STANDING_MIN_TRAVEL_M or t[i] - t[j] >= STANDING_MAX_WAIT_S - 1e-9:
+            keep.append(i)
+    return frames[keep]
 
 
 def plan_shards(frames: list[int], shard_size: int) -> list[tuple[int, ...]]:
@@ -216,7 +248,7 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     seed = int(sim_meta["seed"])
     trajectories = read_parquet(sim_dir / "trajectories.parquet")
     require_finite(trajectories, str(sim_dir / "trajectories.parquet"))  # a NaN would drop actors, write NaN boxes
-    selection = select_frames(trajectories["frame"].to_numpy(), frames)
+    selection = select_frames(trajectories["frame"].to_numpy(), frames, trajectories[trajectories["is_ego"]])
     del trajectories
     key = _job_key(sim_meta, sim_dir, rig, condition, selection)
     work = out.with_name(f".{out.name}.partial")
@@ -350,7 +382,10 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
     replace_path(record, out)
     shutil.rmtree(work)
     visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
-    return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible)}
+    # Per camera: the share of frames nearly repeating the one before (pipeline/core/scene_content.py).
+    near_dup = {c.name: round(near_duplicate_rate(frames, labels, c.name), 4) for c in rig.cameras}
+    return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible),
+            "near_duplicate_rate": near_dup}
 
 
 def main(args: argparse.Namespace) -> int:
@@ -363,6 +398,6 @@ def main(args: argparse.Namespace) -> int:
         raise ValueError(f"{rpath}: {exc}") from exc
     summary = render(args.sim, condition, rig, args.out, frames=args.frames, workers=args.workers,
                      shard_size=args.shard_size, progress=not args.no_progress)
-    log.info("wrote %s: %d frames, %d labels (%d visible in cameras)", args.out, summary["frames"], summary["labels"],
-             summary["visible_camera_labels"])
+    log.info("wrote %s: %d frames, %d labels (%d visible in cameras); near-duplicate frame rate %s", args.out,
+             summary["frames"], summary["labels"], summary["visible_camera_labels"], summary["near_duplicate_rate"])
     return 0

@@ -25,6 +25,7 @@ from pipeline.core.tables import write_parquet
 from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import build_demand
+from pipeline.traffic.parking import PARKED_FILE, place_parked, with_parked
 from pipeline.traffic.roadgeometry import write_road_geometry
 from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
 
@@ -84,8 +85,12 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
         candidates = demand.vehicles.loc[demand.vehicles["cls"] == config.ego.cls.value, "vehicle_id"].tolist()
         vehicles, persons, tls_rows, counters, ego_id = run(sumocfg, config.simulation, config.ego, candidates, seed,
                                                              progress=progress)
-        trajectories = to_trajectories(vehicles, persons, demand.actor_table(), ego_id)
+        actors = demand.actor_table()
+        parked = place_parked(config.demand, net_file, seed)
+        trajectories = with_parked(to_trajectories(vehicles, persons, actors, ego_id), parked,
+                                   int(actors["track_id"].max()) + 1)
         write_parquet(trajectories, tmp / "trajectories.parquet")
+        write_parquet(parked, tmp / PARKED_FILE)
         tls = pd.DataFrame(tls_rows, columns=["frame", "time_s", "tls_id", "state"]).astype({"frame": np.int32})
         write_parquet(tls, tmp / "tls_states.parquet")
         write_parquet(demand.vehicles, tmp / "vehicles.parquet")
@@ -97,7 +102,8 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
 
 
 def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: str, net: dict) -> dict[str, object]:
-    vehicles = traj[traj["cls"] != ObjectClass.PEDESTRIAN.value]
+    vehicles = traj[(traj["cls"] != ObjectClass.PEDESTRIAN.value) & ~traj["parked"]]
+    parked = traj[traj["parked"] & (traj["frame"] == traj["frame"].min())]
     per_frame = traj.groupby("frame").size()
     return {
         "ego_id": ego_id,
@@ -109,11 +115,16 @@ def _stats(traj: pd.DataFrame, counters: dict, config: ScenarioConfig, ego_id: s
         "vehicles_inserted": int(counters.get("departed", 0)),
         "vehicles_arrived": int(counters.get("arrived", 0)),
         "persons_inserted": int(counters.get("persons_departed", 0)),
+        "parked_vehicles": len(parked),
+        "parked_by_class": {str(k): int(v) for k, v in sorted(parked["cls"].value_counts().items())},
         "collisions": int(counters.get("collisions", 0)),
         "collision_events": counters.get("collision_events", []),
         "teleports": int(counters.get("teleports", 0)),
         "ego_left_early": bool(counters.get("ego_left_early", 0)),
         "mean_speed_mps": round(float(vehicles["speed_mps"].mean()), 4) if len(vehicles) else 0.0,
+        # Moving vehicles per km of driving lane at the first recorded frame (what the ego drives through).
+        "density_veh_per_lane_km": round(float(((vehicles["frame"] == vehicles["frame"].min()).sum())
+                                               / max(net["driving_lane_length_m"] / 1000.0, 1e-9)), 3),
         "network": net,
     }
 

@@ -81,14 +81,15 @@ class Demand:
 
 
 def _random_routes(net_file: Path, count: int, seed: int, min_distance_m: float, work: Path, *, prefix: str,
-                   extra: list[str]) -> list[tuple[str, list[str]]]:
-    """``count`` or more validated routes from randomTrips, as (trip id, edge list)."""
+                   extra: list[str], fringe_factor: str = "max") -> list[tuple[str, list[str]]]:
+    """``count`` or more validated routes from randomTrips, as (trip id, edge list). ``fringe_factor`` weighs
+    origins and destinations on the network's fringe (randomTrips' --fringe-factor; "max": only there)."""
     trips, routes = work / f"{prefix}.trips.xml", work / f"{prefix}.rou.xml"
     # Ask for twice as many as needed: validation drops trips without a route.
     period = 1.0 / (2 * count)
     run_python_tool("randomTrips.py", ["-n", str(net_file), "-o", trips.name, "-r", routes.name, "--seed", str(seed),
                                        "-b", "0", "-e", "1", "-p", f"{period:.9f}", "--prefix", prefix,
-                                       "--min-distance", f"{min_distance_m:.1f}", "--fringe-factor", "max",
+                                       "--min-distance", f"{min_distance_m:.1f}", "--fringe-factor", fringe_factor,
                                        "--validate", *extra], cwd=work)
     root = ET.parse(routes).getroot()
     out = []
@@ -163,7 +164,7 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
     vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])
     persons = _pedestrians(config, net_file, work_dir, seed, rng)
     path = out_dir / ROUTES_FILE
-    _write_routes(vehicles, persons, path)
+    _write_routes(vehicles, persons, path, config.depart_pos.value)
     return Demand(vehicles, persons, path)
 
 
@@ -173,8 +174,10 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
         return pd.DataFrame({"person_id": pd.Series(dtype=str), "depart_s": pd.Series(dtype=float),
                              "route": pd.Series(dtype=str), "speed_mps": pd.Series(dtype=float),
                              **{f"color_{c}": pd.Series(dtype=np.uint8) for c in "rgb"}})
+    # Walks start and end anywhere (not on the fringe like vehicles'): people come out of the buildings, and
+    # a walker covers only ~100 m during the warm-up, so fringe origins would leave the inner streets empty.
     walks = _random_routes(net_file, config.pedestrians, seed + 1, 50.0, work, prefix="ped",
-                           extra=["--pedestrians", "--max-distance", "1500"])
+                           extra=["--pedestrians", "--max-distance", "1500"], fringe_factor="1")
     if len(walks) < config.pedestrians:
         raise DemandError(f"{net_file}: only {len(walks)} valid walks for {config.pedestrians} pedestrians "
                           "(does the network have sidewalks?)")
@@ -207,7 +210,7 @@ def _vtype(row) -> dict[str, str]:
     return attrs
 
 
-def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path) -> None:
+def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, depart_pos: str) -> None:
     root = ET.Element("routes")
     root.append(ET.Comment(" roadsynth: one vType per background vehicle, parameters sampled per vehicle "))
     for row in vehicles.itertuples(index=False):
@@ -221,7 +224,7 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path) -> 
     for depart, kind, ident, row in sorted(entries, key=lambda e: (e[0], e[1], e[2])):
         if kind == 0:
             veh = ET.SubElement(root, "vehicle", id=ident, type=f"t_{ident}", depart=f"{depart:.2f}",
-                                departLane="best", departSpeed="max", departPos="base")
+                                departLane="best", departSpeed="max", departPos=depart_pos)
             ET.SubElement(veh, "route", edges=row.route)
         else:
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}")

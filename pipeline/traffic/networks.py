@@ -22,6 +22,9 @@ log = logging.getLogger(__name__)
 
 NET_FILE = "network.net.xml"
 _MOTORWAY, _RAMP = "highway.motorway", "highway.motorway_link"
+# A parking lane: no class may drive on it (so netconvert connects nothing to it and moving traffic never
+# enters it); its lane type marks it for the road geometry and the parked-vehicle placement.
+PARKING_LANE_TYPE = "parking"
 
 
 class NetworkError(ValueError):
@@ -161,14 +164,35 @@ def _build_highway(config: NetworkConfig, out_dir: Path) -> Path:
 
 def _build_urban(config: NetworkConfig, out_dir: Path) -> Path:
     cfg: UrbanNetwork = config.urban
-    run_tool([binary("netgenerate"), "--grid", "--grid.x-number", str(cfg.blocks_x + 1),
-              "--grid.y-number", str(cfg.blocks_y + 1), "--grid.length", f"{cfg.block_length_m:.2f}",
-              "--grid.attach-length", f"{cfg.block_length_m / 2:.2f}",
-              "--default.lanenumber", str(cfg.lanes_per_direction), "--default.lanewidth", f"{cfg.lane_width_m:.2f}",
-              "--default.speed", f"{cfg.speed_limit_mps:.2f}", "--default-junction-type", "traffic_light",
-              "--sidewalks.guess", "true", "--default.sidewalk-width", f"{cfg.sidewalk_width_m:.2f}",
+    grid = [binary("netgenerate"), "--grid", "--grid.x-number", str(cfg.blocks_x + 1),
+            "--grid.y-number", str(cfg.blocks_y + 1), "--grid.length", f"{cfg.block_length_m:.2f}",
+            "--grid.attach-length", f"{cfg.block_length_m / 2:.2f}",
+            "--default.lanenumber", str(cfg.lanes_per_direction), "--default.lanewidth", f"{cfg.lane_width_m:.2f}",
+            "--default.speed", f"{cfg.speed_limit_mps:.2f}", "--default-junction-type", "traffic_light"]
+    finish = ["--sidewalks.guess", "true", "--default.sidewalk-width", f"{cfg.sidewalk_width_m:.2f}",
               "--crossings.guess", "true", "--walkingareas", "true", "--no-turnarounds", "true",
-              "--tls.default-type", "static", "--seed", "1", "--output-file", NET_FILE], cwd=out_dir)
+              "--tls.default-type", "static"]
+    if cfg.parking_lane_width_m is None:
+        run_tool([*grid, *finish, "--seed", "1", "--output-file", NET_FILE], cwd=out_dir)
+        return out_dir / NET_FILE
+    # netgenerate has no parking lanes: it writes the grid as plain XML, a kerbside lane that no class may use
+    # is added as the rightmost lane of every edge, and netconvert builds the network from that (guessing
+    # sidewalks outside it, crossings over it, and connections for the driving lanes only, so right turns
+    # start from the right driving lane).
+    run_tool([*grid, "--seed", "1", "--plain-output-prefix", "urban", "--output-file", "urban.grid.net.xml"],
+             cwd=out_dir)
+    (out_dir / "urban.grid.net.xml").unlink()
+    for name in ("urban.con.xml", "urban.tll.xml"):  # rebuilt from the new lanes' permissions
+        (out_dir / name).unlink()
+    edges = ET.parse(out_dir / "urban.edg.xml").getroot()
+    for edge in edges.iter("edge"):
+        edge.set("numLanes", str(int(edge.get("numLanes", "1")) + 1))
+        ET.SubElement(edge, "lane", index="0", disallow="all", type=PARKING_LANE_TYPE,
+                      width=f"{cfg.parking_lane_width_m:.2f}")
+    _write_xml(edges, out_dir / "urban.edg.xml")
+    strip_timestamp(out_dir / "urban.nod.xml")
+    run_tool([binary("netconvert"), "--node-files", "urban.nod.xml", "--edge-files", "urban.edg.xml", *finish,
+              "--output-file", NET_FILE], cwd=out_dir)
     return out_dir / NET_FILE
 
 
@@ -201,6 +225,8 @@ def network_summary(net_file: Path) -> dict[str, object]:
         raise NetworkError(f"{net_file}: not a readable SUMO network ({exc})") from None
     edges = [e for e in net.getEdges(withInternal=False) if e.getFunction() == ""]
     driving = [lane for e in edges for lane in e.getLanes() if lane.allows("passenger")]
+    parking = [float(lane.get("length")) for lane in ET.parse(net_file).getroot().iter("lane")
+               if lane.get("type") == PARKING_LANE_TYPE]
     return {
         "edges": len(edges),
         "driving_lanes": len(driving),
@@ -208,4 +234,6 @@ def network_summary(net_file: Path) -> dict[str, object]:
         "traffic_lights": len(net.getTrafficLights()),
         "crossings": sum(1 for e in net.getEdges(withInternal=True) if e.getFunction() == "crossing"),
         "sidewalk_lanes": sum(1 for e in edges for lane in e.getLanes() if lane.getPermissions() == {"pedestrian"}),
+        "parking_lanes": len(parking),
+        "parking_lane_length_m": round(sum(parking), 2),
     }

@@ -10,8 +10,10 @@ The simulate stage calls :func:`write_road_geometry` on the generated network an
 
 Lane ``kind`` comes from the lane's permissions (allow/disallow) and the edge function: ``crossing`` and
 ``walkingarea`` by function; otherwise ``driving`` if any road motor vehicle class may use it, ``bike`` if
-bicycles may, ``rail`` if only rail classes may, ``sidewalk`` if only pedestrians may, and ``verge`` if
-nothing may (e.g. OSM green verges, ``disallow="all"``).
+bicycles may, ``rail`` if only rail classes may, ``sidewalk`` if only pedestrians may, ``parking`` for a lane
+of lane type ``parking`` (the urban network's kerbside parking lanes: no class may drive on them; drawn as
+asphalt without markings of its own), and ``verge`` if nothing else may (e.g. OSM green verges,
+``disallow="all"``).
 
 Marking rule (``left_marking``/``right_marking`` in {solid, dashed, none}), on normal edges only; a
 *carriageway* lane is one of kind driving or bike:
@@ -115,9 +117,11 @@ def _permissions(lane: ET.Element) -> set[str]:
     return set() if "all" in names else _ALL_CLASSES - names
 
 
-def _lane_kind(function: str, permissions: set[str]) -> str:
+def _lane_kind(function: str, permissions: set[str], lane_type: str | None = None) -> str:
     if function in ("crossing", "walkingarea"):
         return function
+    if lane_type == "parking":
+        return "parking"
     if permissions & _ROAD_MOTOR:
         return "driving"
     if "bicycle" in permissions:
@@ -156,7 +160,7 @@ def _lane_rows(root: ET.Element) -> list[dict]:
         if function == "connector":
             continue
         lanes = sorted(edge.iter("lane"), key=lambda e: int(e.get("index", "0")))
-        kinds = [_lane_kind(function, _permissions(lane)) for lane in lanes]
+        kinds = [_lane_kind(function, _permissions(lane), lane.get("type")) for lane in lanes]
         marks = _edge_markings(lanes, kinds) if function == "normal" else [("none", "none")] * len(lanes)
         for lane, kind, (left, right) in zip(lanes, kinds, marks, strict=True):
             shape = parse_shape(lane.get("shape"))

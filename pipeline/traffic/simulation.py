@@ -114,13 +114,43 @@ def choose_ego(sumo, candidates: list[str], ego: EgoConfig, sim: SimulationConfi
         last = route[-1]
         remaining = sumo.vehicle.getDrivingDistance(vid, last, sumo.lane.getLength(f"{last}_0"))
         speed = max(sumo.vehicle.getSpeed(vid), sumo.vehicle.getAllowedSpeed(vid))
-        if remaining >= ego.route_margin * sim.duration_s * speed:
+        if remaining >= ego.route_margin * sim.duration_s * speed and sumo.vehicle.getSpeed(vid) >= ego.min_speed_mps:
             eligible.append(vid)
     if not eligible:
         raise SimulationError(f"no {ego.cls.value} driving at the end of the warm-up ({sim.warmup_s} s) has a route "
-                              f"long enough for {sim.duration_s} s of recording; shorten simulation.duration_s, "
-                              "lengthen the warm-up, or name ego.vehicle_id")
+                              f"long enough for {sim.duration_s} s of recording and a speed >= ego.min_speed_mps "
+                              f"({ego.min_speed_mps:g} m/s); shorten simulation.duration_s, lengthen the warm-up, "
+                              "lower ego.min_speed_mps, or name ego.vehicle_id")
+    if ego.min_neighbours > 0:
+        xy = {vid: np.array(sumo.vehicle.getPosition(vid)) for vid in running}
+        heading = {vid: np.radians(90.0 - sumo.vehicle.getAngle(vid)) for vid in running}
+        counts = neighbours_ahead(np.array([xy[v] for v in eligible]), np.array([heading[v] for v in eligible]),
+                                  np.array([xy[v] for v in running]), np.array([heading[v] for v in running]),
+                                  ego.neighbour_radius_m)
+        enough = [v for v, c in zip(eligible, counts, strict=True) if c >= ego.min_neighbours]
+        if not enough:
+            most = int(counts.max())
+            log.warning("no ego candidate has %d vehicles within %g m ahead; choosing among the %d with the most (%d)",
+                        ego.min_neighbours, ego.neighbour_radius_m, int((counts == most).sum()), most)
+            enough = [v for v, c in zip(eligible, counts, strict=True) if c == most]
+        log.info("ego: %d of %d candidates have >= %d vehicles driving their way within %g m ahead", len(enough),
+                 len(eligible),
+                 ego.min_neighbours, ego.neighbour_radius_m)
+        eligible = enough
     return eligible[int(rng.integers(len(eligible)))]
+
+
+def neighbours_ahead(xy: np.ndarray, yaw_rad: np.ndarray, others_xy: np.ndarray, others_yaw_rad: np.ndarray,
+                     radius_m: float) -> np.ndarray:
+    """(N,) int: for each of N vehicles at ``xy`` (N, 2) heading ``yaw_rad`` (N,), the number of the M others
+    (positions ``others_xy`` (M, 2), headings ``others_yaw_rad`` (M,)) within ``radius_m`` of it, strictly in
+    front of it (positive projection on its heading) and driving its way (headings less than 90 deg apart):
+    oncoming traffic passes in a second or two. A vehicle's own position (distance 0) is not in front of it, so
+    it never counts itself."""
+    d = others_xy[None, :, :] - xy[:, None, :]
+    ahead = d[..., 0] * np.cos(yaw_rad)[:, None] + d[..., 1] * np.sin(yaw_rad)[:, None]
+    same_way = np.cos(others_yaw_rad[None, :] - yaw_rad[:, None]) > 0
+    return ((np.hypot(d[..., 0], d[..., 1]) <= radius_m) & (ahead > 0) & same_way).sum(axis=1)
 
 
 def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: list[str], seed: int, *,

@@ -8,6 +8,12 @@ against an occupancy raster (:mod:`pipeline.world.occupancy`) so none stands on 
   pavement (parks, block interiors, highway verges).
 - Street lamps: every ~30 m on the outer side of town sidewalks, every ~50 m beyond highway shoulders;
   7 m / 10 m poles with an arm over the road; their head positions are the night light sources.
+- Street furniture (town edges only): traffic signs on 2.2-2.6 m posts 0.35 m from the kerb, facing the
+  traffic of their edge (round with a red ring, triangular with a red border, or a plain rectangle): one near
+  the start of most edges, more every 35-70 m; a bus shelter (posts, roof, glass back and sides, bench) with
+  its stop sign behind the sidewalk of about one edge in five of at least 60 m; bushes in the strip between
+  sidewalk and buildings. Shelters are placed before the street trees (trees avoid them), signs and bushes
+  after everything else, each only where the occupancy raster is free.
 - Barriers: trapezoid concrete barriers 0.6 m outside both outer edges of highway carriageways, cut where
   they would touch a carriageway or junction (ramps, merges); where the two directions of a highway meet
   without a gap (an edge and its reverse), a slimmer median barrier on their shared border, cut 1 m
@@ -22,6 +28,7 @@ import numpy as np
 
 from pipeline.core.classes import SemanticClass
 from pipeline.traffic.roadgeometry import CARRIAGEWAY_KINDS, RoadGeometry
+from pipeline.world import furniture
 from pipeline.world.materials import material_index
 from pipeline.world.occupancy import Grid
 from pipeline.world.polygons import cumulative_length, interpolate, offset_polyline, resample, ribbon
@@ -75,8 +82,11 @@ class PropPlacer:
         self._buildings()
         lights = [self._lamps(edge, lanes) for edge, lanes in self.edges.items()]
         self.street_lights = np.concatenate(lights) if lights else np.zeros((0, 3))
+        furniture.bus_shelters(self)
         self._street_trees()
         self._scattered_trees()
+        furniture.signs(self)
+        furniture.bushes(self)
         return self
 
     # -- buildings ---------------------------------------------------------------------------------
@@ -251,3 +261,4 @@ class PropPlacer:
         ends = np.stack([np.stack(profile, 0)[:, 0], np.stack(profile, 0)[::-1, -1]], 0)  # end caps (2, 4, 3)
         self.parts["barrier"].add(*quads(ends), "barrier")
         self.take(np.stack([profile[0][:-1], profile[0][1:], profile[-1][1:], profile[-1][:-1]], 1))
+

@@ -13,7 +13,7 @@ from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config.base import ConfigModel
-from pipeline.core.config.distributions import Constant, Distribution, TruncNormal
+from pipeline.core.config.distributions import Constant, Distribution, TruncNormal, Uniform
 
 
 class _Model(ConfigModel):
@@ -45,6 +45,10 @@ class UrbanNetwork(_Model):
     lane_width_m: float = Field(3.2, gt=2.5, le=5.0)
     sidewalk_width_m: float = Field(2.5, ge=1.0, le=6.0)
     speed_limit_mps: float = Field(13.89, gt=3.0, le=30.0)
+    parking_lane_width_m: float | None = Field(
+        None, ge=1.8, le=3.0,
+        description="a kerbside parking lane of this width on every street (between sidewalk and traffic); "
+                    "None: no parking lane")
 
 
 class NetworkConfig(_Model):
@@ -113,22 +117,63 @@ class DeparturePattern(str, enum.Enum):
     RANDOM = "random"  # independent uniform departure times over the window
 
 
+class ParkedConfig(_Model):
+    """Vehicles parked along the kerb, in the network's parking lanes (``urban.parking_lane_width_m``).
+
+    Each parking lane is filled from ``end_clearance_m`` after its start to ``end_clearance_m`` before its end
+    (lanes end where the junction and its crossings begin) with a row of slots: a vehicle of a class drawn by
+    ``classes`` share, sized and coloured like moving vehicles of that class (``demand.classes``), then a gap
+    drawn from ``gap_m``. Each slot holds its vehicle with probability ``occupancy`` (else it stays empty).
+    A parked vehicle keeps ``kerb_gap_m`` between its right side and the lane's kerb edge.
+    """
+
+    occupancy: float = Field(0.7, ge=0.0, le=1.0)
+    classes: dict[ObjectClass, float] = Field(default_factory=lambda: {ObjectClass.CAR: 0.85, ObjectClass.VAN: 0.15},
+                                              min_length=1, description="share per class")
+    gap_m: Distribution = Uniform(low=0.8, high=2.5)
+    kerb_gap_m: Distribution = Uniform(low=0.1, high=0.35)
+    end_clearance_m: float = Field(5.0, ge=0.0, description="no parking this close to a lane end")
+
+    @field_validator("classes")
+    @classmethod
+    def _check_shares(cls, classes: dict[ObjectClass, float]) -> dict[ObjectClass, float]:
+        if any(v < 0 for v in classes.values()) or sum(classes.values()) <= 0:
+            raise ValueError(f"shares must be >= 0 and not all zero, got {classes}")
+        if ObjectClass.PEDESTRIAN in classes:
+            raise ValueError("pedestrians do not park")
+        return classes
+
+
+class DepartPosition(str, enum.Enum):
+    """Where on its first edge a vehicle is inserted (SUMO ``departPos``)."""
+
+    BASE = "base"  # at the start of the edge: one entry lane inserts a vehicle per safe headway at most
+    RANDOM_FREE = "random_free"  # at a random free position along the edge
+
+
 class DemandConfig(_Model):
     """Background traffic. ``vehicles`` vehicles depart in ``[0, depart_window_s]`` on random routes."""
 
     vehicles: int = Field(200, ge=1, le=20000)
     depart_window_s: float = Field(60.0, gt=0.0)
     departure: DeparturePattern = DeparturePattern.RANDOM
+    depart_pos: DepartPosition = Field(DepartPosition.BASE,
+                                       description="where on its first edge a vehicle is inserted (departPos)")
     min_route_length_m: float = Field(300.0, ge=0.0)
     classes: dict[ObjectClass, ClassSpec]
     driver: DriverModel
     pedestrians: int = Field(0, ge=0, description="pedestrians walking sidewalks and crossings (urban/osm)")
     pedestrian_speed_mps: Distribution = TruncNormal(mean=1.34, std=0.26, low=0.6, high=2.2)
+    parked: ParkedConfig | None = Field(None, description="vehicles parked in the network's parking lanes")
 
     @model_validator(mode="after")
     def _check_classes(self) -> DemandConfig:
         if ObjectClass.PEDESTRIAN in self.classes:
             raise ValueError("pedestrians are not a vehicle class: set 'pedestrians' (a count) instead")
+        if self.parked is not None:
+            missing = sorted(c.value for c in self.parked.classes if c not in self.classes)
+            if missing:
+                raise ValueError(f"parked.classes {missing} have no entry in classes (their sizes and colours)")
         if sum(spec.share for spec in self.classes.values()) <= 0:
             raise ValueError("class shares must not all be zero")
         return self
@@ -162,11 +207,22 @@ class SimulationConfig(_Model):
 
 
 class EgoConfig(_Model):
-    """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``."""
+    """The ego is a random vehicle (by seed) whose remaining route covers the recording, or ``vehicle_id``.
+
+    ``min_neighbours`` > 0 narrows the random choice to candidates with at least that many other vehicles
+    driving their way within ``neighbour_radius_m`` ahead of them (in the half-plane in front of their heading,
+    headings less than 90 deg apart) at the end of the warm-up: the ego still is a random vehicle, drawn among
+    those that have traffic to look at. When no candidate has that many, those with the most are used (logged).
+    0 keeps the paper's plain random ego. ``min_speed_mps`` > 0 also leaves out candidates slower than that at
+    the end of the warm-up (on the highway: cars just inserted at an entry, still queued, have neighbours too).
+    """
 
     vehicle_id: str | None = None
     route_margin: float = Field(1.2, ge=1.0, description="remaining route >= margin x duration x max speed")
     cls: ObjectClass = ObjectClass.CAR
+    min_neighbours: int = Field(0, ge=0)
+    neighbour_radius_m: float = Field(40.0, gt=0.0)
+    min_speed_mps: float = Field(0.0, ge=0.0)
 
 
 class ScenarioConfig(_Model):
