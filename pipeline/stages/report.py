@@ -97,6 +97,11 @@ def coco_by_group(gt_path: Path, det_path: Path, group_by: str) -> dict[str, lis
     return out
 
 
+def _percent(value: float | None) -> str:
+    """A share as a percentage with one decimal; "-" where it is undefined (no detections, no ground truth)."""
+    return "-" if value is None else f"{100 * value:.1f}"
+
+
 def _markdown(ious, table, bins, coco, group_by: str, score_threshold: float) -> str:
     head = " | ".join(f"P@{t:g} | R@{t:g}" for t in ious)
     lines = [
@@ -105,14 +110,12 @@ def _markdown(ious, table, bins, coco, group_by: str, score_threshold: float) ->
         f"| {group_by} | {head} |", "|---" * (1 + 2 * len(ious)) + "|",
     ]
     for group, by_iou in table.items():
-        cells = " | ".join(f"{100 * by_iou[t]['precision']:.1f} | {100 * by_iou[t]['recall']:.1f}"
-                           if by_iou[t]["precision"] is not None else f"- | {100 * by_iou[t]['recall']:.1f}"
-                           for t in ious)
+        cells = " | ".join(f"{_percent(by_iou[t]['precision'])} | {_percent(by_iou[t]['recall'])}" for t in ious)
         lines.append(f"| {group} | {cells} |")
     if bins:
         lines += ["", "## Recall (%) by ground-truth distance, box height (px) and occlusion", "",
                   "| bin | " + " | ".join(f"R@{t:g}" for t in ious) + " |", "|---" * (1 + len(ious)) + "|"]
-        lines += [f"| {name} | " + " | ".join(f"{100 * by_iou[t]['recall']:.1f}" for t in ious) + " |"
+        lines += [f"| {name} | " + " | ".join(_percent(by_iou[t]["recall"]) for t in ious) + " |"
                   for name, by_iou in bins.items()]
     lines += ["", f"## COCO AP per {group_by}", "", f"| {group_by} | AP | AP50 | AP75 | AR100 |",
               "|---|---|---|---|---|"]
