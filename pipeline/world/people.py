@@ -7,8 +7,10 @@ is squeezed along x by the placement; the poses keep strides moderate for that r
 
 from __future__ import annotations
 
+import numpy as np
+
 from pipeline.core.classes import ObjectClass
-from pipeline.world.figures import Outfit, figure, pose
+from pipeline.world.figures import SHIN_M, THIGH_M, Outfit, figure, pose
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import merge
 
@@ -22,13 +24,23 @@ def _standing(stance_m: float = 0.11, lean: float = 0.0):
                 hands=[(0.15, 0.02, -1.0), (0.15, -0.02, -1.0)], elbow_dir=(-1.0, 0.3, 0.0))
 
 
-def _walking(step_m: float = 0.2):
-    """Mid-stride (double support just after heel strike): left foot ahead, heel down and toe up; right foot
-    behind on its toes, knee bent; arms swinging opposite to the legs."""
-    return pose(pelvis=(0.0, 0.0, 0.895), chest=(0.03, 0.0, 1.415), head=(0.05, 0.0, 1.61),
-                ankles=[(step_m, 0.085, 0.11), (-step_m, -0.085, 0.165)],
-                feet=[(1.0, 0.05, 0.25), (1.0, -0.05, -0.7)],
-                wrists=[(-0.13, 0.22, 0.88), (0.2, -0.2, 0.92)],
+def _leg(thigh_deg: float, knee_deg: float) -> np.ndarray:
+    """(x, z) of the ankle from the hip joint, the thigh ``thigh_deg`` forward of vertical and the knee bent by
+    ``knee_deg`` (the shin swings back by that much)."""
+    t, s = np.radians(thigh_deg), np.radians(thigh_deg - knee_deg)
+    return np.array([THIGH_M * np.sin(t) + SHIN_M * np.sin(s), -THIGH_M * np.cos(t) - SHIN_M * np.cos(s)])
+
+
+def _walking(thigh_deg: float = 18.0, trail_deg: float = -9.0):
+    """Mid-stride at double support, just after the left heel strikes: the left leg ahead and almost straight, its
+    foot toe up; the right leg behind, knee bent, on its toes; arms swinging opposite to the legs; the pelvis at its
+    lowest (the leading ankle 10 cm up)."""
+    lead, trail = _leg(thigh_deg, 4.0), _leg(trail_deg, 32.0)
+    hip_z = 0.1 - lead[1]
+    return pose(pelvis=(0.0, 0.0, hip_z), chest=(0.03, 0.0, hip_z + 0.52), head=(0.05, 0.0, hip_z + 0.715),
+                ankles=[(lead[0], 0.085, hip_z + lead[1]), (trail[0], -0.085, hip_z + trail[1])],
+                feet=[(1.0, 0.05, 0.3), (1.0, -0.05, -0.75)],
+                wrists=[(-0.14, 0.22, hip_z - 0.02), (0.2, -0.2, hip_z + 0.03)],
                 hands=[(-0.3, 0.0, -1.0), (0.5, 0.0, -1.0)],
                 knee_dir=(1.0, 0.0, 0.0), elbow_dir=[(-1.0, 0.3, 0.0), (-1.0, -0.2, -0.5)])
 
@@ -51,7 +63,7 @@ def pedestrian_coat() -> Mesh:
 
 def pedestrian_summer() -> Mesh:
     """A slim person walking in short sleeves and shorts: forearms and shins bare (skin)."""
-    return merge(figure(_walking(0.17), Outfit(sleeves="skin", shins="skin", girth=0.92)), ObjectClass.PEDESTRIAN)
+    return merge(figure(_walking(15.0, -8.0), Outfit(sleeves="skin", shins="skin", girth=0.92)), ObjectClass.PEDESTRIAN)
 
 
 PEDESTRIANS = (pedestrian, pedestrian_standing, pedestrian_coat, pedestrian_summer)

@@ -32,7 +32,7 @@ def _wheel(x: float, radius: float, tyre_m: float, spokes: int, rim_m: float) ->
                            centre + rim_r * np.array([np.cos(a), 0, np.sin(a)]), 0.006, "metal", 5, ref=Y)
                   for a in ang]
     else:
-        parts.append(cylinder(centre - [0, rim_m, 0], centre + [0, rim_m, 0], rim_r, "rim", 20))
+        parts.append(cylinder(centre - [0, rim_m, 0], centre + [0, rim_m, 0], rim_r, "trim", 20))  # dark cast wheel
     return parts
 
 
@@ -49,7 +49,7 @@ def _bicycle(sport: bool) -> list[Part]:
            "st": (-0.2, 0.0, 0.82 if sport else 0.72), "ht": (0.36, 0.0, 0.84 if sport else 0.8),
            "hb": (0.41, 0.0, 0.64), "low": (-0.14, 0.0, 0.55)}
     top = [("st", "ht")] if sport else [("low", "ht")]
-    frame = _tubes(pts, [("bb", "st"), ("bb", "hb"), ("ht", "hb"), *top], 0.02, "paint")
+    frame = _tubes(pts, [("bb", "st"), ("bb", "hb"), ("ht", "hb"), *top], 0.024, "paint")
     for s in (1.0, -1.0):  # chain and seat stays, fork blades, each side
         off = np.array([0.0, s * 0.045, 0.0])
         frame += [capsule(np.add(pts[a], off * (0.3 if a != "rear" and a != "front" else 1.0)),
@@ -57,7 +57,7 @@ def _bicycle(sport: bool) -> list[Part]:
                   for a, b in (("bb", "rear"), ("st", "rear"), ("hb", "front"))]
     saddle_z = 0.98 if sport else 0.93
     bar_x, bar_z = (0.44, 0.93) if sport else (0.27, 1.04)
-    parts = [*_wheel(-ax, 0.34, 0.018, 6, 0.011), *_wheel(ax, 0.34, 0.018, 6, 0.011), *frame,
+    parts = [*_wheel(-ax, 0.34, 0.022, 6, 0.011), *_wheel(ax, 0.34, 0.022, 6, 0.011), *frame,
              cylinder(pts["st"], (-0.23, 0.0, saddle_z - 0.02), 0.014, "metal", 8),
              ellipsoid((-0.22, 0.0, saddle_z), (0.13, 0.075, 0.03), "trim", 10, 6),
              capsule(pts["ht"], (0.34 if sport else 0.31, 0.0, bar_z + 0.02), 0.016, 0.016, "metal", 8, 1),
@@ -114,8 +114,10 @@ def motorcycle() -> Mesh:
     with lamp and plate, exhaust; a helmeted rider leaning forward onto clip-on bars."""
     ax = 0.72
     parts = [*_wheel(-ax, 0.31, 0.065, 0, 0.035), *_wheel(ax, 0.31, 0.065, 0, 0.035),
-             ellipsoid((0.0, 0.0, 0.47), (0.33, 0.16, 0.2), "metal", 12, 6),
-             ellipsoid((0.12, 0.0, 0.8), (0.3, 0.17, 0.13), "paint", 12, 6),
+             ellipsoid((0.0, 0.0, 0.45), (0.33, 0.16, 0.19), "trim", 12, 6),
+             ellipsoid((0.05, 0.0, 0.52), (0.16, 0.2, 0.12), "metal", 10, 6),
+             ellipsoid((0.12, 0.0, 0.8), (0.32, 0.19, 0.15), "paint", 12, 6),
+             ellipsoid((0.32, 0.0, 0.6), (0.3, 0.2, 0.17), "paint", 12, 6, axis=(0.5, 0.0, 1.0)),
              ellipsoid((0.56, 0.0, 0.75), (0.16, 0.2, 0.3), "paint", 12, 6, axis=(0.45, 0.0, 1.0)),
              ellipsoid((0.58, 0.0, 1.02), (0.05, 0.16, 0.13), "glass", 12, 6, axis=(0.7, 0.0, 1.0)),
              ellipsoid((0.71, 0.0, 0.74), (0.05, 0.08, 0.06), "headlight", 12, 6),
@@ -147,8 +149,8 @@ def scooter() -> Mesh:
              ellipsoid((-0.8, 0.0, 0.48), (0.012, 0.09, 0.06), "plate", 10, 6),
              cylinder((0.52, -0.33, 1.02), (0.52, 0.33, 1.02), 0.017, "trim", 8),
              capsule((ax, 0.0, 0.24), (0.55, 0.0, 0.9), 0.035, 0.035, "trim", 8, 1)]
-    parts += _motorcycle_rider((-0.3, 0.0, 0.86), 8.0, [(0.12, 0.15, 0.44), (0.12, -0.15, 0.44)],
-                               [(0.5, 0.28, 1.02), (0.5, -0.28, 1.02)], "paint")
+    parts += _motorcycle_rider((-0.24, 0.0, 0.86), 15.0, [(0.12, 0.15, 0.44), (0.12, -0.15, 0.44)],
+                               [(0.44, 0.28, 1.02), (0.44, -0.28, 1.02)], "cloth")
     return merge(parts, ObjectClass.MOTORCYCLE)
 
 

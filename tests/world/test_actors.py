@@ -121,6 +121,66 @@ def test_the_parts_check_finds_a_hole_and_an_inward_part():
     assert not _parts(merge([(v, t[1:], m[1:])], ObjectClass.PEDESTRIAN))[0][1]
 
 
+def _first_materials(mesh: Mesh, origins: np.ndarray, direction) -> np.ndarray:
+    """(N,) material of the first triangle each ray from ``origins`` (N, 3) along ``direction`` meets; -1 = miss."""
+    from pipeline.world.scene import _cast, _embree
+
+    rays = np.column_stack([origins, np.broadcast_to(direction, origins.shape)]).astype(np.float32)
+    t, prim, _ = _cast(_embree(mesh.vertices, mesh.triangles), rays)
+    return np.where(np.isfinite(t), mesh.material[np.minimum(prim, len(mesh) - 1)], -1)
+
+
+PEDESTRIAN_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] == ObjectClass.PEDESTRIAN]
+
+
+@pytest.mark.parametrize(("object_class", "family"), PEDESTRIAN_FAMILIES)
+def test_pedestrians_have_a_face_on_top_and_shoes_below(object_class, family):
+    """Seen from the front at eye height (6 % of the stature below the top), a person shows skin; from behind, hair;
+    from above, the head (skin or hair) is what is highest; at the ankles, from the front, shoes or skin."""
+    mesh = family_mesh(family)
+    skin, hair = material_index("skin"), material_index("trim")
+    eyes = np.array([[5.0, 0.0, 0.44]])
+    assert _first_materials(mesh, eyes, [-1.0, 0.0, 0.0])[0] == skin
+    assert _first_materials(mesh, eyes * [-1, 1, 1], [1.0, 0.0, 0.0])[0] == hair
+    top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
+    assert _first_materials(mesh, (top + [0, 0, 1.0])[None], [0.0, 0.0, -1.0])[0] in (skin, hair)
+    feet = np.array([[5.0, y, -0.49] for y in np.linspace(-0.3, 0.3, 61)])
+    seen = set(_first_materials(mesh, feet, [-1.0, 0.0, 0.0]).tolist()) - {-1}
+    assert seen and seen <= {material_index("trim"), material_index("rubber")}
+
+
+@pytest.mark.parametrize("family", ["pedestrian", "pedestrian_summer"])
+def test_a_walker_mid_stride_shows_daylight_between_the_legs(family):
+    """From the side just above the knees (30 % of the stature), rays meet the rear leg, then miss, then meet the
+    front leg: the legs are apart (higher up, at mid-thigh, a real walker's thighs overlap seen from the side)."""
+    fn = next(f for f in FAMILIES[ObjectClass.PEDESTRIAN] if f.__name__ == family)
+    mesh = family_mesh(fn)
+    origins = np.array([[x, -5.0, -0.2] for x in np.linspace(-0.5, 0.5, 201)])
+    hit = _first_materials(mesh, origins, [0.0, 1.0, 0.0]) >= 0
+    runs = np.flatnonzero(np.diff(hit.astype(int)))  # where hit / miss changes along x
+    assert hit.any() and len(runs) >= 3, hit.astype(int)
+    first, last = np.flatnonzero(hit)[[0, -1]]
+    assert not hit[first:last].all()
+
+
+TWO_WHEELER_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.BICYCLE, ObjectClass.MOTORCYCLE)]
+
+
+@pytest.mark.parametrize(("object_class", "family"), TWO_WHEELER_FAMILIES)
+def test_two_wheelers_stand_on_two_tyres_and_carry_a_rider(object_class, family):
+    """From the side just above the ground, rays meet tyres (rubber) near both ends and nothing between them; a
+    ray from the front at the very top meets the rider's head (skin, hair or a helmet), above the bars."""
+    mesh = family_mesh(family)
+    xs = np.linspace(-0.5, 0.5, 201)
+    low = _first_materials(mesh, np.array([[x, -5.0, -0.49] for x in xs]), [0.0, 1.0, 0.0])
+    assert set(low.tolist()) == {-1, material_index("rubber")}
+    assert (low[xs < -0.25] >= 0).any() and (low[xs > 0.25] >= 0).any() and (low[np.abs(xs) < 0.1] < 0).all()
+    top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
+    head = _first_materials(mesh, (top + [5.0, 0.0, -0.03])[None], [-1.0, 0.0, 0.0])[0]
+    assert head in {material_index(n) for n in ("skin", "trim", "paint", "glass")}
+    assert material_index("skin") in set(mesh.material.tolist())
+
+
 VEHICLE_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK,
                                                                 ObjectClass.BUS)]
 
