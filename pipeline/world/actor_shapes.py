@@ -6,9 +6,12 @@ Frame: x forward, y left, z up, origin on the ground under the box centre (norma
 Cars, vans and buses are lofted bodies (:mod:`pipeline.world.loft`: a rounded cross-section swept along a side
 profile, with arches, glasshouse and pillars) with wheels (tyre, recessed rim, hub), door mirrors, and lamps,
 plates and grille laid onto the end faces as decals; trucks have a lofted cab on boxes (cargo, trailer). Small
-parts (mirrors, riders, a bicycle's frame) are convex solids (cuboids, or a convex profile extruded across y),
-whose outward winding is fixed per part by facing away from its centre. :data:`FAMILIES` lists each class's
-families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a semi-trailer).
+parts (mirrors, bumper bars) are convex solids (cuboids, or a convex profile extruded across y), whose outward
+winding is fixed per part by facing away from its centre. Pedestrians (:mod:`pipeline.world.people`), bicycles and
+motorcycles with their riders (:mod:`pipeline.world.two_wheelers`) are smooth closed solids
+(:mod:`pipeline.world.solids`) dressed as figures (:mod:`pipeline.world.figures`). :data:`FAMILIES` lists each
+class's families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a
+semi-trailer).
 """
 
 from __future__ import annotations

@@ -124,7 +124,7 @@ def figure(p: Pose, outfit: Outfit = Outfit()) -> list[Part]:
         thigh = p.hips[i] + 0.5 * (p.knees[i] - p.hips[i])
         calf = p.knees[i] + 0.35 * (p.ankles[i] - p.knees[i])
         parts.append(limb([p.hips[i] + [0, 0, 0.04], thigh, p.knees[i], calf, p.ankles[i]],
-                          g * np.array([0.085, 0.07, 0.052, 0.055, 0.038]),
+                          g * np.array([0.09, 0.08, 0.058, 0.06, 0.04]),
                           [outfit.trousers, outfit.trousers, outfit.shins, outfit.shins], n=8))
         parts.append(_shoe(p.ankles[i], p.feet[i], outfit.shoes))
         elbow, wrist = p.elbows[i], p.wrists[i]
