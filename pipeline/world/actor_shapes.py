@@ -6,9 +6,12 @@ Frame: x forward, y left, z up, origin on the ground under the box centre (norma
 Cars, vans and buses are lofted bodies (:mod:`pipeline.world.loft`: a rounded cross-section swept along a side
 profile, with arches, glasshouse and pillars) with wheels (tyre, recessed rim, hub), door mirrors, and lamps,
 plates and grille laid onto the end faces as decals; trucks have a lofted cab on boxes (cargo, trailer). Small
-parts (mirrors, riders, a bicycle's frame) are convex solids (cuboids, or a convex profile extruded across y),
-whose outward winding is fixed per part by facing away from its centre. :data:`FAMILIES` lists each class's
-families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a semi-trailer).
+parts (mirrors, bumper bars) are convex solids (cuboids, or a convex profile extruded across y), whose outward
+winding is fixed per part by facing away from its centre. Pedestrians (:mod:`pipeline.world.people`), bicycles and
+motorcycles with their riders (:mod:`pipeline.world.two_wheelers`) are smooth closed solids
+(:mod:`pipeline.world.solids`) dressed as figures (:mod:`pipeline.world.figures`). :data:`FAMILIES` lists each
+class's families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a
+semi-trailer).
 """
 
 from __future__ import annotations
@@ -23,8 +26,9 @@ from pipeline.world.loft import BodySpec, decal, loft
 from pipeline.world.loft import wheel as loft_wheel
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
-
-Part = tuple[np.ndarray, np.ndarray, np.ndarray]  # vertices (V, 3), triangles (T, 3), material (T,)
+from pipeline.world.people import PEDESTRIANS
+from pipeline.world.solids import Part, merge
+from pipeline.world.two_wheelers import BICYCLES, MOTORCYCLES
 
 
 def _outward(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -69,16 +73,6 @@ def wheel(x: float, z: float, radius: float, y0: float, y1: float, material: str
 def mirrored(part_fn: Callable[[float, float], Part], y0: float, y1: float) -> list[Part]:
     """A part at y in [y0, y1] and its mirror image at [-y1, -y0]."""
     return [part_fn(y0, y1), part_fn(-y1, -y0)]
-
-
-def merge(parts: list[Part], semantic_class: ObjectClass) -> Mesh:
-    offsets = np.cumsum([0] + [len(v) for v, _, _ in parts[:-1]])
-    return Mesh(
-        np.concatenate([v for v, _, _ in parts]),
-        np.concatenate([t + o for (_, t, _), o in zip(parts, offsets, strict=True)]),
-        np.concatenate([m for _, _, m in parts]),
-        semantic_class.semantic,
-    )
 
 
 def _mirrors(x: float, z: float, half_w: float, out_m: float = 0.11) -> list[Part]:
@@ -306,61 +300,15 @@ def bus() -> Mesh:
     return merge(_car_body(spec, 0.985, ends), ObjectClass.BUS)
 
 
-def _rider(x_seat: float, z_seat: float, x_hands: float, z_hands: float) -> list[Part]:
-    """A seated rider: legs, torso (shirt in the actor's paint), arms, helmeted head."""
-    return [
-        *mirrored(lambda y0, y1: cuboid((x_seat - 0.1, y0, z_seat - 0.55), (x_seat + 0.3, y1, z_seat), "cloth"),
-                  0.04, 0.17),
-        cuboid((x_seat - 0.15, -0.2, z_seat), (x_seat + 0.12, 0.2, z_seat + 0.55), "paint"),
-        *mirrored(lambda y0, y1: cuboid((x_seat, y0, z_hands), (x_hands, y1, z_seat + 0.5), "paint"), 0.17, 0.25),
-        cuboid((x_seat - 0.1, -0.11, z_seat + 0.58), (x_seat + 0.14, 0.11, z_seat + 0.85), "rubber"),
-    ]
-
-
-def motorcycle() -> Mesh:
-    """2.2 x 0.8 x 1.5 m motorcycle with rider."""
-    wheels = [wheel(x, 0.32, 0.32, -0.07, 0.07) for x in (0.78, -0.78)]
-    body = prism_y([(-0.7, 0.45), (0.6, 0.4), (0.62, 0.85), (-0.75, 0.8)], -0.18, 0.18, "paint", "paint")
-    bars = cuboid((0.48, -0.4, 0.9), (0.56, 0.4, 0.96), "metal")
-    lights = [cuboid((0.6, -0.08, 0.72), (0.66, 0.08, 0.82), "headlight"),
-              cuboid((-0.81, -0.08, 0.7), (-0.75, 0.08, 0.78), "taillight"),
-              cuboid((-0.83, -0.09, 0.52), (-0.79, 0.09, 0.64), "plate")]
-    # Hands just above the bars' underside: coplanar faces of two materials would make the hit's material a tie.
-    return merge([*wheels, body, bars, *lights, *_rider(-0.2, 0.85, 0.5, 0.91)], ObjectClass.MOTORCYCLE)
-
-
-def bicycle() -> Mesh:
-    """1.8 x 0.6 x 1.75 m bicycle with rider."""
-    wheels = [wheel(x, 0.34, 0.34, -0.02, 0.02, n=16) for x in (0.52, -0.52)]
-    frame = [cuboid((-0.5, -0.03, 0.3), (0.5, 0.03, 0.38), "metal"),
-             cuboid((-0.25, -0.03, 0.38), (-0.18, 0.03, 0.95), "metal"),
-             cuboid((0.38, -0.03, 0.38), (0.45, 0.03, 1.05), "metal"),
-             cuboid((0.36, -0.3, 1.02), (0.46, 0.3, 1.08), "metal")]
-    legs = mirrored(lambda y0, y1: cuboid((-0.3, y0, 0.45), (0.0, y1, 0.95), "cloth"), 0.04, 0.15)
-    return merge([*wheels, *frame, *_rider(-0.22, 0.95, 0.42, 1.05)[2:], *legs], ObjectClass.BICYCLE)
-
-
-def pedestrian() -> Mesh:
-    """0.5 x 0.6 x 1.75 m walking person: legs mid-stride, torso (paint), arms, head."""
-    return merge([
-        cuboid((0.03, 0.02, 0.0), (0.25, 0.15, 0.88), "cloth"),
-        cuboid((-0.25, -0.15, 0.0), (-0.03, -0.02, 0.88), "cloth"),
-        cuboid((-0.12, -0.2, 0.86), (0.12, 0.2, 1.45), "paint"),
-        *mirrored(lambda y0, y1: cuboid((-0.08, y0, 0.8), (0.08, y1, 1.43), "paint"), 0.2, 0.3),
-        cuboid((-0.05, -0.06, 1.44), (0.05, 0.06, 1.52), "skin"),
-        cuboid((-0.11, -0.1, 1.52), (0.11, 0.1, 1.75), "skin"),
-    ], ObjectClass.PEDESTRIAN)
-
-
 # Body families per class, in a fixed order (an actor's variant picks one among those that suit its length).
 FAMILIES: dict[ObjectClass, tuple[Callable[[], Mesh], ...]] = {
     ObjectClass.CAR: (sedan, hatchback, estate, suv, coupe, pickup),
     ObjectClass.VAN: (van, minibus),
     ObjectClass.TRUCK: (box_truck, semi_trailer),
     ObjectClass.BUS: (bus,),
-    ObjectClass.MOTORCYCLE: (motorcycle,),
-    ObjectClass.BICYCLE: (bicycle,),
-    ObjectClass.PEDESTRIAN: (pedestrian,),
+    ObjectClass.MOTORCYCLE: MOTORCYCLES,
+    ObjectClass.BICYCLE: BICYCLES,
+    ObjectClass.PEDESTRIAN: PEDESTRIANS,
 }
 # The length range (metres) each family suits; a family outside its range is chosen only when none suits.
 SUITS_LENGTH_M: dict[Callable[[], Mesh], tuple[float, float]] = {

@@ -31,10 +31,32 @@ def test_every_family_spans_the_unit_box_exactly(object_class, family):
     np.testing.assert_array_equal(mesh.vertices.min(axis=0), [-0.5, -0.5, -0.5])
     np.testing.assert_array_equal(mesh.vertices.max(axis=0), [0.5, 0.5, 0.5])
     assert mesh.semantic == object_class.semantic
-    # Outward winding: every part is a closed solid facing out (or a thin decal on one), so the signed volume is
-    # positive.
-    v = mesh.vertices[mesh.triangles]
-    assert np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0 > 0.05
+    # Outward winding: every part is a closed solid facing out (or a thin decal on one), so each closed part's signed
+    # volume is positive, and so is the whole's (thin people and bicycles fill only a few % of their boxes).
+    parts = _parts(mesh)
+    assert all(volume > 0 for volume, closed in parts if closed)
+    assert sum(volume for volume, _ in parts) > 0.02
+
+
+def _parts(mesh: Mesh) -> list[tuple[float, bool]]:
+    """(signed volume, closed) of each connected part (triangles sharing vertices); closed: every directed edge's
+    reverse is an edge of the part (a watertight, consistently oriented surface)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    t = mesh.triangles
+    graph = coo_matrix((np.ones(2 * len(t)), (np.r_[t[:, 0], t[:, 1]], np.r_[t[:, 1], t[:, 2]])),
+                       shape=(len(mesh.vertices),) * 2)
+    label = connected_components(graph, directed=False)[1][t[:, 0]]
+    v = mesh.vertices[t]
+    volume = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0
+    out = []
+    for k in np.unique(label):
+        tk = t[label == k]
+        edges = {(int(a), int(b)) for a, b in np.concatenate([tk[:, [0, 1]], tk[:, [1, 2]], tk[:, [2, 0]]])}
+        out.append((float(volume[label == k].sum()), len(edges) == 3 * len(tk) and all((b, a) in edges
+                                                                                      for a, b in edges)))
+    return out
 
 
 def _coplanar_overlaps(mesh: Mesh) -> list[tuple[int, int]]:
@@ -73,6 +95,90 @@ def test_the_coplanar_check_finds_an_overlap():
         mesh = Mesh(np.concatenate([square, other]), np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
                     np.array([0, 0, 1, 1], np.int32), ObjectClass.CAR.semantic)
         assert sorted(_coplanar_overlaps(mesh)) == expected
+
+
+PEOPLE_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.PEDESTRIAN, ObjectClass.BICYCLE,
+                                                               ObjectClass.MOTORCYCLE)]
+
+
+@pytest.mark.parametrize(("object_class", "family"), PEOPLE_FAMILIES)
+def test_people_and_two_wheelers_are_closed_solids(object_class, family):
+    """Every part of a person, bicycle or motorcycle is a watertight, outward-facing solid (no decals), and each
+    model stays light."""
+    mesh = family_mesh(family)
+    parts = _parts(mesh)
+    assert all(closed and volume > 0 for volume, closed in parts)
+    assert len(parts) >= 10 and len(mesh) < 4500
+
+
+def test_the_parts_check_finds_a_hole_and_an_inward_part():
+    from pipeline.world.solids import ellipsoid, merge
+
+    v, t, m = ellipsoid((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), "skin")
+    assert _parts(merge([(v, t, m)], ObjectClass.PEDESTRIAN)) == [(pytest.approx(4.0, rel=0.2), True)]
+    inward = _parts(merge([(v, t[:, ::-1], m)], ObjectClass.PEDESTRIAN))
+    assert inward[0][0] < 0 and inward[0][1]
+    assert not _parts(merge([(v, t[1:], m[1:])], ObjectClass.PEDESTRIAN))[0][1]
+
+
+def _first_materials(mesh: Mesh, origins: np.ndarray, direction) -> np.ndarray:
+    """(N,) material of the first triangle each ray from ``origins`` (N, 3) along ``direction`` meets; -1 = miss."""
+    from pipeline.world.scene import _cast, _embree
+
+    rays = np.column_stack([origins, np.broadcast_to(direction, origins.shape)]).astype(np.float32)
+    t, prim, _ = _cast(_embree(mesh.vertices, mesh.triangles), rays)
+    return np.where(np.isfinite(t), mesh.material[np.minimum(prim, len(mesh) - 1)], -1)
+
+
+PEDESTRIAN_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] == ObjectClass.PEDESTRIAN]
+
+
+@pytest.mark.parametrize(("object_class", "family"), PEDESTRIAN_FAMILIES)
+def test_pedestrians_have_a_face_on_top_and_shoes_below(object_class, family):
+    """Seen from the front at eye height (6 % of the stature below the top), a person shows skin; from behind, hair;
+    from above, the head (skin or hair) is what is highest; at the ankles, from the front, shoes or skin."""
+    mesh = family_mesh(family)
+    skin, hair = material_index("skin"), material_index("trim")
+    eyes = np.array([[5.0, 0.0, 0.44]])
+    assert _first_materials(mesh, eyes, [-1.0, 0.0, 0.0])[0] == skin
+    assert _first_materials(mesh, eyes * [-1, 1, 1], [1.0, 0.0, 0.0])[0] == hair
+    top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
+    assert _first_materials(mesh, (top + [0, 0, 1.0])[None], [0.0, 0.0, -1.0])[0] in (skin, hair)
+    feet = np.array([[5.0, y, -0.49] for y in np.linspace(-0.3, 0.3, 61)])
+    seen = set(_first_materials(mesh, feet, [-1.0, 0.0, 0.0]).tolist()) - {-1}
+    assert seen and seen <= {material_index("trim"), material_index("rubber")}
+
+
+@pytest.mark.parametrize("family", ["pedestrian", "pedestrian_summer"])
+def test_a_walker_mid_stride_shows_daylight_between_the_legs(family):
+    """From the side just above the knees (30 % of the stature), rays meet the rear leg, then miss, then meet the
+    front leg: the legs are apart (higher up, at mid-thigh, a real walker's thighs overlap seen from the side)."""
+    fn = next(f for f in FAMILIES[ObjectClass.PEDESTRIAN] if f.__name__ == family)
+    mesh = family_mesh(fn)
+    origins = np.array([[x, -5.0, -0.2] for x in np.linspace(-0.5, 0.5, 201)])
+    hit = _first_materials(mesh, origins, [0.0, 1.0, 0.0]) >= 0
+    runs = np.flatnonzero(np.diff(hit.astype(int)))  # where hit / miss changes along x
+    assert hit.any() and len(runs) >= 3, hit.astype(int)
+    first, last = np.flatnonzero(hit)[[0, -1]]
+    assert not hit[first:last].all()
+
+
+TWO_WHEELER_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.BICYCLE, ObjectClass.MOTORCYCLE)]
+
+
+@pytest.mark.parametrize(("object_class", "family"), TWO_WHEELER_FAMILIES)
+def test_two_wheelers_stand_on_two_tyres_and_carry_a_rider(object_class, family):
+    """From the side just above the ground, rays meet tyres (rubber) near both ends and nothing between them; a
+    ray from the front at the very top meets the rider's head (skin, hair or a helmet), above the bars."""
+    mesh = family_mesh(family)
+    xs = np.linspace(-0.5, 0.5, 201)
+    low = _first_materials(mesh, np.array([[x, -5.0, -0.49] for x in xs]), [0.0, 1.0, 0.0])
+    assert set(low.tolist()) == {-1, material_index("rubber")}
+    assert (low[xs < -0.25] >= 0).any() and (low[xs > 0.25] >= 0).any() and (low[np.abs(xs) < 0.1] < 0).all()
+    top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
+    head = _first_materials(mesh, (top + [5.0, 0.0, -0.03])[None], [-1.0, 0.0, 0.0])[0]
+    assert head in {material_index(n) for n in ("skin", "trim", "paint", "glass")}
+    assert material_index("skin") in set(mesh.material.tolist())
 
 
 VEHICLE_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK,
