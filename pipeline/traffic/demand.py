@@ -126,7 +126,7 @@ def sample_vehicles(config: DemandConfig, rng: np.random.Generator) -> pd.DataFr
         spec = config.classes[cls]
         for name in ("length_m", "width_m", "height_m"):
             columns[name][mask] = getattr(spec, name).sample(rng, count)
-        colors = np.asarray(spec.colors)[rng.integers(0, len(spec.colors), size=count)]
+        colors = np.asarray(spec.colors)[spec.color_index(rng, count)]
         columns["color_r"][mask], columns["color_g"][mask], columns["color_b"][mask] = colors.T
         columns["max_speed_mps"][mask] = spec.max_speed_mps
         for name, values in sample_driver(spec.driver or config.driver, rng, count).items():

@@ -87,7 +87,7 @@ def place_parked(config: DemandConfig, net_file: Path, seed: int) -> pd.DataFram
             cls: ObjectClass = classes[int(rng.choice(len(classes), p=shares / shares.sum()))]
             spec = config.classes[cls]
             size = [float(np.round(getattr(spec, f).sample(rng, 1)[0], 4)) for f in ("length_m", "width_m", "height_m")]
-            color = spec.colors[int(rng.integers(len(spec.colors)))]
+            color = spec.colors[int(spec.color_index(rng))]
             gap, kerb_gap = float(parked.gap_m.sample(rng, 1)[0]), float(parked.kerb_gap_m.sample(rng, 1)[0])
             taken = bool(rng.random() < parked.occupancy)
             if s + size[0] > length - parked.end_clearance_m:

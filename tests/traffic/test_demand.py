@@ -82,3 +82,27 @@ def test_written_vtypes_carry_each_vehicles_parameters(small_highway_run):
         assert float(vt.get("accel")) == pytest.approx(row["accel_mps2"], abs=1e-12)
         assert float(vt.get("speedFactor")) == pytest.approx(row["speed_factor"], abs=1e-12)
         assert float(vt.get("length")) == pytest.approx(row["length_m"], abs=1e-12)
+
+
+def test_color_shares_set_the_colour_frequencies():
+    """With color_shares, colours are drawn by those shares (a large sample, within 3 standard errors); without,
+    uniformly as before; shares of the wrong length or all zero fail naming the field."""
+    import numpy as np
+    import pytest
+    from pydantic import ValidationError
+
+    from pipeline.core.config.scenario import ClassSpec
+
+    base = dict(share=1.0, length_m={"dist": "constant", "value": 4.5}, width_m={"dist": "constant", "value": 1.8},
+                height_m={"dist": "constant", "value": 1.5}, colors=[[255, 255, 255], [0, 0, 0], [255, 0, 0]],
+                max_speed_mps=40.0)
+    spec = ClassSpec(**base, color_shares=[0.6, 0.3, 0.1])
+    n = 20000
+    counts = np.bincount(spec.color_index(np.random.default_rng(0), n), minlength=3) / n
+    np.testing.assert_allclose(counts, [0.6, 0.3, 0.1], atol=3 * np.sqrt(0.25 / n))
+    uniform = ClassSpec(**base)
+    np.testing.assert_array_equal(uniform.color_index(np.random.default_rng(1), 50),
+                                  np.random.default_rng(1).integers(0, 3, size=50))
+    for bad in ([0.5, 0.5], [0.0, 0.0, 0.0], [1.0, -0.5, 0.5]):
+        with pytest.raises(ValidationError, match="color_shares"):
+            ClassSpec(**base, color_shares=bad)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import enum
 from pathlib import Path
 
+import numpy as np
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from pipeline.core.classes import ObjectClass
@@ -99,7 +100,9 @@ class ClassSpec(_Model):
     length_m: Distribution
     width_m: Distribution
     height_m: Distribution
-    colors: list[tuple[int, int, int]] = Field(min_length=1, description="RGB 0-255, drawn uniformly")
+    colors: list[tuple[int, int, int]] = Field(min_length=1, description="RGB 0-255, drawn uniformly or by "
+                                               "color_shares")
+    color_shares: list[float] | None = Field(None, description="relative frequency of each colour (same order)")
     max_speed_mps: float = Field(gt=0.0)
     driver: DriverModel | None = Field(None, description="overrides the demand's driver model")
 
@@ -110,6 +113,21 @@ class ClassSpec(_Model):
             if not all(0 <= c <= 255 for c in rgb):
                 raise ValueError(f"colour components must be in 0..255, got {rgb}")
         return colors
+
+    @model_validator(mode="after")
+    def _check_color_shares(self) -> ClassSpec:
+        shares = self.color_shares
+        if shares is not None and (len(shares) != len(self.colors) or min(shares) < 0 or sum(shares) <= 0):
+            raise ValueError(f"color_shares must give one share >= 0 per colour ({len(self.colors)}), not all 0; "
+                             f"got {shares}")
+        return self
+
+    def color_index(self, rng: np.random.Generator, size: int | None = None) -> np.ndarray | int:
+        """Indices into ``colors`` (``size`` of them, or one): uniform, or weighted by ``color_shares``."""
+        if self.color_shares is None:
+            return rng.integers(0, len(self.colors), size=size)
+        p = np.asarray(self.color_shares, np.float64)
+        return rng.choice(len(self.colors), size=size, p=p / p.sum())
 
 
 class DeparturePattern(str, enum.Enum):
