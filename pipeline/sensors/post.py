@@ -261,6 +261,20 @@ def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.nd
     return image * (1.0 - mask) + blurred * mask
 
 
+AE_KEY = 0.12  # log-average luminance a metered frame is scaled to (about a morning frame's; noon ~0.25, night ~0.01)
+AE_GAIN_LIMITS = (1.0, 2.5)  # the metering only brightens, by up to 1.3 stops: dark frames, not bright ones
+
+
+def auto_exposure_gain(image: np.ndarray) -> float:
+    """The gain a camera's metering applies to an (H, W, 3) float32 linear image (after the condition's exposure):
+    AE_KEY over the image's log-average luminance (Rec. 709 weights, every 4th pixel and row, +1e-4 against log 0),
+    clipped to AE_GAIN_LIMITS."""
+    sub = np.asarray(image, np.float32)[::4, ::4]
+    luminance = 0.2126 * sub[..., 0] + 0.7152 * sub[..., 1] + 0.0722 * sub[..., 2]
+    log_average = float(np.exp(np.mean(np.log(1e-4 + np.maximum(luminance, 0.0)), dtype=np.float64)))
+    return float(np.clip(AE_KEY / log_average, *AE_GAIN_LIMITS))
+
+
 def apply_post(
     image: np.ndarray,
     lens: LensConfig,
@@ -270,13 +284,19 @@ def apply_post(
     *,
     flow: np.ndarray | None = None,
     sky_level: float = 0.0,
+    gain: float = 1.0,
 ) -> np.ndarray:
     """All post effects of a condition on an (H, W, 3) float32 linear image (see the module docstring).
 
     ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``sky_level`` the
-    mean sky radiance after exposure (sets the brightness of rain streaks).
+    mean sky radiance after exposure (sets the brightness of rain streaks); ``gain`` the metering's gain on top of
+    the condition's exposure (:func:`auto_exposure_gain`): the image is scaled by it first; the sensor noise stays
+    the condition's (its figures describe the image processor's output, denoised at high gain).
     """
     out = np.asarray(image, np.float32)
+    if gain != 1.0:
+        out = out * np.float32(gain)
+        sky_level *= gain
     if flow is not None:
         out = motion_blur(out, flow)
     if rain is not None and rng is not None:  # streaks are drawn already blurred by their own fall

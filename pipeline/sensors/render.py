@@ -24,7 +24,7 @@ from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
-from pipeline.sensors.post import apply_post, motion_flow
+from pipeline.sensors.post import apply_post, auto_exposure_gain, motion_flow
 from pipeline.sensors.shading import shade, sky, to_srgb8
 from pipeline.world.scene import FrameScene, Hits, make_rays
 
@@ -115,8 +115,10 @@ def render_camera(
         shift_world = ego_pose.rotation[:, 0] * (ego_speed_mps * shutter_s)
         points = np.where(hits.hit[:, None], dirs_cam * hits.t_m[:, None], np.inf)
         flow = motion_flow(points, cam_to_world.rotation.T @ shift_world, camera.fx, camera.fy).reshape(h, w, 2)
-    image = apply_post(radiance.reshape(h, w, 3), condition.lens, condition.noise, condition.rain, rng, flow=flow,
-                       sky_level=_sky_level(condition))
+    radiance = radiance.reshape(h, w, 3)
+    gain = auto_exposure_gain(radiance) if indirect else 1.0  # a realistic camera meters its frame
+    image = apply_post(radiance, condition.lens, condition.noise, condition.rain, rng, flow=flow,
+                       sky_level=_sky_level(condition), gain=gain)
     return CameraFrame(
         rgb=to_srgb8(image, "filmic" if indirect else "soft"),
         instance_id=hits.instance_id.reshape(h, w),

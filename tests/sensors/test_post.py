@@ -135,3 +135,27 @@ def test_normal_draws_are_splitmix64_quarters_indexing_the_quantiles():
     bits = [int(_splitmix64(key, k)) for k in range(3)]
     expected = [NORMAL_QUANTILES[(bits[i // 4] >> (16 * (i % 4))) & 0xFFFF] for i in range(11)]
     np.testing.assert_array_equal(draws, expected)  # the last three from a part of the third output
+
+
+@pytest.mark.parametrize(("level", "gain"), [(0.06, 0.12 / 0.0601), (0.1, 0.12 / 0.1001), (0.2, 1.0),
+                                             (0.01, 2.5)])
+def test_auto_exposure_brightens_dark_frames_by_their_log_average(level, gain):
+    """A grey frame of luminance L gets AE_KEY / (L + 1e-4), at least 1 and at most 2.5."""
+    from pipeline.sensors.post import auto_exposure_gain
+
+    image = np.full((60, 80, 3), level, np.float32)
+    assert auto_exposure_gain(image) == pytest.approx(gain, rel=1e-5)
+    # The log-average: half the frame at 4x a level, half at 1/4 of it, meters as about that level.
+    split = np.concatenate([np.full((32, 80, 3), 4.0 * 0.08), np.full((32, 80, 3), 0.25 * 0.08)]).astype(np.float32)
+    assert auto_exposure_gain(split) == pytest.approx(0.12 / np.exp(0.5 * (np.log(0.3201) + np.log(0.0201))),
+                                                      rel=1e-4)
+
+
+def test_post_scales_by_the_gain_and_keeps_the_conditions_noise():
+    from pipeline.sensors.post import apply_post
+
+    lens, noise = LensConfig(vignetting=0.0, bloom_strength=0.0), SensorNoiseConfig(shot=0.0, read_std=0.01)
+    image = np.full((40, 50, 3), 0.05, np.float32)
+    plain = apply_post(image, lens, noise, None, np.random.default_rng(3))
+    bright = apply_post(image, lens, noise, None, np.random.default_rng(3), gain=3.0)
+    np.testing.assert_allclose(bright - 0.15, plain - 0.05, atol=1e-6)  # same noise draws, scaled image
