@@ -1,6 +1,6 @@
 """Frames, rigid transforms and oriented 3D boxes.
 
-Conventions (DESIGN.md, "Conventions"):
+Conventions (docs/design.md, "Frames and conventions"):
 
 - World: SUMO network coordinates, metres, x east, y north, z up.
 - Ego / vehicle / LiDAR frame: x forward, y left, z up (ISO 8855).

@@ -1,6 +1,6 @@
 """Pinhole camera with Brown-Conrady distortion: configuration, ray generation and projection.
 
-Conventions (DESIGN.md):
+Conventions (docs/design.md, "Frames and conventions"):
 
 - The camera is mounted on the ego by ``mount``: the pose of the camera *body* frame (x forward,
   y left, z up) in the ego frame. Its optical frame (OpenCV: x right, y down, z forward) is the body
