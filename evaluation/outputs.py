@@ -18,14 +18,11 @@ import logging
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from evaluation.report import report_markdown
-
-if TYPE_CHECKING:
-    from evaluation.api import Evaluation
+from evaluation.report import EvaluationData, report_markdown
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +51,7 @@ def _write_csv(path: Path, header: list[str], rows: list[list[Any]]) -> None:
         writer.writerows([["" if v is None else v for v in row] for row in rows])
 
 
-def write_plot_data(evaluation: Evaluation, plots: Path) -> list[Path]:
+def write_plot_data(evaluation: EvaluationData, plots: Path) -> list[Path]:
     """Write the CSV/JSON plot data; returns the files written."""
     written = []
     keys = ["score", "precision", "recall", "tp", "fp", "f1"]
@@ -100,7 +97,7 @@ def _write_coco_pr(precision: np.ndarray, path: Path) -> Path:
     return path
 
 
-def write_outputs(evaluation: Evaluation, out_dir: Path, *, png: bool = True) -> None:
+def write_outputs(evaluation: EvaluationData, out_dir: Path, *, png: bool = True) -> None:
     """Write metrics.json, plots/ (data, and PNG with ``png``) and report.md into ``out_dir``.
 
     PNG rendering imports matplotlib (about half a second), so it happens only when asked.

@@ -4,10 +4,25 @@ Reads only the metrics dict (and the KITTI summary text)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from evaluation.api import Evaluation
+    import numpy as np
+
+
+class EvaluationData(Protocol):
+    """What the report and the writers (:mod:`evaluation.outputs`) read of an evaluation; the results of
+    :func:`evaluation.evaluate` (:class:`evaluation.api.Evaluation`) are one. A protocol rather than an import of
+    that class, so that evaluation's modules import one way (api -> outputs -> report), without a circle."""
+
+    @property
+    def metrics(self) -> dict[str, Any]: ...
+    @property
+    def curves(self) -> list[dict[str, Any]]: ...
+    @property
+    def coco_precision(self) -> np.ndarray | None: ...
+    @property
+    def kitti_markdown(self) -> str | None: ...
 
 
 def _pct(value: float | None) -> str:
@@ -110,7 +125,7 @@ def _count(value: Any) -> str:
     return str(value)
 
 
-def report_markdown(evaluation: Evaluation) -> str:
+def report_markdown(evaluation: EvaluationData) -> str:
     """The Markdown report of an evaluation."""
     m = evaluation.metrics
     out = ["# Detection evaluation", ""]

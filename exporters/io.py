@@ -24,12 +24,12 @@ from typing import Any
 from pipeline.core.files import atomic_dir, atomic_file, atomic_named_dir
 
 log = logging.getLogger(__name__)
-# zstd level of MCAP and rosbag2 chunks (both libraries hard-code 3): level 1 takes half the CPU time
-# for a file within 2% of the size (bench/bench_export.py).
+# zstd level of MCAP and rosbag2 chunks (both libraries hard-code 3): level 1 takes much less CPU time
+# for a file of nearly the same size (bench/bench_export.py; docs/performance.md).
 ZSTD_LEVEL = 1
 # zstd workers per rosbag2 chunk. Compressing chunks on the writer thread is that export's longest path, so
-# zstd splits each chunk into 2 MB jobs compressed at once (same CPU time; measured on two-frame chunks of
-# ~6.4 MB: 25-40% less time when a core is free). MCAP compresses whole chunks on a pool instead (one thread each).
+# zstd splits each chunk into 2 MB jobs compressed at once (same CPU time, less wall time when a core is free:
+# docs/performance.md). MCAP compresses whole chunks on a pool instead (one thread each).
 # The output does not depend on the number of workers once there is one, but differs from single-threaded
 # output, so the count is fixed rather than taken from the machine: the same bytes everywhere.
 ZSTD_THREADS = 2

@@ -10,7 +10,7 @@ Conventions (the devkit's readme.txt; mapping and thresholds in exporters/README
 - label_2: ``type truncated occluded alpha x1 y1 x2 y2 h w l x y z rotation_y``, one object per line;
   location is the bottom centre of the box in the rectified camera frame; objects the filter marks
   tiny or occluded become ``DontCare`` regions (dropping their 3D fields as the devkit does).
-- Our 2D boxes are continuous with x2 = last covered column + 1 (DESIGN.md); written as is.
+- Our 2D boxes are continuous with x2 = last covered column + 1 (docs/design.md); written as is.
 - calib: the rectified reference camera *is* our camera, so R0_rect = I and P0 = P1 = P2 = P3 = [K | 0]
   (one camera, no stereo baseline); Tr_velo_to_cam maps LiDAR to camera; Tr_imu_to_velo maps the ego
   body frame (x forward, y left, z up, like KITTI's OXTS/IMU frame) to the LiDAR.

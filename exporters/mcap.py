@@ -72,8 +72,7 @@ from exporters.scene import (
 from exporters.source import ExportSource, FrameItem, RecordSource
 
 # A chunk is sealed once it exceeds this: about one frame of the default rig (0.75 MB PNG + 2.4 MB sweep) per
-# chunk. Against two frames per chunk (4 MB): export of the benchmark record 1.08-1.30 s vs 1.26-1.45 s
-# (4 alternating fresh processes each), the same file size within 0.1%.
+# chunk: faster than two frames per chunk (4 MB) for the same file size (docs/performance.md).
 CHUNK_SIZE = 2 << 20
 COMPRESS_WORKERS = 2  # threads compressing chunks while the next fill (each chunk by one thread)
 _NUMERIC = {"<f4": PackedElementField.FLOAT32, "<u2": PackedElementField.UINT16, "u1": PackedElementField.UINT8,

@@ -46,8 +46,8 @@ def pack_points(points: Mapping[str, np.ndarray] | pd.DataFrame) -> memoryview:
     ``DatasetRecord.point_columns``) in :data:`POINT_FIELDS` layout, padding zeroed so output is deterministic.
 
     Built as six little-endian 32-bit words per point (x, y, z, intensity; ring | class << 16 with the pad
-    byte zero; instance) and returned as a view of that buffer: ~0.6 ms for 100k points, where filling a
-    structured array and copying it out took ~4 ms.
+    byte zero; instance) and returned as a view of that buffer: several times faster than filling a structured
+    array and copying it out.
     """
     n = len(points["x_m"])
     words = np.empty((n, POINT_STRIDE // 4), dtype="<u4")

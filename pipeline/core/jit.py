@@ -8,8 +8,8 @@ Conventions:
 
 - A kernel is compiled for the explicit signatures it declares, when its module is imported: a process pool's
   workers, forked after the import, never compile. Numba caches the machine code on disk (beside the module, or
-  under ``NUMBA_CACHE_DIR``), so only the first import after an install or an edit compiles (~0.6 s of CPU per
-  kernel here); later imports load it.
+  under ``NUMBA_CACHE_DIR``), so only the first import after an install or an edit compiles (seconds of CPU per
+  kernel: docs/performance.md); later imports load it.
 - No fast-math: IEEE arithmetic in the order written (no fused multiply-adds, no reassociation, except where a
   kernel asks for one with :func:`fma32`, as the OpenCV loop it replaces does), float32 where the
   numpy code it replaced was float32 (numba makes a Python float literal float64: write ``np.float32(0.5)``).

@@ -5,10 +5,9 @@ and frees them again. glibc's malloc serves blocks above its mmap threshold (128
 32 MB) with fresh ``mmap`` calls and returns freed heap tops above its trim threshold to the system, so such
 a process keeps unmapping memory and faulting it in again, page by page. :func:`keep_freed_memory` raises
 both thresholds, so blocks below 64 MB come from the heap and up to 256 MB of freed heap stays mapped for
-reuse. On this project's 2-core machine, exporting the 100-frame benchmark record in a fresh process:
-rosbag2 takes 2.13-2.65 s with the thresholds and 2.72-2.91 s without (3 alternating runs each). MCAP took
-1.46-1.54 s with and 2.05-2.40 s without until its writer came to copy each chunk once
-(:mod:`exporters.mcap_writer`); now the two differ by no more than the noise.
+reuse. It makes the rosbag2 export of the benchmark record measurably faster; MCAP gained as much until its
+writer came to copy each chunk once (:mod:`exporters.mcap_writer`), and now differs by no more than the noise
+(docs/performance.md).
 
 It changes the whole process, for as long as it runs: the ``roadsynth export`` command calls it (a process
 that ends with its export); library users may call it in their own processes. The render stage gains

@@ -1,9 +1,9 @@
 """Lossless PNG writing: one fixed row filter (numpy) and ISA-L's deflate (python-isal), level 1.
 
 The render stage writes four PNGs per camera frame. With OpenCV's writer (zlib level 1, the same fixed filters,
-run-length strategy) that took ~36 ms of a highway frame's CPU; this writer takes ~10 ms for the same pixels, in
-files ~9% larger (735 -> 805 kB per frame; ``bench/bench_png.py``). Any PNG reader decodes them (the tests read
-them back with OpenCV and Pillow).
+run-length strategy) that was a large share of a frame's CPU; this writer takes a fraction of that for the same
+pixels, in files slightly larger (``bench/bench_png.py``; docs/performance.md). Any PNG reader decodes them
+(the tests read them back with OpenCV and Pillow).
 
 Same image, same bytes: ISA-L picks its code by the processor's instruction sets, and gave byte-identical files for
 rendered frames on an AMD EPYC (AVX2) and an Intel Xeon (AVX-512) in 2026-11. The decoded samples never depend
@@ -26,7 +26,7 @@ from isal import isal_zlib
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
 FILTERS = {"none": 0, "sub": 1, "up": 2}  # PNG filter types 0-2; Average and Paeth cost more than they save here
 COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> PNG colour type: grey, grey+alpha, RGB, RGBA
-LEVEL = 1  # ISA-L's levels are 0-3; 1: ~2.5x faster than zlib's level 1 on rendered frames
+LEVEL = 1  # ISA-L's levels are 0-3; 1 is faster than zlib's level 1 on rendered frames
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:

@@ -253,7 +253,7 @@ class DatasetRecord:
         if not path.is_file():
             raise RecordError(f"{path}: missing from the record")
         # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs. A plain
-        # ParquetFile read skips read_table's dataset discovery (~20% of the CPU time of a 100k-point sweep).
+        # ParquetFile read skips read_table's dataset discovery (a large share of a sweep's read).
         try:
             with open_parquet(path) as parquet:
                 table = parquet.read()

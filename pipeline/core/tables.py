@@ -34,12 +34,10 @@ def write_arrow(table: pa.Table, path: Path) -> None:
 
 
 def write_sweep(table: pa.Table, path: Path) -> None:
-    """Write a LiDAR sweep: the fixed settings, but LZ4 with byte-stream-split float columns. On a 100k-point
-    highway sweep that writes in 8.3 ms instead of 15.4, reads in 2.7 ms instead of 5.8, and is 8% smaller
-    (1131 kB against 1233; measured on the rendered benchmark record). Columns declared not nullable are written
-    without definition levels (4.7 ms instead of 6.8 for the same sweep; LZ4 without the byte split: 3.4 ms, but
-    28% larger). The page checksums add ~0.7 ms to the write of a 112k-point sweep (3.3 -> 4.0 ms) and ~0.2 ms to
-    its read (bench/bench_parquet_checksum.py)."""
+    """Write a LiDAR sweep: the fixed settings, but LZ4 with byte-stream-split float columns: faster to write and
+    read than zstd, and smaller. Columns declared not nullable are written without definition levels (faster; LZ4
+    without the byte split is faster still but much larger). The page checksums cost a little of the write and the
+    read (bench/bench_parquet_checksum.py; the figures are in docs/performance.md)."""
     floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     pq.write_table(table, path, compression="lz4", row_group_size=1 << 20, use_dictionary=False,
                    write_statistics=True, version="2.6", use_byte_stream_split=floats or False,

@@ -358,7 +358,7 @@ class OnnxDetector:
 
     def predict(self, rgbs: list[np.ndarray]) -> list[Detections]:
         # NMS of a few hundred candidates is small work: torch's thread pool waking for it fights
-        # onnxruntime for the cores (measured: 5 ms instead of 0.1 ms per image on 2 cores).
+        # onnxruntime for the cores (measured many times slower per image on 2 cores: docs/performance.md).
         threads = torch.get_num_threads()
         torch.set_num_threads(1)
         try:

@@ -1,6 +1,6 @@
 """Pinhole camera with Brown-Conrady distortion: configuration, ray generation and projection.
 
-Conventions (DESIGN.md):
+Conventions (docs/design.md, "Frames and conventions"):
 
 - The camera is mounted on the ego by ``mount``: the pose of the camera *body* frame (x forward,
   y left, z up) in the ego frame. Its optical frame (OpenCV: x right, y down, z forward) is the body
@@ -184,7 +184,7 @@ class Camera:
     @functools.cached_property
     def pixel_directions(self) -> np.ndarray:
         """(H*W, 3) float32 unit directions (optical frame) through the pixel centres, row-major."""
-        if not self.has_distortion:  # what unproject gives, in one compiled pass (~15x faster: once per process)
+        if not self.has_distortion:  # what unproject gives, in one compiled pass (once per process)
             return _pinhole_directions(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
         rows, cols = np.divmod(np.arange(self.width * self.height), self.width)
         return self._image_rays(self.pixel_uv(cols, rows))

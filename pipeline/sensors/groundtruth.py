@@ -1,4 +1,4 @@
-"""Camera ground truth computed from rays, never estimated (DESIGN.md, "Ground truth is computed").
+"""Camera ground truth computed from rays, never estimated (docs/design.md, "Ground truth is computed").
 
 Per frame and camera, one row per actor whose own (unoccluded) projection covers at least one pixel
 centre of the image:

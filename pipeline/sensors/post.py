@@ -36,7 +36,7 @@ FLARE_GHOSTS = ((0.55, 0.05, (0.6, 0.8, 1.0)), (1.3, 0.03, (1.0, 0.7, 0.4)), (1.
 @functools.lru_cache(maxsize=8)
 def vignette_gain(height: int, width: int, strength: float) -> np.ndarray:
     """(H, W, 3) float32 gain 1 - strength * (r / r_corner)^2 (pixel centres; exactly 1 - strength at corners), the
-    same in each channel: numpy multiplies equal shapes ~8x faster than it broadcasts an (H, W, 1) array."""
+    same in each channel: numpy multiplies equal shapes much faster than it broadcasts an (H, W, 1) array."""
     y = (np.arange(height, dtype=np.float64) + 0.5 - 0.5 * height) / (0.5 * height)
     x = (np.arange(width, dtype=np.float64) + 0.5 - 0.5 * width) / (0.5 * width)
     aspect = width / height
@@ -48,7 +48,7 @@ def vignette_gain(height: int, width: int, strength: float) -> np.ndarray:
 
 def per_channel(a: np.ndarray) -> np.ndarray:
     """(..., 3) float32: ``a`` (any shape) repeated in 3 channels, so that a pixel-wise product or sum with an image
-    runs on equal shapes (OpenCV's merge: ~10x faster than numpy's repeat)."""
+    runs on equal shapes (OpenCV's merge: much faster than numpy's repeat)."""
     a = np.ascontiguousarray(a, np.float32)
     return cv2.merge([a.reshape(-1, 1)] * 3).reshape(*a.shape, 3)
 
@@ -70,8 +70,8 @@ _QUANTILES = NORMAL_QUANTILES.copy()  # the kernels' copy: numba types a read-on
 def standard_normal(shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
     """``shape`` float32 standard normal draws (:func:`_normal_draws`), keyed by one draw of ``rng``.
 
-    For 800x600x3 draws ~1.5 ms, against 4-6 ms for OpenCV's ``randn`` and 15-18 ms for numpy's float32 normals,
-    and as reproducible: a fixed algorithm of integers and a table.
+    Faster than OpenCV's ``randn`` and numpy's float32 normals (docs/performance.md), and as reproducible: a fixed
+    algorithm of integers and a table.
     """
     out = np.empty(shape, np.float32)
     _normal_draws(out.reshape(-1), np.uint64(rng.integers(1 << 63)), _QUANTILES)
@@ -183,7 +183,7 @@ def bloom(image: np.ndarray, threshold: float, strength: float, sigma_px: float)
     if strength == 0:
         return image
     h, w = image.shape[:2]
-    # The part above the threshold: OpenCV's threshold to zero is ~3x faster than numpy's maximum.
+    # The part above the threshold: OpenCV's threshold to zero is faster than numpy's maximum.
     excess = cv2.threshold(image - np.float32(threshold), 0.0, 0.0, cv2.THRESH_TOZERO)[1]
     small = cv2.resize(excess, (max(w // 4, 1), max(h // 4, 1)), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), max(sigma_px / 4.0, 0.5)) + cv2.GaussianBlur(

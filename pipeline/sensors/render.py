@@ -2,8 +2,8 @@
 
 Label images (instance, semantic, depth) come from the pixel-centre rays. The colour image shades the
 centre ray of every pixel; with ``samples_per_pixel`` N > 1, pixels on an edge (:func:`edge_pixels`: object,
-class or material boundaries, silhouettes, creases; ~6% of a highway frame) average N stratified rays
-instead (all pixels with ``samples_everywhere``: for shadow edges too, at ~3x the cost; see
+class or material boundaries, silhouettes, creases: a small share of a frame) average N stratified rays
+instead (all pixels with ``samples_everywhere``: for shadow edges too, at several times the cost; see
 bench/bench_antialias.py). Each ray is shaded
 and fogged under the :class:`Condition` (sun, sky, and at night the frame's spot lights: headlights and street
 lamps), then given the condition's post effects (:mod:`pipeline.sensors.post`: rain, motion blur, bloom,

@@ -55,7 +55,7 @@ def sun_rays(rays, normal, t_m, sun):
 @kernel("float32(float32, float32)")
 def _power(x, exponent):
     """``x ** exponent`` (float32): by repeated squaring for whole exponents up to 1024 (every material's
-    shininess; ~20x faster than powf, within a few float32 ulps of it), else powf."""
+    shininess; much faster than powf, within a few float32 ulps of it), else powf."""
     if not (exponent == np.floor(exponent) and 0 < exponent <= 1024):
         return x ** exponent
     n = np.int64(exponent)

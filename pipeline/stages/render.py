@@ -227,10 +227,10 @@ def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path,
 def _frozen_heap() -> Iterator[None]:
     """Keep the objects alive when the render starts out of the cyclic garbage collector's reach while it runs.
 
-    They are mostly the imported modules' (~210k after the renderer's imports), and each full collection visited
-    all of them: ~90 ms, twice in a 100-frame render's main process, once during the static world build that the
-    workers wait for. Frozen (gc.freeze), they are skipped, and workers forked from this process keep sharing their
-    pages (a collection writes to every object it visits). Thawed (gc.unfreeze) at the end.
+    They are mostly the imported modules' objects, and each full collection visited all of them, in the main
+    process and during the static world build that the workers wait for (docs/performance.md). Frozen
+    (gc.freeze), they are skipped, and workers forked from this process keep sharing their pages (a collection
+    writes to every object it visits). Thawed (gc.unfreeze) at the end.
     """
     gc.freeze()
     try:
@@ -274,7 +274,7 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
 def _pool_context() -> multiprocessing.context.BaseContext:
     """The process pool's start method.
 
-    A worker needs the renderer's modules imported: ~2 s of CPU (open3d, pandas, pyarrow, the pipeline). Plain
+    A worker needs the renderer's modules imported: seconds of CPU (open3d, pandas, pyarrow, the pipeline). Plain
     fork gives it this process's for nothing, but Embree's worker threads do not survive a fork of a process that
     has started them. So on Linux workers fork from this process while it has made no Embree scene yet (the case
     of a `roadsynth render` process; :func:`_run` forks them before this process renders). Otherwise they fork

@@ -39,7 +39,7 @@ from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
 
 # A sweep's columns are never null: declared so (Parquet's "required"), they are written without definition levels,
-# ~1.7 ms of a 100k-point sweep's ~6.8 ms (see write_sweep).
+# a large part of a sweep's write time (see write_sweep, docs/performance.md).
 SWEEP_SCHEMA = pa.schema([pa.field(c, pa.from_numpy_dtype(np.dtype(t)), nullable=False)
                           for c, t in POINT_COLUMNS.items()])
 # One fixed PNG row filter per image kind (libpng's adaptive choice per row costs more than it saves): Up for the
@@ -256,7 +256,7 @@ _WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by 
 @contextlib.contextmanager
 def remembered_world(path: Path, world: StaticWorld | None) -> Iterator[None]:
     """Within the block, :func:`_state` takes ``world``, just pickled to ``path`` by this process, as it is instead
-    of unpickling it: in this process, and in workers forked from it (~60 ms each, highway). Forgotten at the end,
+    of unpickling it: in this process, and in workers forked from it (docs/performance.md). Forgotten at the end,
     so that a later render never mistakes it for another pickle at the same path. ``world`` None: nothing to keep
     (the pickle was there already)."""
     if world is not None:
@@ -271,7 +271,7 @@ def reuse_freed_memory() -> None:
     """Let glibc keep freed memory for the next frame instead of returning it to the OS.
 
     By default its dynamic thresholds unmap or trim most of a frame's large temporaries (image-sized arrays) when
-    they are freed, and the next frame pays the page faults again: ~10% of a frame's CPU. Peak memory stays the
+    they are freed, and the next frame pays the page faults again (docs/performance.md). Peak memory stays the
     same (measured): only memory already used once stays mapped.
     """
     if not sys.platform.startswith("linux"):
@@ -309,7 +309,7 @@ def render_shard(job: ShardJob) -> int:
     """Render ``job.frames``; write images, point clouds and the shard's tables. Returns frames rendered.
 
     ``job.threads`` caps Embree's threads per cast and, when not 0, OpenCV's for the process (its post effects:
-    a second thread beside a pool's other workers only costs CPU, ~1.5 ms per frame at noon). Neither changes a
+    a second thread beside a pool's other workers only costs CPU). Neither changes a
     pixel."""
     if job.threads:
         cv2.setNumThreads(job.threads)

@@ -305,7 +305,7 @@ def load_road_geometry(roads_dir: Path) -> RoadGeometry:
     tables = [read_parquet(roads_dir / f"{n}.parquet") for n in ("lanes", "junctions", "traffic_lights")]
     for frame in tables:
         # Python strings, not pandas' Arrow-backed ones: the world build selects and reads these tables lane by lane,
-        # and Arrow strings made that ~15% slower (urban world: 3.8-4.1 -> 3.2-3.4 s).
+        # and Arrow strings made that measurably slower (docs/performance.md).
         for col in frame.columns:
             if pd.api.types.is_string_dtype(frame[col].dtype) and frame[col].dtype != object:
                 frame[col] = frame[col].astype(object)

@@ -4,7 +4,7 @@ libsumo runs one simulation per process (start/close in sequence is fine; parall
 processes). Actors are read through subscriptions, not per-vehicle getters: after the warm-up every
 running vehicle and person is subscribed once, and each newly departed one when it appears.
 
-Recorded positions follow DESIGN.md: SUMO's front-bumper position and clockwise-from-north angle are
+Recorded positions follow docs/design.md: SUMO's front-bumper position and clockwise-from-north angle are
 converted to box centre and yaw (CCW from east); centre z = road z + height / 2.
 """
 

@@ -4,7 +4,7 @@ An actor's mesh is its class's canonical mesh, spanning the unit box [-0.5, 0.5]
 ``p = A u + c`` (:func:`pipeline.world.actors.unit_to_world`). So a ray meets the actor where the ray mapped back
 into the unit frame, ``u = A^-1 (p - c)`` with direction ``A^-1 d`` (left unnormalised, so that t stays in world
 metres), meets the canonical mesh, whose Embree scene is built once per class and process. Building a BVH over
-every placed actor instead cost ~20 ms per 37k triangles, per frame: more than all the actor rays it served.
+every placed actor instead cost, per frame, more than all the actor rays it served (docs/performance.md).
 
 :func:`actor_pairs` lists which (ray, actor) pairs can meet (an exact slab test against the unit box, with a
 margin) with the pairs' rays in the unit frame; the caller casts each class's pairs against its canonical scene;

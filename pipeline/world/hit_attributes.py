@@ -3,7 +3,7 @@
 :meth:`pipeline.world.scene.FrameScene.cast_rays` casts every ray against the static world and some against the
 frame's actors; :func:`resolve_hits` keeps the nearer hit of each ray and reads the hit triangle's semantic class,
 material and albedo (an actor's paint: its own colour), and turns the normal towards the ray's origin. In numpy
-this took a dozen image-sized temporaries (~6 ms per 480k camera rays); compiled (:mod:`pipeline.core.jit`), one
+this took a dozen image-sized temporaries; compiled (:mod:`pipeline.core.jit`), one
 pass over the rays. :func:`spread_cast` puts a cast of some of the rays back in place among all of them.
 """
 

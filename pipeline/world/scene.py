@@ -1,6 +1,6 @@
 """Ray casting against the world of one frame: the static road scene plus the frame's actors (Embree).
 
-Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
+Design (measured with bench/bench_render_core.py; the figures are in docs/performance.md):
 
 - The static world is one Embree scene built once per run (:class:`StaticScene`); rebuilding a merged
   static+actor BVH every frame costs far more than casting twice.
@@ -8,18 +8,18 @@ Design (measured on 2 cores, 480k rays, see bench/bench_render_core.py):
   under an affine map, so a ray meets it where the ray mapped into the actor's unit box frame meets the canonical
   mesh, whose scene is built once per model and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
   actor) pairs by an exact test against each unit box, then one cast per model present). Building a BVH over the
-  placed actors instead cost ~0.5 us per triangle, every frame: ~11 ms of a highway frame, more than its actor
-  rays. A ray's result is the nearer of the static and the actor hit. Callers may pass a conservative mask of
-  the rays that can reach an actor at all (from projected boxes) to skip the actor test for the rest.
+  placed actors instead cost time per triangle, every frame: more than the actor rays it served. A ray's result
+  is the nearer of the static and the actor hit. Callers may pass a conservative mask of the rays that can reach
+  an actor at all (from projected boxes) to skip the actor test for the rest.
 - The static world is also cut into chunks (:attr:`StaticScene.chunk_boxes`: axis-aligned boxes around nearby
   triangles, tall geometry in 20 m cells, ground-level geometry in 80 m ones) so that a camera can tell from
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
 - Only the actors that some ray of the frame can reach are placed and tested (``active``, from
-  :func:`pipeline.sensors.reach.actors_in_reach`: ~15% of an urban frame's actors, ~65% of a highway one's).
+  :func:`pipeline.sensors.reach.actors_in_reach`: a minority of an urban frame's actors).
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
-  along the sun; ~1-3% of the lit pixels of a highway or urban frame); against the static world only those from
+  along the sun; a few per cent of the lit pixels); against the static world only those from
   hits within SUN_MAP_RANGE_M (:mod:`pipeline.sensors.shading`) whose grid cell of the static world's projection
   along the sun lies as high as they do (:class:`pipeline.world.sunmap.SunMap`), and all from farther hits.
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
@@ -175,7 +175,7 @@ def rectangles_mask(rows: int, cols: int, lo: np.ndarray, hi: np.ndarray) -> np.
     """(rows, cols) bool union of K index rectangles [lo[k, 0], hi[k, 0]) x [lo[k, 1], hi[k, 1]) (each (K, 2)
     int, clipped to the grid; empty ones add nothing): e.g. the rays that may reach an actor, from its window.
 
-    Vectorised over rectangles: +-1 at their corners, then OpenCV's 2D prefix sum (~30x faster than numpy's
+    Vectorised over rectangles: +-1 at their corners, then OpenCV's 2D prefix sum (much faster than numpy's
     cumsums) counts the rectangles over each cell.
     """
     lo = np.clip(np.asarray(lo, np.int64).reshape(-1, 2), 0, [rows, cols])

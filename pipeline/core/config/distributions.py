@@ -16,7 +16,7 @@ from pipeline.core.config.base import ConfigModel
 
 
 def _stats():
-    """scipy.stats, imported on first use: it costs ~1 s of start-up in every CLI call and render worker,
+    """scipy.stats, imported on first use: it costs a noticeable start-up in every CLI call and render worker,
     and only the simulate stage samples from these distributions."""
     from scipy import stats
 
