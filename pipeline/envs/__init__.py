@@ -1,0 +1,18 @@
+"""Gymnasium environments: drive the ego through roadsynth's naturalistic SUMO traffic (docs/envs.md).
+
+Importing this package registers ``roadsynth/Highway-v0``, ``roadsynth/Urban-v0`` and ``roadsynth/Scenario-v0``
+(``gymnasium.make("roadsynth/Scenario-v0", scenario=NAME_OR_PATH)``).
+"""
+
+from gymnasium.envs.registration import register, registry
+
+from pipeline.envs.env import RoadsynthEnv
+from pipeline.envs.options import EnvOptions, RewardWeights
+
+_ENTRY = "pipeline.envs.env:RoadsynthEnv"
+for _id, _kwargs in (("roadsynth/Highway-v0", {"scenario": "highway"}), ("roadsynth/Urban-v0", {"scenario": "urban"}),
+                     ("roadsynth/Scenario-v0", {})):
+    if _id not in registry:
+        register(id=_id, entry_point=_ENTRY, kwargs=_kwargs)
+
+__all__ = ["EnvOptions", "RewardWeights", "RoadsynthEnv"]
