@@ -88,7 +88,7 @@ class RoadsynthEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
-        sumocfg, candidates = self._inputs(run_seed)
+        sumocfg, candidates = self.sumo_inputs(run_seed)
         sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true", "--no-step-log", "true",
                            "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner)
         self._sumo = sumo
@@ -181,7 +181,7 @@ class RoadsynthEnv(gym.Env):
 
     # ---- helpers ----
 
-    def _inputs(self, run_seed: int) -> tuple[Path, list[str]]:
+    def sumo_inputs(self, run_seed: int) -> tuple[Path, list[str]]:
         """The run's .sumocfg and ego candidates: network built once per env, demand once per run seed."""
         if self._work is None:
             self._work = Path(tempfile.mkdtemp(prefix="roadsynth-env-"))
