@@ -12,19 +12,19 @@ class RewardWeights:
     progress: route progress this step / (target speed x dt), capped to [0, 1] (target_speed_mps; None: the
         speed limit of the ego's lane): only distance gained along the
         ego's route counts, so circling or standing earns nothing and reversing is impossible (speed >= 0).
-    comfort: -(jerk / jerk_ref_mps3)^2, jerk = change of longitudinal acceleration per second.
-    lane_keeping: -(lateral offset / half lane width)^2.
+    comfort: -min((jerk / jerk_ref_mps3)^2, 1), jerk = change of longitudinal acceleration per second.
+    lane_keeping: -min((lateral offset / half lane width)^2, 1).
     collision: -1 on the step the ego collides (the episode terminates).
     off_road: -1 on the step the ego leaves the carriageway (the episode terminates).
     """
 
     progress: float = 1.0
-    comfort: float = 0.05
+    comfort: float = 0.2
     lane_keeping: float = 0.1
     collision: float = 10.0
     off_road: float = 10.0
     target_speed_mps: float | None = None
-    jerk_ref_mps3: float = 5.0
+    jerk_ref_mps3: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("progress", "comfort", "lane_keeping", "collision", "off_road"):

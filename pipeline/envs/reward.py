@@ -9,10 +9,10 @@ def reward_terms(weights: RewardWeights, *, progress_m: float, target_speed_mps:
                  lateral_offset_m: float, half_lane_width_m: float, collided: bool, off_road: bool) -> dict[str, float]:
     """Each weighted term (see RewardWeights); the reward is their sum."""
     progress = min(max(progress_m, 0.0) / (target_speed_mps * dt_s), 1.0)
-    lane = min((lateral_offset_m / max(half_lane_width_m, 1e-6)) ** 2, 4.0)
+    lane = min((lateral_offset_m / max(half_lane_width_m, 1e-6)) ** 2, 1.0)
     return {
         "progress": weights.progress * progress,
-        "comfort": -weights.comfort * min((jerk_mps3 / weights.jerk_ref_mps3) ** 2, 100.0),
+        "comfort": -weights.comfort * min((jerk_mps3 / weights.jerk_ref_mps3) ** 2, 1.0),
         "lane_keeping": -weights.lane_keeping * lane,
         "collision": -weights.collision * float(collided),
         "off_road": -weights.off_road * float(off_road),
