@@ -7,6 +7,7 @@ Importing this package registers ``roadsynth/Highway-v0``, ``roadsynth/Urban-v0`
 from gymnasium.envs.registration import register, registry
 
 from pipeline.envs.env import RoadsynthEnv
+from pipeline.envs.meta import MetaAction, MetaActions
 from pipeline.envs.options import EnvOptions, RewardWeights
 
 _ENTRY = "pipeline.envs.env:RoadsynthEnv"
@@ -15,4 +16,4 @@ for _id, _kwargs in (("roadsynth/Highway-v0", {"scenario": "highway"}), ("roadsy
     if _id not in registry:
         register(id=_id, entry_point=_ENTRY, kwargs=_kwargs)
 
-__all__ = ["EnvOptions", "RewardWeights", "RoadsynthEnv"]
+__all__ = ["EnvOptions", "MetaAction", "MetaActions", "RewardWeights", "RoadsynthEnv"]

@@ -179,6 +179,24 @@ class RoadsynthEnv(gym.Env):
             shutil.rmtree(self._work, ignore_errors=True)
             self._work, self._net_file, self._demands = None, None, {}
 
+    def lane_count(self) -> int:
+        """Lanes of the edge the ego is on."""
+        return self._sumo.edge.getLaneNumber(self._sumo.vehicle.getRoadID(self.ego_id))
+
+    def lane_width_m(self) -> float:
+        """Width of the ego's lane."""
+        return self._sumo.lane.getWidth(self._sumo.vehicle.getLaneID(self.ego_id))
+
+    def action_from_mps2(self, lon_mps2: float, lat_mps2: float) -> np.ndarray:
+        """The action (in this env's action space, clipped to it) for accelerations in m/s^2."""
+        o = self.options
+        lon = min(max(lon_mps2, o.accel_min_mps2), o.accel_max_mps2)
+        lat = min(max(lat_mps2, -o.lat_accel_max_mps2), o.lat_accel_max_mps2)
+        if o.normalize_actions:
+            lon = lon / o.accel_max_mps2 if lon > 0 else lon / -o.accel_min_mps2
+            lat = lat / o.lat_accel_max_mps2
+        return np.array([lon, lat], dtype=np.float32)
+
     # ---- helpers ----
 
     def sumo_inputs(self, run_seed: int) -> tuple[Path, list[str]]:
