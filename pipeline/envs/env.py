@@ -183,6 +183,10 @@ class RoadsynthEnv(gym.Env):
         """Lanes of the edge the ego is on."""
         return self._sumo.edge.getLaneNumber(self._sumo.vehicle.getRoadID(self.ego_id))
 
+    def ego_length_m(self) -> float:
+        """The ego's length (its leader's gap is ds minus half of both lengths)."""
+        return self._sumo.vehicle.getLength(self.ego_id)
+
     def lane_width_m(self) -> float:
         """Width of the ego's lane."""
         return self._sumo.lane.getWidth(self._sumo.vehicle.getLaneID(self.ego_id))
