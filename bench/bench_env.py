@@ -5,7 +5,7 @@ the same warm-up, for --steps steps; the bare loop only calls simulationStep(). 
 model, moveToXY, collision/off-road checks, the neighbour queries, the observation and the reward. Prints
 steps/s of each (best of --repeat) and their ratio (issue 27 aims at <= 1.5x).
 
-    python bench/bench_env.py [--scenario highway] [--vehicles 200] [--steps 300] [--repeat 3] [--seed 1]
+    python bench/bench_env.py [--scenario highway] [--vehicles 200] [--steps 300] [--repeat 3] [--seed 1] [--nearby-k 8]
 """
 
 from __future__ import annotations
@@ -55,10 +55,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--nearby-k", type=int, default=8, help="rows of the 'nearby' observation (0: none)")
     args = parser.parse_args()
 
     env = gym.make("roadsynth/Scenario-v0", scenario=args.scenario, vehicles=args.vehicles,
-                   time_limit_s=max(60.0, args.steps * 0.2))
+                   time_limit_s=max(60.0, args.steps * 0.2), nearby_k=args.nearby_k)
     inner = env.unwrapped
     try:
         sumocfg, _ = inner.sumo_inputs(args.seed)
@@ -69,7 +70,8 @@ def main() -> None:
         feat, ends = max(r[0] for r in runs), sum(r[1] for r in runs)
     finally:
         env.close()
-    print(f"scenario {args.scenario}, {args.vehicles} vehicles, seed {args.seed}, {args.steps} steps of "
+    print(f"scenario {args.scenario}, {args.vehicles} vehicles, nearby_k {args.nearby_k}, seed {args.seed}, "
+          f"{args.steps} steps of "
           f"{inner.sim.step_length_s:g} s after a {inner.sim.warmup_s:g} s warm-up, best of {args.repeat}")
     print(f"{'loop':<28}{'steps/s':>10}{'ms/step':>10}")
     print(f"{'bare libsumo simulationStep':<28}{bare:>10.0f}{1000 / bare:>10.2f}")

@@ -70,7 +70,7 @@ class RoadsynthEnv(gym.Env):
                                                     "record_hz": 1.0 / step})
         o = self.options
         self.observation_space = features.observation_space(o.max_speed_mps, o.accel_min_mps2, o.accel_max_mps2,
-                                                            o.neighbour_range_m)
+                                                            o.neighbour_range_m, o.nearby_k)
         if o.normalize_actions:
             self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         else:
@@ -80,8 +80,12 @@ class RoadsynthEnv(gym.Env):
         self._work: Path | None = None
         self._net_file: Path | None = None
         self._demands: dict[int, tuple[Path, list[str]]] = {}
+        self._classes: dict[int, dict[str, int]] = {}  # run seed -> vehicle id -> features.CLASS_ORDER index + 1
         self._sumo = None
         self.ego_id = ""
+        # SUMO searches lanes within this radius of the moved ego (default 100 m): the ego moves at most
+        # max_speed x dt a step, so a few metres beyond that is enough, and the search is the step's main cost.
+        self._match_m = o.max_speed_mps * step + 10.0
 
     # ---- episode ----
 
@@ -99,6 +103,9 @@ class RoadsynthEnv(gym.Env):
                                        np.random.default_rng([run_seed, 0xE90]))
         sumo.vehicle.setSpeedMode(ego, 0)
         sumo.vehicle.setLaneChangeMode(ego, 0)
+        if self.options.nearby_k > 0:
+            sumo.vehicle.subscribeContext(ego, features.CMD_GET_VEHICLE_VARIABLE, self.options.neighbour_range_m,
+                                          features.NEARBY_VARS)
         self._run_seed = run_seed
         self._start_time_s = sumo.simulation.getTime()
         self._speed = sumo.vehicle.getSpeed(ego)
@@ -128,7 +135,8 @@ class RoadsynthEnv(gym.Env):
         x = fx + (speed * c - lat_speed * s) * dt
         y = fy + (speed * s + lat_speed * c) * dt
         # No edge or lane hint: SUMO prefers a hinted lane, which would keep the ego on it across the lane border.
-        sumo.vehicle.moveToXY(ego, "", -1, x, y, angle=90.0 - math.degrees(heading), keepRoute=2)
+        sumo.vehicle.moveToXY(ego, "", -1, x, y, angle=90.0 - math.degrees(heading), keepRoute=2,
+                              matchThreshold=self._match_m)
         sumo.simulationStep()
         self._speed, self._accel, self._lat_speed = speed, accel, lat_speed
 
@@ -177,7 +185,7 @@ class RoadsynthEnv(gym.Env):
         self._sumo = None
         if self._work is not None:
             shutil.rmtree(self._work, ignore_errors=True)
-            self._work, self._net_file, self._demands = None, None, {}
+            self._work, self._net_file, self._demands, self._classes = None, None, {}, {}
 
     def lane_count(self) -> int:
         """Lanes of the edge the ego is on."""
@@ -217,6 +225,8 @@ class RoadsynthEnv(gym.Env):
             vehicles = demand.vehicles
             candidates = vehicles.loc[vehicles["cls"] == self.config.ego.cls.value, "vehicle_id"].tolist()
             self._demands[run_seed] = (sumocfg, candidates)
+            index = {c.value: i + 1 for i, c in enumerate(features.CLASS_ORDER)}
+            self._classes[run_seed] = dict(zip(vehicles["vehicle_id"], vehicles["cls"].map(index), strict=True))
         return self._demands[run_seed]
 
     def _accelerations(self, action: np.ndarray) -> tuple[float, float]:
@@ -258,11 +268,15 @@ class RoadsynthEnv(gym.Env):
         ego_row = np.array([self._speed, self._accel, sumo.vehicle.getLaneIndex(ego),
                             sumo.vehicle.getLateralLanePosition(ego), heading_rel, self._route_left or 0.0])
         space = self.observation_space
-        return {
+        obs = {
             "ego": np.clip(ego_row, space["ego"].low, space["ego"].high).astype(np.float32),
-            "neighbours": features.neighbour_rows(sumo, ego, (cx, cy), lane_yaw, self._speed,
-                                                  self.options.neighbour_range_m, space["neighbours"]),
+            "neighbours": features.neighbour_rows(sumo, ego, self._speed, lane_yaw, self.options.neighbour_range_m,
+                                                  space["neighbours"]),
         }
+        if "nearby" in space.spaces:
+            obs["nearby"] = features.nearby_rows(sumo.vehicle.getContextSubscriptionResults(ego), ego, (cx, cy),
+                                                 lane_yaw, self._speed, self._classes[self._run_seed], space["nearby"])
+        return obs
 
     def _info(self) -> dict[str, object]:
         return {"ego_id": self.ego_id, "run_seed": self._run_seed,

@@ -1,9 +1,10 @@
 """Feature observations: the ego's lane-frame state and its six SUMO-Gym neighbour slots.
 
 Conventions: SUMO gives a vehicle's front-bumper position and its angle in degrees clockwise from north;
-centres are front - length/2 x heading (DESIGN.md). The lane frame at the ego: s along the ego's lane
-direction, d to its left. Neighbour rows are centre-to-centre offsets in that frame, so "road-aligned"
-holds locally (on a curve of radius R the error in d is about ds^2 / 2R).
+centres are front - length/2 x heading (DESIGN.md). s runs along the road, d to the left. The six slots are
+road-aligned through SUMO's lane model (gaps along the lanes, lane indices and lateral offsets). The "nearby"
+rows are centre-to-centre offsets in the ego's local lane frame (x along the lane direction at the ego):
+exact on straight roads; on a curve of radius R the error in d is about ds^2 / 2R.
 """
 
 from __future__ import annotations
@@ -13,11 +14,19 @@ import math
 import numpy as np
 from gymnasium import spaces
 
+from pipeline.core.classes import ObjectClass
+
 EGO_FIELDS = ("speed_mps", "accel_mps2", "lane_index", "lateral_offset_m", "heading_rel_rad", "route_left_m")
 NEIGHBOUR_SLOTS = ("left_leader", "leader", "right_leader", "left_follower", "follower", "right_follower")
 NEIGHBOUR_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m")
-# getNeighbors mode bits: 1 = left (else right), 2 = leaders (else followers).
-_NEIGHBOUR_MODE = {"left_leader": 3, "right_leader": 2, "left_follower": 1, "right_follower": 0}
+NEARBY_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m", "heading_rel_rad", "class_index")
+# class_index of a nearby vehicle: 1 + its position here (0 only in absent rows).
+CLASS_ORDER = tuple(c for c in ObjectClass if c is not ObjectClass.PEDESTRIAN)
+# traci.constants, spelled out: the ego's context subscription of the vehicles around it.
+CMD_GET_VEHICLE_VARIABLE, VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_LENGTH, VAR_WIDTH = 0xA4, 0x42, 0x43, 0x40, 0x44, 0x4D
+NEARBY_VARS = (VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_LENGTH, VAR_WIDTH)
+# getNeighbors mode bits (traci's getLeftLeaders etc.): 1 = right (else left), 2 = leaders (else followers).
+_NEIGHBOUR_MODE = {"left_leader": 2, "right_leader": 3, "left_follower": 0, "right_follower": 1}
 MAX_LANES = 16
 MAX_ROUTE_M = 1.0e5
 MAX_LATERAL_M = 20.0
@@ -25,19 +34,26 @@ MAX_SIZE_M = 30.0
 
 
 def observation_space(max_speed_mps: float, accel_min_mps2: float, accel_max_mps2: float,
-                      range_m: float) -> spaces.Dict:
+                      range_m: float, nearby_k: int) -> spaces.Dict:
     """The Dict space: "ego" (6,) float32 in EGO_FIELDS order, "neighbours" (6, 6) float32 (NEIGHBOUR_SLOTS x
-    NEIGHBOUR_FIELDS); an absent neighbour's row is all zeros (``present`` is the mask)."""
+    NEIGHBOUR_FIELDS) and, if ``nearby_k`` > 0, "nearby" (nearby_k, 8) float32 (the nearest vehicles, nearest
+    first, x NEARBY_FIELDS); an absent row is all zeros (``present`` is the mask)."""
     ego_low = np.array([0.0, accel_min_mps2, 0.0, -MAX_LATERAL_M, -math.pi, 0.0], dtype=np.float32)
     ego_high = np.array([max_speed_mps, accel_max_mps2, MAX_LANES - 1, MAX_LATERAL_M, math.pi, MAX_ROUTE_M],
                         dtype=np.float32)
     row_low = np.array([0.0, -range_m, -MAX_LATERAL_M, -2 * max_speed_mps, 0.0, 0.0], dtype=np.float32)
     row_high = np.array([1.0, range_m, MAX_LATERAL_M, 2 * max_speed_mps, MAX_SIZE_M, MAX_SIZE_M], dtype=np.float32)
     n = len(NEIGHBOUR_SLOTS)
-    return spaces.Dict({
+    boxes = {
         "ego": spaces.Box(ego_low, ego_high, dtype=np.float32),
         "neighbours": spaces.Box(np.tile(row_low, (n, 1)), np.tile(row_high, (n, 1)), dtype=np.float32),
-    })
+    }
+    if nearby_k > 0:
+        near_low = np.append(row_low, [-math.pi, 0.0]).astype(np.float32)
+        near_high = np.append(row_high, [math.pi, len(CLASS_ORDER)]).astype(np.float32)
+        boxes["nearby"] = spaces.Box(np.tile(near_low, (nearby_k, 1)), np.tile(near_high, (nearby_k, 1)),
+                                     dtype=np.float32)
+    return spaces.Dict(boxes)
 
 
 def yaw_from_sumo_angle(angle_deg: float) -> float:
@@ -53,33 +69,72 @@ def centre_xy(sumo, vid: str) -> tuple[float, float, float]:
     return x - half * math.cos(yaw), y - half * math.sin(yaw), yaw
 
 
-def neighbour_ids(sumo, ego: str, range_m: float) -> dict[str, str]:
-    """The nearest vehicle of each slot that has one (slot -> id), as SUMO's lane model sees them."""
-    found: dict[str, str] = {}
+def neighbour_ids(sumo, ego: str, range_m: float) -> dict[str, tuple[str, float]]:
+    """The nearest vehicle of each slot that has one: slot -> (id, SUMO's gap), as SUMO's lane model sees them.
+
+    The gap follows getLeader / getFollower: for leaders from the ego's front + its minGap to the leader's back,
+    for followers from the follower's front + its minGap to the ego's back."""
+    found: dict[str, tuple[str, float]] = {}
     leader = sumo.vehicle.getLeader(ego, range_m)
     if leader and leader[0]:
-        found["leader"] = leader[0]
+        found["leader"] = leader
     follower = sumo.vehicle.getFollower(ego, range_m)
     if follower and follower[0]:
-        found["follower"] = follower[0]
+        found["follower"] = follower
     for slot, mode in _NEIGHBOUR_MODE.items():
         near = sumo.vehicle.getNeighbors(ego, mode)
         if near:
-            found[slot] = min(near, key=lambda pair: (pair[1], pair[0]))[0]
+            found[slot] = min(near, key=lambda pair: (pair[1], pair[0]))
     return found
 
 
-def neighbour_rows(sumo, ego: str, ego_xy: tuple[float, float], lane_yaw: float, ego_speed_mps: float,
-                   range_m: float, space: spaces.Box) -> np.ndarray:
-    """(6, 6) float32 rows in NEIGHBOUR_SLOTS order, clipped to ``space``; neighbours beyond ``range_m`` are absent."""
+def neighbour_rows(sumo, ego: str, ego_speed_mps: float, lane_yaw: float, range_m: float,
+                   space: spaces.Box) -> np.ndarray:
+    """(6, 6) float32 rows in NEIGHBOUR_SLOTS order, clipped to ``space``; neighbours beyond ``range_m`` are absent.
+
+    Road-aligned: ds (centre to centre) from SUMO's gap along the lanes plus the minGap and half of both lengths;
+    dd from lane indices (on the ego's edge; else the slot's side) x lane width plus both lateral offsets.
+    """
     rows = np.zeros((len(NEIGHBOUR_SLOTS), len(NEIGHBOUR_FIELDS)), dtype=np.float64)
-    c, s = math.cos(lane_yaw), math.sin(lane_yaw)
-    for slot, vid in neighbour_ids(sumo, ego, range_m).items():
-        x, y, yaw = centre_xy(sumo, vid)
-        dx, dy = x - ego_xy[0], y - ego_xy[1]
-        ds, dd = dx * c + dy * s, -dx * s + dy * c
+    v = sumo.vehicle
+    ego_length, ego_road, ego_index = v.getLength(ego), v.getRoadID(ego), v.getLaneIndex(ego)
+    ego_lat, width = v.getLateralLanePosition(ego), sumo.lane.getWidth(v.getLaneID(ego))
+    for slot, (vid, gap) in neighbour_ids(sumo, ego, range_m).items():
+        length = v.getLength(vid)
+        if slot.endswith("leader"):
+            ds = gap + v.getMinGap(ego) + 0.5 * (ego_length + length)
+        else:
+            ds = -(gap + v.getMinGap(vid) + 0.5 * (ego_length + length))
         if abs(ds) > range_m:
             continue
-        dv = sumo.vehicle.getSpeed(vid) * math.cos(yaw - lane_yaw) - ego_speed_mps
-        rows[NEIGHBOUR_SLOTS.index(slot)] = (1.0, ds, dd, dv, sumo.vehicle.getLength(vid), sumo.vehicle.getWidth(vid))
+        side = 1 if slot.startswith("left") else -1 if slot.startswith("right") else 0
+        lanes = v.getLaneIndex(vid) - ego_index if v.getRoadID(vid) == ego_road else side
+        dd = lanes * width + v.getLateralLanePosition(vid) - ego_lat
+        dv = v.getSpeed(vid) * math.cos(yaw_from_sumo_angle(v.getAngle(vid)) - lane_yaw) - ego_speed_mps
+        rows[NEIGHBOUR_SLOTS.index(slot)] = (1.0, ds, dd, dv, length, v.getWidth(vid))
+    return np.clip(rows, space.low, space.high).astype(np.float32)
+
+
+def nearby_rows(results: dict[str, dict[int, object]], ego: str, ego_xy: tuple[float, float], lane_yaw: float,
+                ego_speed_mps: float, classes: dict[str, int], space: spaces.Box) -> np.ndarray:
+    """(K, 8) float32 rows (NEARBY_FIELDS) of the K nearest vehicles (by centre distance, ties by id) among the
+    ego's context-subscription ``results``, in the ego's lane frame, clipped to ``space``; the rest absent.
+    ``classes``: vehicle id -> class_index."""
+    k = space.shape[0]
+    rows = np.zeros(space.shape, dtype=np.float64)
+    ids = sorted(v for v in results if v != ego)
+    if ids:
+        values = np.array([(*results[v][VAR_POSITION], results[v][VAR_ANGLE], results[v][VAR_SPEED],
+                            results[v][VAR_LENGTH], results[v][VAR_WIDTH]) for v in ids])
+        yaw = np.radians(90.0 - values[:, 2])
+        x = values[:, 0] - 0.5 * values[:, 4] * np.cos(yaw)
+        y = values[:, 1] - 0.5 * values[:, 4] * np.sin(yaw)
+        dx, dy = x - ego_xy[0], y - ego_xy[1]
+        c, s = math.cos(lane_yaw), math.sin(lane_yaw)
+        order = np.argsort(np.hypot(dx, dy), kind="stable")[:k]
+        rel = (yaw[order] - lane_yaw + math.pi) % (2 * math.pi) - math.pi
+        rows[: len(order)] = np.column_stack([
+            np.ones(len(order)), dx[order] * c + dy[order] * s, -dx[order] * s + dy[order] * c,
+            values[order, 3] * np.cos(yaw[order] - lane_yaw) - ego_speed_mps, values[order, 4], values[order, 5],
+            rel, [classes.get(ids[i], 0) for i in order]])
     return np.clip(rows, space.low, space.high).astype(np.float32)

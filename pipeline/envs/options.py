@@ -44,6 +44,7 @@ class EnvOptions:
     normalize_actions: the action space is Box(-1, 1, (2,)); -1..0 maps to accel_min..0 and 0..1 to 0..accel_max
         (lateral: +-lat_accel_max), so 0 is no acceleration. False: the action space is in m/s^2 directly.
     time_limit_s: episode length after the warm-up (truncated then). neighbour_range_m: farthest neighbour observed.
+    nearby_k: rows of the "nearby" observation (the K nearest vehicles within neighbour_range_m); 0: no "nearby".
     """
 
     accel_min_mps2: float = -6.0
@@ -54,12 +55,15 @@ class EnvOptions:
     normalize_actions: bool = True
     time_limit_s: float = 60.0
     neighbour_range_m: float = 100.0
+    nearby_k: int = 8
     reward: RewardWeights = field(default_factory=RewardWeights)
 
     def __post_init__(self) -> None:
         if not (self.accel_min_mps2 < 0 < self.accel_max_mps2):
             raise ValueError(f"need accel_min_mps2 < 0 < accel_max_mps2, got {self.accel_min_mps2}, "
                              f"{self.accel_max_mps2}")
+        if self.nearby_k < 0:
+            raise ValueError(f"nearby_k must be >= 0, got {self.nearby_k}")
         for name in ("lat_accel_max_mps2", "lat_speed_max_mps", "max_speed_mps", "time_limit_s",
                      "neighbour_range_m"):
             if getattr(self, name) <= 0:
