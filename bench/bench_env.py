@@ -5,7 +5,7 @@ the same warm-up, for --steps steps; the bare loop only calls simulationStep(). 
 model, moveToXY, collision/off-road checks, the neighbour queries, the observation and the reward. Prints
 steps/s of each (best of --repeat) and their ratio (issue 27 aims at <= 1.5x).
 
-    python bench/bench_env.py [--scenario highway] [--vehicles 200] [--steps 300] [--repeat 3] [--seed 1] [--nearby-k 8]
+    python bench/bench_env.py [--scenario highway] [--vehicles 200] [--steps 300] [--repeat 3] [--seed 1] [--nearby-k 0]
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--nearby-k", type=int, default=8, help="rows of the 'nearby' observation (0: none)")
+    parser.add_argument("--nearby-k", type=int, default=0, help="rows of the 'nearby' observation (0: none)")
     args = parser.parse_args()
 
     env = gym.make("roadsynth/Scenario-v0", scenario=args.scenario, vehicles=args.vehicles,

@@ -104,8 +104,10 @@ class RoadsynthEnv(gym.Env):
         sumo.vehicle.setSpeedMode(ego, 0)
         sumo.vehicle.setLaneChangeMode(ego, 0)
         if self.options.nearby_k > 0:
+            # Collecting every vehicle in range each step costs about as much as the rest of the features: only
+            # when "nearby" asks for it (the slots then read their vehicles from it too).
             sumo.vehicle.subscribeContext(ego, features.CMD_GET_VEHICLE_VARIABLE, self.options.neighbour_range_m,
-                                          features.NEARBY_VARS)
+                                          features.CONTEXT_VARS)
         self._run_seed = run_seed
         self._start_time_s = sumo.simulation.getTime()
         self._speed = sumo.vehicle.getSpeed(ego)
@@ -268,14 +270,15 @@ class RoadsynthEnv(gym.Env):
         ego_row = np.array([self._speed, self._accel, sumo.vehicle.getLaneIndex(ego),
                             sumo.vehicle.getLateralLanePosition(ego), heading_rel, self._route_left or 0.0])
         space = self.observation_space
+        context = sumo.vehicle.getContextSubscriptionResults(ego) if self.options.nearby_k > 0 else {}
         obs = {
             "ego": np.clip(ego_row, space["ego"].low, space["ego"].high).astype(np.float32),
             "neighbours": features.neighbour_rows(sumo, ego, self._speed, lane_yaw, self.options.neighbour_range_m,
-                                                  space["neighbours"]),
+                                                  context, space["neighbours"]),
         }
         if "nearby" in space.spaces:
-            obs["nearby"] = features.nearby_rows(sumo.vehicle.getContextSubscriptionResults(ego), ego, (cx, cy),
-                                                 lane_yaw, self._speed, self._classes[self._run_seed], space["nearby"])
+            obs["nearby"] = features.nearby_rows(context, ego, (cx, cy), lane_yaw, self._speed,
+                                                 self._classes[self._run_seed], space["nearby"])
         return obs
 
     def _info(self) -> dict[str, object]:

@@ -44,7 +44,8 @@ class EnvOptions:
     normalize_actions: the action space is Box(-1, 1, (2,)); -1..0 maps to accel_min..0 and 0..1 to 0..accel_max
         (lateral: +-lat_accel_max), so 0 is no acceleration. False: the action space is in m/s^2 directly.
     time_limit_s: episode length after the warm-up (truncated then). neighbour_range_m: farthest neighbour observed.
-    nearby_k: rows of the "nearby" observation (the K nearest vehicles within neighbour_range_m); 0: no "nearby".
+    nearby_k: rows of the "nearby" observation (the K nearest vehicles within neighbour_range_m); 0 (default): no
+        "nearby" (it costs ~0.1 ms a step on the 200-vehicle highway: SUMO collects every vehicle in range).
     """
 
     accel_min_mps2: float = -6.0
@@ -55,7 +56,7 @@ class EnvOptions:
     normalize_actions: bool = True
     time_limit_s: float = 60.0
     neighbour_range_m: float = 100.0
-    nearby_k: int = 8
+    nearby_k: int = 0
     reward: RewardWeights = field(default_factory=RewardWeights)
 
     def __post_init__(self) -> None:

@@ -65,11 +65,12 @@ def test_same_seed_and_actions_give_identical_observations_and_rewards():
 
 
 def test_observations_are_finite_and_inside_the_declared_spaces():
-    env = make()
+    env = make(nearby_k=8)
     try:
         observations, rewards = rollout(env, seed=3, steps=30)
     finally:
         env.close()
+    assert set(env.observation_space.spaces) == {"ego", "neighbours", "nearby"}
     for obs in observations:
         assert obs in env.observation_space
         assert obs["ego"].dtype == obs["neighbours"].dtype == np.float32
@@ -149,7 +150,7 @@ def test_a_second_env_in_the_same_process_is_refused_until_the_first_closes():
 
 
 def test_neighbour_slots_lie_where_their_names_say_and_reappear_in_nearby():
-    env = make()
+    env = make(nearby_k=8)
     seen = set()
     try:
         for seed in (1, 2, 3):
