@@ -10,10 +10,11 @@ from pipeline.envs.env import RoadsynthEnv
 from pipeline.envs.meta import MetaAction, MetaActions
 from pipeline.envs.options import EnvOptions, RewardWeights
 
-_ENTRY = "pipeline.envs.env:RoadsynthEnv"
-for _id, _kwargs in (("roadsynth/Highway-v0", {"scenario": "highway"}), ("roadsynth/Urban-v0", {"scenario": "urban"}),
-                     ("roadsynth/Scenario-v0", {})):
+for _id, _entry, _kwargs in (
+        ("roadsynth/Highway-v0", "pipeline.envs.env:RoadsynthEnv", {"scenario": "highway"}),
+        ("roadsynth/Urban-v0", "pipeline.envs.env:RoadsynthEnv", {"scenario": "urban"}),
+        ("roadsynth/Scenario-v0", "pipeline.envs.env:scenario_env", {})):
     if _id not in registry:
-        register(id=_id, entry_point=_ENTRY, kwargs=_kwargs)
+        register(id=_id, entry_point=_entry, kwargs=_kwargs)
 
 __all__ = ["EnvOptions", "MetaAction", "MetaActions", "RewardWeights", "RoadsynthEnv"]

@@ -286,6 +286,13 @@ class RoadsynthEnv(gym.Env):
                 "time_s": round(self._sumo.simulation.getTime() - self._start_time_s, 6)}
 
 
+def scenario_env(scenario: str | Path | None = None, **kwargs) -> RoadsynthEnv:
+    """``roadsynth/Scenario-v0``: like RoadsynthEnv, but the scenario (a NAME or YAML PATH) must be named."""
+    if scenario is None:
+        raise TypeError("roadsynth/Scenario-v0 needs scenario=NAME (configs/scenarios/) or a YAML PATH")
+    return RoadsynthEnv(scenario, **kwargs)
+
+
 def _options(options: EnvOptions | None, kwargs: dict) -> EnvOptions:
     base = options or EnvOptions()
     known = {f.name for f in fields(EnvOptions)}

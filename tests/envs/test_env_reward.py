@@ -46,3 +46,18 @@ def test_options_are_checked_and_keywords_reach_them():
         _options(None, {"speed_limit": 3.0})
     options = _options(None, {"accel_max_mps2": 2.0, "reward": {"collision": 3.0}})
     assert options.accel_max_mps2 == 2.0 and options.reward.collision == 3.0
+
+
+def test_scenario_env_takes_a_yaml_path_and_needs_a_scenario(tmp_path):
+    import gymnasium as gym
+
+    import pipeline.envs  # noqa: F401  (registers the envs)
+    from pipeline.core.config import config_dir
+
+    path = tmp_path / "mine.yaml"
+    path.write_text((config_dir() / "scenarios" / "urban.yaml").read_text().replace("name: urban", "name: mine"))
+    env = gym.make("roadsynth/Scenario-v0", scenario=str(path), vehicles=10)
+    assert env.unwrapped.config.name == "mine" and env.unwrapped.config.demand.vehicles == 10
+    env.close()
+    with pytest.raises(TypeError, match="needs scenario"):
+        gym.make("roadsynth/Scenario-v0")
