@@ -36,8 +36,9 @@ def rollout(env: gym.Env, seed: int, steps: int) -> tuple[list[dict], list[float
     return observations, rewards
 
 
-def test_check_env_passes_without_warnings():
-    env = make()
+@pytest.mark.parametrize("env_id", ["roadsynth/Highway-v0", "roadsynth/Urban-v0"])
+def test_check_env_passes_without_warnings(env_id):
+    env = gym.make(env_id, **SMALL)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
@@ -47,8 +48,9 @@ def test_check_env_passes_without_warnings():
     assert active_sumo_owner() is None
 
 
-def test_same_seed_and_actions_give_identical_observations_and_rewards():
-    env = make()
+@pytest.mark.parametrize("env_id", ["roadsynth/Highway-v0", "roadsynth/Urban-v0"])
+def test_same_seed_and_actions_give_identical_observations_and_rewards(env_id):
+    env = gym.make(env_id, **SMALL, nearby_k=8)
     try:
         first_obs, first_rewards = rollout(env, seed=11, steps=40)
         second_obs, second_rewards = rollout(env, seed=11, steps=40)
@@ -58,8 +60,8 @@ def test_same_seed_and_actions_give_identical_observations_and_rewards():
     assert first_rewards == second_rewards
     assert len(first_obs) == len(second_obs) > 1
     for a, b in zip(first_obs, second_obs, strict=True):
-        np.testing.assert_array_equal(a["ego"], b["ego"])
-        np.testing.assert_array_equal(a["neighbours"], b["neighbours"])
+        for key in ("ego", "neighbours", "nearby"):
+            np.testing.assert_array_equal(a[key], b[key])
     # The seed reaches the demand and SUMO: another seed is another episode.
     assert not np.array_equal(first_obs[0]["ego"], other_obs[0]["ego"])
 
