@@ -103,6 +103,8 @@ class RoadsynthEnv(gym.Env):
                                        np.random.default_rng([run_seed, 0xE90]))
         sumo.vehicle.setSpeedMode(ego, 0)
         sumo.vehicle.setLaneChangeMode(ego, 0)
+        self._vclass = sumo.vehicle.getVehicleClass(ego)
+        self._lane_ok: dict[str, bool] = {}
         if self.options.nearby_k > 0:
             # Collecting every vehicle in range each step costs about as much as the rest of the features: only
             # when "nearby" asks for it (the slots then read their vehicles from it too).
@@ -189,10 +191,6 @@ class RoadsynthEnv(gym.Env):
             shutil.rmtree(self._work, ignore_errors=True)
             self._work, self._net_file, self._demands, self._classes = None, None, {}, {}
 
-    def lane_count(self) -> int:
-        """Lanes of the edge the ego is on."""
-        return self._sumo.edge.getLaneNumber(self._sumo.vehicle.getRoadID(self.ego_id))
-
     def ego_length_m(self) -> float:
         """The ego's length (its leader's gap is ds minus half of both lengths)."""
         return self._sumo.vehicle.getLength(self.ego_id)
@@ -254,13 +252,27 @@ class RoadsynthEnv(gym.Env):
         return None if d < _INVALID_DISTANCE else max(d, 0.0)
 
     def _off_road(self) -> tuple[bool, float]:
-        """Whether the ego's centre line is beyond the outer border of its carriageway; half its lane's width."""
+        """Whether the ego's centre is beyond the outer border of the lanes it may drive on (a sidewalk or
+        parking lane beside it counts as off the road), or on a lane it may not use; half its lane's width."""
         sumo, ego = self._sumo, self.ego_id
-        half = 0.5 * sumo.lane.getWidth(sumo.vehicle.getLaneID(ego))
+        lane = sumo.vehicle.getLaneID(ego)
+        half = 0.5 * sumo.lane.getWidth(lane)
         lat, index = sumo.vehicle.getLateralLanePosition(ego), sumo.vehicle.getLaneIndex(ego)
-        lanes = sumo.edge.getLaneNumber(sumo.vehicle.getRoadID(ego))
-        beyond = (index == lanes - 1 and lat > half) or (index == 0 and lat < -half) or abs(lat) > 2 * half
+        beyond = ((lat > half and not self.lane_drivable(index + 1))
+                  or (lat < -half and not self.lane_drivable(index - 1))
+                  or abs(lat) > 2 * half or not self._drivable(lane))
         return bool(beyond), half
+
+    def lane_drivable(self, index: int) -> bool:
+        """Whether lane ``index`` of the ego's current edge exists and admits the ego's vehicle class."""
+        sumo = self._sumo
+        road = sumo.vehicle.getRoadID(self.ego_id)
+        return 0 <= index < sumo.edge.getLaneNumber(road) and self._drivable(f"{road}_{index}")
+
+    def _drivable(self, lane: str) -> bool:
+        if lane not in self._lane_ok:
+            self._lane_ok[lane] = self._vclass not in self._sumo.lane.getDisallowed(lane)
+        return self._lane_ok[lane]
 
     def _observe(self) -> dict[str, np.ndarray]:
         sumo, ego = self._sumo, self.ego_id

@@ -5,7 +5,7 @@ proportional-derivative controller turns the gap to that target into the env's c
 lateral) acceleration. The lateral target is kept relative to the ego's current lane centre, not as a lane
 index: SUMO's indices shift where an edge gains or loses a lane (an on-ramp's merge lane ends), while the
 ego's offset only jumps by a lane width when it crosses a border. A lane change toward a lane the current edge
-does not have is ignored.
+does not have, or that the ego may not use (a sidewalk, a parking lane), is ignored.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ class MetaActions(gym.ActionWrapper):
             self.target_speed_mps = max(self.target_speed_mps - self.speed_step_mps, 0.0)
         elif meta in (MetaAction.LANE_LEFT, MetaAction.LANE_RIGHT):
             step = 1 if meta is MetaAction.LANE_LEFT else -1
-            if 0 <= lane + round(self.target_offset_m / width) + step < inner.lane_count():
+            if inner.lane_drivable(int(lane) + round(self.target_offset_m / width) + step):
                 self.target_offset_m += step * width
         lon = self.k_speed * (self.target_speed_mps - speed)
         error = self.target_offset_m - offset

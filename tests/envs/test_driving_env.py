@@ -183,3 +183,20 @@ def test_neighbour_slots_lie_where_their_names_say_and_reappear_in_nearby():
     finally:
         env.close()
     assert {"leader", "follower"} <= seen and len(seen) >= 4
+
+
+def test_drifting_onto_the_urban_parking_lane_or_sidewalk_is_off_road():
+    env = gym.make("roadsynth/Urban-v0", **SMALL)
+    try:
+        env.reset(seed=0)
+        inner = env.unwrapped
+        road = inner._sumo.vehicle.getRoadID(inner.ego_id)
+        assert not inner.lane_drivable(0) and not inner.lane_drivable(1), road  # sidewalk, parking lane
+        for _ in range(100):  # (it starts nearly at rest: lateral speed needs some longitudinal speed)
+            obs, _, terminated, truncated, info = env.step(np.array([0.3, -1.0], dtype=np.float32))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert terminated and info["reason"] == "off_road"
+    assert obs["ego"][2] >= 2  # never mapped onto a lane it may not use
