@@ -17,8 +17,8 @@ import numpy as np
 import pandas as pd
 
 from pipeline.core.classes import ObjectClass
-from pipeline.core.config import ScenarioConfig, load_config
-from pipeline.core.config.loading import parse_config
+from pipeline.core.config import ScenarioConfig
+from pipeline.core.config.resolve import resolve_scenario
 from pipeline.core.files import atomic_file
 from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.core.tables import write_parquet
@@ -55,23 +55,6 @@ def outputs(args: argparse.Namespace) -> list[OutputSpec]:
                                 recognise=json_file(dict, ("frames", "collisions", "teleports")),
                                 expected="a JSON file of run stats"))
     return specs
-
-
-def resolve_scenario(name_or_path: str | Path, *, vehicles: int | None = None, duration_s: float | None = None,
-                     warmup_s: float | None = None) -> tuple[ScenarioConfig, Path]:
-    """Load a scenario and apply command-line overrides (validated like the file itself)."""
-    config, path = load_config(ScenarioConfig, name_or_path, "scenarios")
-    data = config.model_dump(mode="json")
-    if vehicles is not None:
-        data["demand"]["vehicles"] = vehicles
-    if duration_s is not None:
-        data["simulation"]["duration_s"] = duration_s
-    if warmup_s is not None:
-        data["simulation"]["warmup_s"] = warmup_s
-    if config.network.osm_file is not None and not Path(config.network.osm_file).is_absolute():
-        # A relative osm_file is relative to the scenario file.
-        data["network"]["osm_file"] = str((path.parent / config.network.osm_file).resolve())
-    return parse_config(ScenarioConfig, data, f"{path} (with command-line overrides)"), path
 
 
 def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = True) -> dict[str, object]:

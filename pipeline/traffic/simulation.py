@@ -39,6 +39,52 @@ class SimulationError(RuntimeError):
     """The simulation could not produce a valid recording (e.g. no vehicle can serve as ego)."""
 
 
+class SumoBusyError(RuntimeError):
+    """A second libsumo simulation was asked for while one is open in this process."""
+
+
+# libsumo holds one simulation per process, and a second start() silently replaces the first (its clock
+# jumps back, no error): every start goes through start_sumo, which knows who holds the open one.
+_active_owner: str | None = None
+
+
+def start_sumo(args: list[str], owner: str):
+    """Start libsumo with ``args`` (after the binary) for ``owner``; returns the libsumo module.
+
+    ``owner`` names who holds the simulation (shown in the error). The same owner may restart (its open
+    simulation is closed first); a different owner gets :class:`SumoBusyError` until :func:`close_sumo`.
+    """
+    global _active_owner
+    import libsumo
+
+    if _active_owner is not None and _active_owner != owner:
+        raise SumoBusyError(f"libsumo already runs a simulation in this process (held by {_active_owner}); "
+                            f"{owner} cannot start another: close the first (env.close()), or use one process "
+                            "per simulation (e.g. gymnasium.vector.AsyncVectorEnv)")
+    if _active_owner == owner:
+        libsumo.close()
+        _active_owner = None
+    libsumo.start([binary("sumo"), *args])
+    _active_owner = owner
+    return libsumo
+
+
+def close_sumo(owner: str) -> None:
+    """Close the simulation ``owner`` holds; nothing if it holds none."""
+    global _active_owner
+    if _active_owner != owner:
+        return
+    import libsumo
+
+    _active_owner = None
+    libsumo.close()
+
+
+def active_sumo_owner() -> str | None:
+    """Who holds this process's libsumo simulation, or None."""
+    return _active_owner
+
+
 def write_sumocfg(out_dir: Path, net_file: str, routes_file: str, sim: SimulationConfig, seed: int) -> Path:
     """Write the .sumocfg that replays the run in plain ``sumo`` / ``sumo-gui``."""
     root = ET.Element("configuration")
@@ -156,13 +202,12 @@ def neighbours_ahead(xy: np.ndarray, yaw_rad: np.ndarray, others_xy: np.ndarray,
 def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: list[str], seed: int, *,
         progress: bool = True) -> tuple[_Columns, _Columns, list[tuple], dict[str, object], str]:
     """Step the simulation; return vehicle and person columns, TLS rows, counters and the ego id."""
-    import libsumo as sumo
-
-    sumo.start([binary("sumo"), "-c", str(sumocfg), "--no-warnings", "true"])
+    owner = f"simulate({sumocfg})"
+    sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true"], owner)
     try:
         return _loop(sumo, sim, ego, ego_candidates, np.random.default_rng([seed, 0xE90]), progress)
     finally:
-        sumo.close()
+        close_sumo(owner)
 
 
 def _loop(sumo, sim, ego, ego_candidates, rng, progress):

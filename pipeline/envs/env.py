@@ -1,0 +1,316 @@
+"""RoadsynthEnv: drive the ego through naturalistic SUMO traffic (Gymnasium 1.x API).
+
+Background traffic is the ``simulate`` stage's: the same network builder, the same demand and per-vehicle
+driver-parameter sampling, the same SUMO settings (write_sumocfg) and the same ego choice, all drawn from the
+run seed. ``reset(seed=N)`` uses N as that run seed (so ``roadsynth simulate --seed N`` shows the same
+traffic); ``reset()`` without a seed draws the next run seed from the env's generator.
+
+The ego is taken from SUMO (speed mode 0, lane-change mode 0) and moved each step with ``moveToXY(keepRoute=2)``
+by a kinematic point model in the lane frame: longitudinal speed >= 0 (no reversing), lateral speed limited and
+never above the longitudinal one; SUMO maps the moved ego to the nearest lane, so lane changes emerge from
+lateral motion, and SUMO's own collision detection reports collisions.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import shutil
+import tempfile
+from dataclasses import fields, replace
+from pathlib import Path
+from typing import ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from pipeline.core.config import ScenarioConfig, SimulationConfig
+from pipeline.core.config.resolve import resolve_scenario
+from pipeline.envs import features
+from pipeline.envs.options import EnvOptions, RewardWeights
+from pipeline.envs.reward import reward_terms
+from pipeline.traffic import networks
+from pipeline.traffic.demand import build_demand
+from pipeline.traffic.simulation import choose_ego, close_sumo, start_sumo, write_sumocfg
+
+log = logging.getLogger(__name__)
+
+_INVALID_DISTANCE = -1.0e8  # SUMO answers about -2^30 when a distance along the route is undefined
+_owners = itertools.count()
+
+
+class RoadsynthEnv(gym.Env):
+    """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours") (pipeline.envs.features);
+    action: Box(2,) float32 (longitudinal, lateral) acceleration, normalised or in m/s^2 (EnvOptions).
+
+    Args:
+        scenario: a scenario NAME (configs/scenarios/) or YAML PATH, as for ``simulate``.
+        vehicles, warmup_s: override demand.vehicles and simulation.warmup_s.
+        dt: seconds per step (SUMO's step length); None keeps the scenario's.
+        options: EnvOptions; any of its fields may also be given as a keyword (``reward`` as RewardWeights or
+            a dict of its fields).
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": []}
+
+    def __init__(self, scenario: str | Path = "highway", *, vehicles: int | None = None, warmup_s: float | None = None,
+                 dt: float | None = None, options: EnvOptions | None = None, render_mode: str | None = None,
+                 **option_kwargs) -> None:
+        if render_mode is not None:
+            raise ValueError(f"render_mode {render_mode!r} is not supported yet (none is)")
+        self.render_mode = render_mode
+        self.options = _options(options, option_kwargs)
+        config, _ = resolve_scenario(scenario, vehicles=vehicles, warmup_s=warmup_s,
+                                     duration_s=self.options.time_limit_s)
+        self.config: ScenarioConfig = config
+        step = dt if dt is not None else config.simulation.step_length_s
+        self.sim = SimulationConfig.model_validate({**config.simulation.model_dump(), "step_length_s": step,
+                                                    "record_hz": 1.0 / step})
+        o = self.options
+        self.observation_space = features.observation_space(o.max_speed_mps, o.accel_min_mps2, o.accel_max_mps2,
+                                                            o.neighbour_range_m, o.nearby_k)
+        if o.normalize_actions:
+            self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        else:
+            self.action_space = spaces.Box(np.array([o.accel_min_mps2, -o.lat_accel_max_mps2], dtype=np.float32),
+                                           np.array([o.accel_max_mps2, o.lat_accel_max_mps2], dtype=np.float32))
+        self._owner = f"RoadsynthEnv({config.name}, #{next(_owners)})"
+        self._work: Path | None = None
+        self._net_file: Path | None = None
+        self._demands: dict[int, tuple[Path, list[str]]] = {}
+        self._classes: dict[int, dict[str, int]] = {}  # run seed -> vehicle id -> features.CLASS_ORDER index + 1
+        self._sumo = None
+        self.ego_id = ""
+        # SUMO searches lanes within this radius of the moved ego (default 100 m): the ego moves at most
+        # max_speed x dt a step, so a few metres beyond that is enough, and the search is the step's main cost.
+        self._match_m = o.max_speed_mps * step + 10.0
+
+    # ---- episode ----
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        sumocfg, candidates = self.sumo_inputs(run_seed)
+        sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true", "--no-step-log", "true",
+                           "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner)
+        self._sumo = sumo
+        for _ in range(round(self.sim.warmup_s / self.sim.step_length_s) + 1):
+            sumo.simulationStep()
+        # The same draw as simulate's ego choice (pipeline.traffic.simulation.run).
+        self.ego_id = ego = choose_ego(sumo, candidates, self.config.ego, self.sim,
+                                       np.random.default_rng([run_seed, 0xE90]))
+        sumo.vehicle.setSpeedMode(ego, 0)
+        sumo.vehicle.setLaneChangeMode(ego, 0)
+        self._vclass = sumo.vehicle.getVehicleClass(ego)
+        self._lane_ok: dict[str, bool] = {}
+        if self.options.nearby_k > 0:
+            # Collecting every vehicle in range each step costs about as much as the rest of the features: only
+            # when "nearby" asks for it (the slots then read their vehicles from it too).
+            sumo.vehicle.subscribeContext(ego, features.CMD_GET_VEHICLE_VARIABLE, self.options.neighbour_range_m,
+                                          features.CONTEXT_VARS)
+        self._run_seed = run_seed
+        self._start_time_s = sumo.simulation.getTime()
+        self._speed = sumo.vehicle.getSpeed(ego)
+        self._lat_speed = 0.0
+        self._accel = 0.0
+        self._last_edge = sumo.vehicle.getRoute(ego)[-1]
+        self._last_edge_length = sumo.lane.getLength(f"{self._last_edge}_0")
+        self._route_left = self._route_left_m()
+        self._obs = self._observe()
+        return self._obs, self._info()
+
+    def step(self, action):
+        if self._sumo is None:
+            raise RuntimeError("step() before reset()")
+        sumo, ego, o, dt = self._sumo, self.ego_id, self.options, self.sim.step_length_s
+        a_lon, a_lat = self._accelerations(np.asarray(action, dtype=np.float64))
+        speed = min(max(self._speed + a_lon * dt, 0.0), o.max_speed_mps)
+        accel = (speed - self._speed) / dt
+        jerk = (accel - self._accel) / dt
+        limit = min(o.lat_speed_max_mps, speed)
+        lat_speed = min(max(self._lat_speed + a_lat * dt, -limit), limit)
+        # The lane's direction half a step ahead: moving along the tangent at the start would drift outward on curves.
+        lane_yaw = self._lane_yaw(0.5 * speed * dt)
+        heading = lane_yaw + (math.atan2(lat_speed, speed) if speed > 0 else 0.0)
+        fx, fy = sumo.vehicle.getPosition(ego)
+        c, s = math.cos(lane_yaw), math.sin(lane_yaw)
+        x = fx + (speed * c - lat_speed * s) * dt
+        y = fy + (speed * s + lat_speed * c) * dt
+        # No edge or lane hint: SUMO prefers a hinted lane, which would keep the ego on it across the lane border.
+        sumo.vehicle.moveToXY(ego, "", -1, x, y, angle=90.0 - math.degrees(heading), keepRoute=2,
+                              matchThreshold=self._match_m)
+        sumo.simulationStep()
+        self._speed, self._accel, self._lat_speed = speed, accel, lat_speed
+
+        collided = any(ego in (col.collider, col.victim) for col in sumo.simulation.getCollisions())
+        gone = ego in sumo.simulation.getArrivedIDList() or ego in sumo.simulation.getStartingTeleportIDList()
+        reason = None
+        if collided:
+            reason = "collision"
+        elif gone:
+            reason = "left_network"
+        off_road = False
+        progress = 0.0
+        half_width = 1.75
+        if not gone:
+            route_left = self._route_left_m()
+            off_road, half_width = self._off_road()
+            if route_left is None:
+                off_road = True
+                reason = reason or "left_route"
+            else:
+                progress = self._route_left - route_left
+                self._route_left = route_left
+            if off_road and reason is None:
+                reason = "off_road"
+            self._obs = self._observe()
+        target = o.reward.target_speed_mps or (sumo.vehicle.getAllowedSpeed(ego) if not gone else 1.0)
+        terms = reward_terms(o.reward, progress_m=progress, target_speed_mps=max(target, 1.0), dt_s=dt, jerk_mps3=jerk,
+                             lateral_offset_m=float(self._obs["ego"][3]), half_lane_width_m=half_width,
+                             collided=collided, off_road=off_road)
+        terminated = collided or off_road
+        elapsed = sumo.simulation.getTime() - self._start_time_s
+        truncated = False
+        if not terminated:
+            if gone or self._route_left <= max(1.0, 2 * speed * dt):
+                truncated, reason = True, reason or "route_end"
+            elif elapsed >= o.time_limit_s - 1e-9:
+                truncated, reason = True, "time_limit"
+        info = self._info()
+        info["reward_terms"] = terms
+        if reason is not None:
+            info["reason"] = reason
+        return self._obs, float(sum(terms.values())), terminated, truncated, info
+
+    def close(self) -> None:
+        close_sumo(self._owner)
+        self._sumo = None
+        if self._work is not None:
+            shutil.rmtree(self._work, ignore_errors=True)
+            self._work, self._net_file, self._demands, self._classes = None, None, {}, {}
+
+    def ego_length_m(self) -> float:
+        """The ego's length (its leader's gap is ds minus half of both lengths)."""
+        return self._sumo.vehicle.getLength(self.ego_id)
+
+    def lane_width_m(self) -> float:
+        """Width of the ego's lane."""
+        return self._sumo.lane.getWidth(self._sumo.vehicle.getLaneID(self.ego_id))
+
+    def action_from_mps2(self, lon_mps2: float, lat_mps2: float) -> np.ndarray:
+        """The action (in this env's action space, clipped to it) for accelerations in m/s^2."""
+        o = self.options
+        lon = min(max(lon_mps2, o.accel_min_mps2), o.accel_max_mps2)
+        lat = min(max(lat_mps2, -o.lat_accel_max_mps2), o.lat_accel_max_mps2)
+        if o.normalize_actions:
+            lon = lon / o.accel_max_mps2 if lon > 0 else lon / -o.accel_min_mps2
+            lat = lat / o.lat_accel_max_mps2
+        return np.array([lon, lat], dtype=np.float32)
+
+    # ---- helpers ----
+
+    def sumo_inputs(self, run_seed: int) -> tuple[Path, list[str]]:
+        """The run's .sumocfg and ego candidates: network built once per env, demand once per run seed."""
+        if self._work is None:
+            self._work = Path(tempfile.mkdtemp(prefix="roadsynth-env-"))
+            self._net_file = networks.build_network(self.config.network, self._work / "net")
+        if run_seed not in self._demands:
+            out = self._work / f"seed{run_seed}"
+            out.mkdir()
+            demand = build_demand(self.config.demand, self._net_file, out, out / "_work", run_seed)
+            shutil.rmtree(out / "_work")
+            sumocfg = write_sumocfg(out, str(self._net_file), demand.routes_file.name, self.sim, run_seed)
+            vehicles = demand.vehicles
+            candidates = vehicles.loc[vehicles["cls"] == self.config.ego.cls.value, "vehicle_id"].tolist()
+            self._demands[run_seed] = (sumocfg, candidates)
+            index = {c.value: i + 1 for i, c in enumerate(features.CLASS_ORDER)}
+            self._classes[run_seed] = dict(zip(vehicles["vehicle_id"], vehicles["cls"].map(index), strict=True))
+        return self._demands[run_seed]
+
+    def _accelerations(self, action: np.ndarray) -> tuple[float, float]:
+        o = self.options
+        if action.shape != (2,) or not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be 2 finite numbers (longitudinal, lateral), got {action!r}")
+        if not o.normalize_actions:
+            return (float(np.clip(action[0], o.accel_min_mps2, o.accel_max_mps2)),
+                    float(np.clip(action[1], -o.lat_accel_max_mps2, o.lat_accel_max_mps2)))
+        lon, lat = np.clip(action, -1.0, 1.0)
+        return (float(lon * (o.accel_max_mps2 if lon > 0 else -o.accel_min_mps2)), float(lat * o.lat_accel_max_mps2))
+
+    def _lane_yaw(self, ahead_m: float = 0.0) -> float:
+        """yaw (rad) of the ego's lane at its position, or ``ahead_m`` further along the lane (within it)."""
+        sumo, ego = self._sumo, self.ego_id
+        lane = sumo.vehicle.getLaneID(ego)
+        pos = min(sumo.vehicle.getLanePosition(ego) + ahead_m, sumo.lane.getLength(lane))
+        angle = sumo.lane.getAngle(lane, pos)
+        return features.yaw_from_sumo_angle(angle)
+
+    def _route_left_m(self) -> float | None:
+        d = self._sumo.vehicle.getDrivingDistance(self.ego_id, self._last_edge, self._last_edge_length)
+        return None if d < _INVALID_DISTANCE else max(d, 0.0)
+
+    def _off_road(self) -> tuple[bool, float]:
+        """Whether the ego's centre is beyond the outer border of the lanes it may drive on (a sidewalk or
+        parking lane beside it counts as off the road), or on a lane it may not use; half its lane's width."""
+        sumo, ego = self._sumo, self.ego_id
+        lane = sumo.vehicle.getLaneID(ego)
+        half = 0.5 * sumo.lane.getWidth(lane)
+        lat, index = sumo.vehicle.getLateralLanePosition(ego), sumo.vehicle.getLaneIndex(ego)
+        beyond = ((lat > half and not self.lane_drivable(index + 1))
+                  or (lat < -half and not self.lane_drivable(index - 1))
+                  or abs(lat) > 2 * half or not self._drivable(lane))
+        return bool(beyond), half
+
+    def lane_drivable(self, index: int) -> bool:
+        """Whether lane ``index`` of the ego's current edge exists and admits the ego's vehicle class."""
+        sumo = self._sumo
+        road = sumo.vehicle.getRoadID(self.ego_id)
+        return 0 <= index < sumo.edge.getLaneNumber(road) and self._drivable(f"{road}_{index}")
+
+    def _drivable(self, lane: str) -> bool:
+        if lane not in self._lane_ok:
+            self._lane_ok[lane] = self._vclass not in self._sumo.lane.getDisallowed(lane)
+        return self._lane_ok[lane]
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        sumo, ego = self._sumo, self.ego_id
+        lane_yaw = self._lane_yaw()
+        cx, cy, yaw = features.centre_xy(sumo, ego)
+        heading_rel = (yaw - lane_yaw + math.pi) % (2 * math.pi) - math.pi
+        ego_row = np.array([self._speed, self._accel, sumo.vehicle.getLaneIndex(ego),
+                            sumo.vehicle.getLateralLanePosition(ego), heading_rel, self._route_left or 0.0])
+        space = self.observation_space
+        context = sumo.vehicle.getContextSubscriptionResults(ego) if self.options.nearby_k > 0 else {}
+        obs = {
+            "ego": np.clip(ego_row, space["ego"].low, space["ego"].high).astype(np.float32),
+            "neighbours": features.neighbour_rows(sumo, ego, self._speed, lane_yaw, self.options.neighbour_range_m,
+                                                  context, space["neighbours"]),
+        }
+        if "nearby" in space.spaces:
+            obs["nearby"] = features.nearby_rows(context, ego, (cx, cy), lane_yaw, self._speed,
+                                                 self._classes[self._run_seed], space["nearby"])
+        return obs
+
+    def _info(self) -> dict[str, object]:
+        return {"ego_id": self.ego_id, "run_seed": self._run_seed,
+                "time_s": round(self._sumo.simulation.getTime() - self._start_time_s, 6)}
+
+
+def scenario_env(scenario: str | Path | None = None, **kwargs) -> RoadsynthEnv:
+    """``roadsynth/Scenario-v0``: like RoadsynthEnv, but the scenario (a NAME or YAML PATH) must be named."""
+    if scenario is None:
+        raise TypeError("roadsynth/Scenario-v0 needs scenario=NAME (configs/scenarios/) or a YAML PATH")
+    return RoadsynthEnv(scenario, **kwargs)
+
+
+def _options(options: EnvOptions | None, kwargs: dict) -> EnvOptions:
+    base = options or EnvOptions()
+    known = {f.name for f in fields(EnvOptions)}
+    unknown = sorted(set(kwargs) - known)
+    if unknown:
+        raise TypeError(f"unknown option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    if isinstance(kwargs.get("reward"), dict):
+        kwargs = {**kwargs, "reward": RewardWeights(**kwargs["reward"])}
+    return replace(base, **kwargs)
