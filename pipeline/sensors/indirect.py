@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
-from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.sensors.sunlight import sky_and_sun
 from pipeline.world.scene import FrameScene, Hits
 
 AO_SAMPLES = 8
@@ -157,8 +157,11 @@ def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.nd
     mirror, weight = mirror_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows,
                                  as_input(f0[rows], np.float32))
     bounce = scene.cast_rays(mirror)
-    normal, t_b = as_input(bounce.normal, np.float32), as_input(bounce.t_m, np.float32)
-    n_dot_l, lit, _ = sun_rays(mirror, normal, t_b, sun)
+    normal = as_input(bounce.normal, np.float32)
+    # n.l as sun_rays computes it (float32, in this order), without the shadow rays: reflections are unshadowed.
+    n_dot_l = normal[:, 0] * sun[0] + normal[:, 1] * sun[1] + normal[:, 2] * sun[2]
+    lit = np.flatnonzero(n_dot_l > 0)
+    t_b = bounce.t_m
     env = sky_and_sun(mirror, bounce.hit & (t_b <= MIRROR_RANGE_M), normal, as_input(bounce.material, np.int32),
                       as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), bool), specular, shininess,
                       sun, *colours)
