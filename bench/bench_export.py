@@ -32,12 +32,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench_records import rendered_record
+
 from exporters.base import Compression, ExportOptions, get_exporter
-from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.memory import keep_freed_memory
 from pipeline.core.record import DatasetRecord
-from pipeline.stages.render import render
-from pipeline.stages.simulate import resolve_scenario, simulate
 from tests.exporters.synthetic_record import build_record
 
 # The uncompressed log of each format comes before its compressed ones (their raw MB/s needs its size).
@@ -52,16 +51,6 @@ def _size_and_files(path: Path) -> tuple[int, int]:
         return path.stat().st_size, 1
     files = [p for p in path.rglob("*") if p.is_file()]
     return sum(p.stat().st_size for p in files), len(files)
-
-
-def rendered_record(tmp: Path, frames: int) -> Path:
-    """``frames`` frames of the default rig under morning, rendered from a highway run simulated here."""
-    config, _ = resolve_scenario("highway", duration_s=frames / 10.0, warmup_s=90.0)
-    simulate(config, 1, tmp / "sim", progress=True)
-    rig, _ = load_config(RigConfig, "default", "rigs")
-    condition, _ = load_config(ConditionConfig, "morning", "conditions")
-    render(tmp / "sim", condition, rig, tmp / "record", frames=frames, workers=os.cpu_count() or 1, progress=True)
-    return tmp / "record"
 
 
 def main() -> None:
@@ -85,7 +74,7 @@ def main() -> None:
             record = build_record(tmp / "record", frames=args.frames, ground_points=args.ground_points)
             kind = f"synthetic record, {args.ground_points} random ground points per sweep"
         else:
-            record = rendered_record(tmp, args.frames)
+            record = rendered_record(tmp, args.frames, "morning", os.cpu_count() or 1, progress=True)
             kind = "record rendered here (highway seed 1, morning, default rig)"
         frames = len(DatasetRecord(record).frames)
         in_mb = sum(p.stat().st_size for p in record.rglob("*") if p.is_file()) / 1e6

@@ -19,12 +19,10 @@ from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+from bench_records import rendered_record
 
 from pipeline.core import tables
-from pipeline.core.config import ConditionConfig, RigConfig, load_config
-from pipeline.stages.render import render
 from pipeline.stages.render_frames import SWEEP_SCHEMA
-from pipeline.stages.simulate import resolve_scenario, simulate
 
 _WRITE_TABLE = pq.write_table
 
@@ -71,14 +69,7 @@ def main() -> None:
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        record = args.record
-        if record is None:
-            config, _ = resolve_scenario("highway", duration_s=args.frames / 10.0, warmup_s=90.0)
-            simulate(config, 1, tmp / "sim", progress=False)
-            rig, _ = load_config(RigConfig, "default", "rigs")
-            condition, _ = load_config(ConditionConfig, "noon", "conditions")
-            record = tmp / "record"
-            render(tmp / "sim", condition, rig, record, frames=args.frames, workers=1, progress=False)
+        record = args.record or rendered_record(tmp, args.frames)
         sweeps = [pq.read_table(p).cast(SWEEP_SCHEMA) for p in sorted(record.glob("lidars/*/*.parquet"))]
         labels = [pq.read_table(record / "labels.parquet")]
         (tmp / "out").mkdir()

@@ -18,12 +18,10 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from bench_records import rendered_record
 
-from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.png import encode_png
-from pipeline.stages.render import render
 from pipeline.stages.render_frames import PNG_FILTER
-from pipeline.stages.simulate import resolve_scenario, simulate
 
 OPENCV_FILTER = {"none": cv2.IMWRITE_PNG_FILTER_NONE, "sub": cv2.IMWRITE_PNG_FILTER_SUB,
                  "up": cv2.IMWRITE_PNG_FILTER_UP}
@@ -61,15 +59,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_name:
-        record = args.record
-        if record is None:
-            tmp = Path(tmp_name)
-            config, _ = resolve_scenario("highway", duration_s=args.frames / 10.0, warmup_s=90.0)
-            simulate(config, 1, tmp / "sim", progress=False)
-            rig, _ = load_config(RigConfig, "default", "rigs")
-            condition, _ = load_config(ConditionConfig, "noon", "conditions")
-            record = tmp / "record"
-            render(tmp / "sim", condition, rig, record, frames=args.frames, workers=1, progress=False)
+        record = args.record or rendered_record(Path(tmp_name), args.frames)
         images = read_images(record)
     frames = len(images["rgb"])
     writers = {"OpenCV (zlib 1, RLE)": opencv_png,
