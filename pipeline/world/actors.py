@@ -296,11 +296,12 @@ class ActorGeometry:
     vertex_on_hull: np.ndarray
 
 
-def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None
-                 ) -> ActorGeometry:
-    """Scale and place every actor's canonical mesh (vectorised per class) and merge them; with ``where`` (A,) bool,
-    only those actors' (their indices stay positions in ``actors``)."""
-    codes = meshes.model_codes(actors)
+def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,
+                 models: np.ndarray | None = None) -> ActorGeometry:
+    """Scale and place every actor's canonical mesh (vectorised per model) and merge them; with ``where`` (A,) bool,
+    only those actors' (their indices stay positions in ``actors``). ``models`` (A,): each actor's model, when the
+    caller has :meth:`ActorMeshes.model_codes` already."""
+    codes = meshes.model_codes(actors) if models is None else np.asarray(models, np.int64)
     if where is not None:
         where = np.asarray(where, bool)
         if where.shape != (len(actors),):

@@ -357,9 +357,9 @@ class FrameScene:
         self.active = np.ones(len(actors), bool) if active is None else np.asarray(active, bool)
         if self.active.shape != (len(actors),):
             raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
-        self.geometry = place_actors(actors, meshes, self.active)
-        self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
         self._model = meshes.model_codes(actors)
+        self.geometry = place_actors(actors, meshes, self.active, self._model)
+        self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
         self._paint = material_index("paint")
