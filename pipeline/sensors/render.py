@@ -92,21 +92,25 @@ def render_camera(
     lights = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
     samples = camera.sample_directions
     indirect = camera.config.quality == "realistic"
+    texture_rad = 1.0 / camera.fx if indirect else 0.0  # the realistic camera textures the static world
     if len(samples) == 1:
-        radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect), hits.t_m, hits.hit)
+        radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect, texture_rad), hits.t_m,
+                                 hits.hit)
     else:
         # Every pixel gets its centre sample; pixels on an edge (edge_pixels) get the stratified samples instead.
         if camera.config.samples_everywhere:
             radiance, where = np.zeros((h * w, 3), np.float32), np.arange(h * w)
         else:
-            radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect), hits.t_m, hits.hit)
+            radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect, texture_rad), hits.t_m,
+                                     hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
         for sample in samples:  # loop over samples; all chosen pixels vectorised
             sample_rays = make_rays(cam_to_world.translation, sample[where], cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, mask)
-            edge += condition.fog(shade(scene, sample_rays, sample_hits, lighting, lights, indirect), sample_hits.t_m,
+            edge += condition.fog(shade(scene, sample_rays, sample_hits, lighting, lights, indirect,
+                                        texture_rad), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
     flow = None

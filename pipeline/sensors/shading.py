@@ -21,6 +21,7 @@ from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
 from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.sensors.textures import textured_albedo
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.scene import FrameScene, Hits, rowdot
 
@@ -93,18 +94,22 @@ def _sky_channels(up_z: np.ndarray, lighting: Lighting) -> list[np.ndarray]:
 
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting, lights: SpotLights | None = None,
-    indirect: bool = False,
+    indirect: bool = False, pixel_angle_rad: float = 0.0,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
     radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
     sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
-    (:mod:`pipeline.sensors.indirect`). The sun's and the sky's terms are compiled passes over the rays
-    (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the wet sheen add theirs with
+    (:mod:`pipeline.sensors.indirect`). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the
+    static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over
+    the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the wet sheen add theirs with
     numpy.
     """
     mats = _materials()
+    if pixel_angle_rad > 0:
+        hits = dataclasses.replace(hits, color=textured_albedo(rays, hits.t_m, hits.hit, hits.instance_id,
+                                                               hits.material, hits.normal, hits.color, pixel_angle_rad))
     wet = None
     if lighting.wetness > 0:
         wet, hits, mats = _wet(hits, mats, lighting.wetness)
