@@ -215,7 +215,7 @@ def minibus() -> Mesh:
 
 
 def pickup() -> Mesh:
-    """5.4 x 1.95 x 1.85 m pickup: cab, a flat-covered load bed, high clearance."""
+    """5.4 x 1.95 x 1.85 m pickup: cab, a load bed under a black tonneau cover, high clearance."""
     spec = BodySpec(5.4, 1.92, top=((0.0, 0.7), (0.01, 1.08), (0.4, 1.1), (0.415, 1.78), (0.44, 1.85),
                                     (0.62, 1.85), (0.71, 1.3), (0.76, 1.2), (0.94, 1.08), (0.99, 0.88),
                                     (1.0, 0.62)),
@@ -223,7 +223,8 @@ def pickup() -> Mesh:
                     wheels_u=(0.17, 0.8), wheel_radius_m=0.38, glass_u=(0.43, 0.71), pillars_u=(0.56,))
     ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.82,
                 bumper_z=0.66)
-    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+    cover = cuboid(((0.03 - 0.5) * 5.4, -0.7, 1.1), ((0.39 - 0.5) * 5.4, 0.7, 1.12), "trim")  # black tonneau cover
+    return merge([*_car_body(spec, 0.71, ends), cover], ObjectClass.CAR)
 
 
 def _truck_rear(x: float, z_lamp: float, half_w: float) -> list[Part]:
@@ -250,13 +251,14 @@ def _cab(length_m: float, width_m: float, height_m: float, x_front: float) -> li
 
 
 def _cargo_details(x_rear: float, x_front: float, half_w: float, z0: float, z1: float) -> list[Part]:
-    """What makes a cargo box read as one: on its rear face (at ``x_rear``, facing -x) a dark frame, the seam between
-    two doors and four locking bars (metal, standing further out); along each side a rub rail at the bottom and a
-    rail at the top (dark)."""
+    """What makes a cargo box read as one: on its rear face (at ``x_rear``, facing -x) an aluminium frame, the seam
+    between two doors and four locking bars (standing further out), red clearance lamps at the top corners and
+    retroreflective tape (red and white, as ECE R48/R104 require) along the bottom and up the corners; along each
+    side a rub rail at the bottom, a rail at the top and white tape segments."""
     d, e, w = 0.015, 0.035, 0.08
-    rear = [cuboid((x_rear - d, -half_w, z0), (x_rear, half_w, z0 + w), "trim"),
-            cuboid((x_rear - d, -half_w, z1 - w), (x_rear, half_w, z1), "trim"),
-            *mirrored(lambda y0, y1: cuboid((x_rear - d, y0, z0 + w), (x_rear, y1, z1 - w), "trim"), half_w - w,
+    rear = [cuboid((x_rear - d, -half_w, z0), (x_rear, half_w, z0 + w), "metal"),
+            cuboid((x_rear - d, -half_w, z1 - w), (x_rear, half_w, z1), "metal"),
+            *mirrored(lambda y0, y1: cuboid((x_rear - d, y0, z0 + w), (x_rear, y1, z1 - w), "metal"), half_w - w,
                       half_w),
             cuboid((x_rear - d, -0.02, z0 + w), (x_rear, 0.02, z1 - w), "trim")]
     bars = [cuboid((x_rear - e, y - 0.02, z0 + 0.2), (x_rear - d, y + 0.02, z1 - 0.2), "metal")
@@ -264,7 +266,34 @@ def _cargo_details(x_rear: float, x_front: float, half_w: float, z0: float, z1: 
     rails = [part for z_lo, z_hi in ((z0, z0 + 0.1), (z1 - 0.07, z1))
              for part in mirrored(lambda y0, y1, z_lo=z_lo, z_hi=z_hi: cuboid((x_rear, y0, z_lo), (x_front, y1, z_hi),
                                                                                "trim"), half_w, half_w + d)]
-    return [*rear, *bars, *rails]
+    lamps = mirrored(lambda y0, y1: cuboid((x_rear - 2 * d, y0, z1 - 0.16), (x_rear - d, y1, z1 - 0.1), "taillight"),
+                     half_w - 0.2, half_w - 0.06)
+    tape = []
+    n = max(2, int(2 * half_w / 0.3))  # across the bottom of the rear: alternating 0.3 m segments
+    ys = np.linspace(-half_w + w, half_w - w, n + 1)
+    tape += [cuboid((x_rear - 2 * d, ys[k], z0 + w + 0.02), (x_rear - d, ys[k + 1], z0 + w + 0.07),
+                    "reflector_red" if k % 2 else "reflector_white") for k in range(n)]
+    zs = np.linspace(z0 + w + 0.1, z1 - w - 0.2, 6)  # up the rear corners, beside the frame
+    tape += [part for k in range(5) for part in mirrored(
+        lambda y0, y1, k=k: cuboid((x_rear - 2 * d, y0, zs[k]), (x_rear - d, y1, zs[k + 1]),
+                                   "reflector_white" if k % 2 else "reflector_red"), half_w - w - 0.05, half_w - w)]
+    xs = np.arange(x_rear + 0.3, x_front - 0.3, 0.9)  # white segments along each side's bottom rail
+    tape += [part for x in xs for part in mirrored(
+        lambda y0, y1, x=x: cuboid((x, y0, z0 + 0.12), (x + 0.45, y1, z0 + 0.17), "reflector_white"), half_w,
+        half_w + d)]
+    return [*rear, *bars, *rails, *lamps, *tape]
+
+
+def _chassis_guards(x_front: float, x_rear: float, half_w: float, rear_axle_x: float, tyre_r: float) -> list[Part]:
+    """Side underrun guards (two rails between the axles, from ``x_front`` back to ``x_rear``) and mud flaps
+    behind the rearmost axle."""
+    rails = [part for z_lo, z_hi in ((0.42, 0.5), (0.72, 0.78))
+             for part in mirrored(lambda y0, y1, z_lo=z_lo, z_hi=z_hi: cuboid((x_rear, y0, z_lo), (x_front, y1, z_hi),
+                                                                               "metal"), half_w - 0.08, half_w - 0.03)]
+    flaps = mirrored(lambda y0, y1: cuboid((rear_axle_x - tyre_r - 0.06, y0, 0.18), (rear_axle_x - tyre_r - 0.04, y1,
+                                                                                      0.2 + tyre_r * 1.3), "rubber"),
+                     half_w - 0.55, half_w - 0.05)
+    return [*rails, *flaps]
 
 
 def box_truck() -> Mesh:
@@ -273,7 +302,8 @@ def box_truck() -> Mesh:
     cargo = cuboid((-4.0, -1.25, 0.95), (1.85, 1.25, 3.5), "cargo")
     wheels = _wheels((4.0 - 2.1 + 0.55 * 2.1, -1.6, -2.8), 1.22, 0.5, 0.3)
     return merge([*_cab(2.1, 2.4, 2.95, 4.0), chassis, cargo, *_cargo_details(-4.0, 1.85, 1.25, 0.95, 3.5),
-                  *_truck_rear(-4.0, 0.7, 1.22), *wheels], ObjectClass.TRUCK)
+                  *_truck_rear(-4.0, 0.7, 1.22), *wheels, *_chassis_guards(2.35, -1.0, 1.25, -2.8, 0.5)],
+                 ObjectClass.TRUCK)
 
 
 def semi_trailer() -> Mesh:
@@ -283,7 +313,8 @@ def semi_trailer() -> Mesh:
     skirt = cuboid((-7.9, -1.0, 0.95), (4.6, 1.0, 1.25), "trim")
     wheels = _wheels((8.0 - 2.3 + 0.55 * 2.3, 4.0, 2.7, -5.2, -6.3, -7.4), 1.24, 0.52, 0.32)
     return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, skirt, *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0),
-                  *_truck_rear(-8.0, 1.05, 1.25), *wheels], ObjectClass.TRUCK)
+                  *_truck_rear(-8.0, 1.05, 1.25), *wheels, *_chassis_guards(2.1, -4.6, 1.275, -7.4, 0.52)],
+                 ObjectClass.TRUCK)
 
 
 def bus() -> Mesh:

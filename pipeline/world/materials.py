@@ -69,6 +69,9 @@ MATERIALS: dict[str, Material] = {
     # lower bands, sills, grilles, hubs).
     "rim": Material((0.55, 0.56, 0.58), specular=0.6, shininess=48.0, reflectivity=0.60, fresnel_f0=0.3),
     "trim": Material((0.035, 0.035, 0.04), specular=0.15, shininess=24.0, reflectivity=0.10),
+    # Appended by the trucks' conspicuity markings (retroreflective tape; pipeline/world/actor_shapes.py).
+    "reflector_red": Material((0.55, 0.04, 0.03), specular=0.3, reflectivity=0.95),
+    "reflector_white": Material((0.85, 0.85, 0.82), specular=0.3, reflectivity=0.95),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
