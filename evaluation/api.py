@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.coco import accumulate_coco, coco_stats_by_group, summarize_coco
+from evaluation.coco_ap import accumulate_coco, coco_stats_by_group, summarize_coco
 from evaluation.curves import sweeps
-from evaluation.errors import FG_IOU, error_breakdown
+from evaluation.error_breakdown import FG_IOU, error_breakdown
 from evaluation.inputs import Detections, GroundTruth, image_groups
 from evaluation.io_coco import read_coco_gt, read_coco_results
 from evaluation.io_kitti import _kitti, read_kitti

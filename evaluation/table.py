@@ -30,7 +30,7 @@ from evaluation.attributes import (
     distance_bins,
     height_bins,
 )
-from evaluation.coco import sort_detections
+from evaluation.coco_ap import sort_detections
 from evaluation.inputs import Detections, GroundTruth, image_groups
 from evaluation.matching import greedy_match
 from evaluation.validate import InputError

@@ -28,7 +28,7 @@ import numpy as np
 from evaluation.inputs import MISSING_GROUP
 from evaluation.markdown import md_table, percent, pr_table
 from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
-from pipeline.stages.evaluated import check_evaluated_inputs
+from pipeline.stages.evaluated_inputs import check_evaluated_inputs
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from evaluation.coco import accumulate_coco, coco_stats_by_group, summarize_coco
+from evaluation.coco_ap import accumulate_coco, coco_stats_by_group, summarize_coco
 from evaluation.inputs import image_groups
 from evaluation.io_coco import detections_from_list, ground_truth_from_dict
 
