@@ -60,17 +60,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="report folder")
 
 
-def _table(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]], dict[str, dict[float, dict]]]:
-    """IoU thresholds, rows by image group ("all" and each value of the group-by attribute), and rows by
-    ground-truth bin (``distance_m:0-30``, ``occlusion:partial``...: recall only)."""
+def _table(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]]]:
+    """IoU thresholds and the table rows (all classes) by image group: "all" and each value of the group-by
+    attribute (the ground-truth bins, ``distance_m:0-30``..., are left out)."""
     rows = [r for r in metrics["table"]["rows"] if r["class"] == "all"]
     ious = sorted({r["iou"] for r in rows})
     by_group: dict[str, dict[float, dict]] = {}
-    by_bin: dict[str, dict[float, dict]] = {}
     for r in rows:
-        target = by_bin if ":" in str(r["group"]) else by_group
-        target.setdefault(str(r["group"]), {})[r["iou"]] = r
-    return ious, by_group, by_bin
+        if ":" not in str(r["group"]):
+            by_group.setdefault(str(r["group"]), {})[r["iou"]] = r
+    return ious, by_group
 
 
 def _group(image: dict, group_by: str) -> str:
@@ -173,7 +172,7 @@ def paper_markdown(ious: list[float], per_detector: dict[str, dict[str, dict[flo
 
 def _detector_report(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]], dict]:
     """IoU thresholds, the table rows by group (Table 1) and the flat metrics.json entries of one detector."""
-    ious, table, _ = _table(metrics)
+    ious, table = _table(metrics)
     coco = _coco_by_group(metrics)
     flat = {group: {**{f"precision@{t:g}": by_iou[t]["precision"] for t in ious},
                     **{f"recall@{t:g}": by_iou[t]["recall"] for t in ious},
