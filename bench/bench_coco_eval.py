@@ -1,4 +1,4 @@
-"""Benchmark COCO bbox AP: pycocotools vs faster-coco-eval vs roadsynth's evaluation.coco, in one run.
+"""Benchmark COCO bbox AP: pycocotools vs faster-coco-eval vs roadsynth's evaluation.coco_ap, in one run.
 
 Problem (issue 5): 5000 images, 3 classes, ~10 ground truths and ~30 detections per image, 1% crowd,
 scores rounded to 2 decimals (many ties). Each tool starts from the same in-memory COCO dict and results
@@ -90,7 +90,7 @@ def run_faster_coco_eval(gt: dict, results: list):
 
 
 def run_ours(gt: dict, results: list):
-    from evaluation.coco import accumulate_coco, summarize_coco
+    from evaluation.coco_ap import accumulate_coco, summarize_coco
     from evaluation.io_coco import detections_from_list, ground_truth_from_dict
 
     g = ground_truth_from_dict(gt, "bench-gt")

@@ -9,9 +9,10 @@ Public API:
 Imports nothing from ``pipeline`` or ``exporters``.
 """
 
-from evaluation.api import METRICS, Evaluation, evaluate, parse_metrics
-from evaluation.coco import CocoParams, accumulate_coco, summarize_coco
+from evaluation.api import METRICS, evaluate, parse_metrics
+from evaluation.coco_ap import CocoParams, accumulate_coco, summarize_coco
 from evaluation.io_coco import detections_from_list, ground_truth_from_dict, read_coco_gt, read_coco_results
+from evaluation.results import Evaluation
 from evaluation.validate import InputError
 
 __all__ = [

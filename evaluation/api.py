@@ -2,7 +2,8 @@
 
 Metrics are chosen by name from :data:`METRICS`, a registry that refuses duplicate registrations,
 unknown names and repeated names. Every key of metrics.json is always present: a metric that was not
-requested or does not apply records ``{"skipped": reason}`` instead of disappearing.
+requested or does not apply records ``{"skipped": reason}`` instead of disappearing. The results are an
+:class:`evaluation.results.Evaluation`, which writes itself.
 """
 
 from __future__ import annotations
@@ -15,12 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.coco import accumulate_coco, summarize_coco
+from evaluation.coco_ap import accumulate_coco, coco_stats_by_group, summarize_coco
 from evaluation.curves import sweeps
-from evaluation.data import Detections, GroundTruth
-from evaluation.errors import FG_IOU, error_breakdown
+from evaluation.error_breakdown import FG_IOU, error_breakdown
+from evaluation.inputs import Detections, GroundTruth, image_groups
 from evaluation.io_coco import read_coco_gt, read_coco_results
 from evaluation.io_kitti import _kitti, read_kitti
+from evaluation.results import Evaluation
 from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD, TableMatches, match_table, table_rows
 from evaluation.validate import InputError
 
@@ -91,6 +93,10 @@ def _coco(ctx: _Context) -> dict[str, Any]:
     ctx.artifacts["coco_accumulation"] = acc
     ctx.ignored["coco_detections_beyond_max_dets"] = acc.dropped_beyond_max_dets
     result = summarize_coco(acc, ctx.gt.category_names)
+    if ctx.group_by is not None:
+        names, index = image_groups(ctx.gt, ctx.group_by)
+        result["group_by"] = ctx.group_by
+        result["stats_by_group"] = coco_stats_by_group(ctx.gt, ctx.dt, index, names)
     if ctx.kind == "kitti":
         result["note"] = "computed on KITTI labels converted to COCO boxes (DontCare as crowd regions)"
     return result
@@ -110,29 +116,6 @@ def _kitti_metric(ctx: _Context) -> dict[str, Any]:
 def _errors(ctx: _Context) -> dict[str, Any]:
     thresholds = ctx.iou_thresholds if FG_IOU in ctx.iou_thresholds else (FG_IOU,)
     return error_breakdown(ctx.gt, ctx.dt, ctx.matches(thresholds), ctx.score_threshold)
-
-
-@dataclasses.dataclass(frozen=True)
-class Evaluation:
-    """Results of :func:`evaluate`.
-
-    Attributes:
-        metrics: the content of metrics.json (keys table, coco, kitti, errors, ignored).
-        curves: PR curve data per group and IoU threshold (what plots read), empty without the table.
-        coco_precision: (T, R, K, A, M) float64 pycocotools-layout precision, or None without COCO.
-        kitti_markdown: the KITTI summary for the report, or None.
-    """
-
-    metrics: dict[str, Any]
-    curves: list[dict[str, Any]]
-    coco_precision: np.ndarray | None
-    kitti_markdown: str | None
-
-    def write(self, out_dir: str | Path, *, png: bool = True) -> None:
-        """Write metrics.json, plots/ (data; PNG renderings too with ``png``) and report.md into ``out_dir``."""
-        from evaluation.outputs import write_outputs
-
-        write_outputs(self, Path(out_dir), png=png)
 
 
 def load_inputs(gt: str | Path, detections: str | Path) -> tuple[GroundTruth, Detections, str, dict[str, int]]:

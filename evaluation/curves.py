@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.data import Detections, GroundTruth
-from evaluation.table import TableMatches, image_groups
+from evaluation.inputs import Detections, GroundTruth, image_groups
+from evaluation.table import TableMatches
 
 MAX_CURVE_POINTS = 200
 

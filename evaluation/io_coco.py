@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.attributes import occlusion_levels
-from evaluation.data import Detections, GroundTruth
+from evaluation.inputs import Detections, GroundTruth
 from evaluation.validate import InputError, box_column, check_unique, int_column, lookup, number_column, where
 
 log = logging.getLogger(__name__)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from evaluation.attributes import KITTI_OCCLUSION_LABELS
-from evaluation.data import Detections, GroundTruth
+from evaluation.inputs import Detections, GroundTruth
 from evaluation.validate import InputError
 
 log = logging.getLogger(__name__)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from evaluation.iou import box_iou_dense
+from evaluation.box_iou import box_iou_dense
 
 
 def segments(problem: np.ndarray, n_problems: int) -> tuple[np.ndarray, np.ndarray]:

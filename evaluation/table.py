@@ -30,14 +30,13 @@ from evaluation.attributes import (
     distance_bins,
     height_bins,
 )
-from evaluation.coco import sort_detections
-from evaluation.data import Detections, GroundTruth
+from evaluation.coco_ap import sort_detections
+from evaluation.inputs import Detections, GroundTruth, image_groups
 from evaluation.matching import greedy_match
 from evaluation.validate import InputError
 
 DEFAULT_IOU_THRESHOLDS = (0.5, 0.6, 0.7, 0.8)
 DEFAULT_SCORE_THRESHOLD = 0.5
-MISSING_GROUP = "(none)"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,21 +84,6 @@ def match_table(gt: GroundTruth, dt: Detections, iou_thresholds) -> TableMatches
     best[match[d_i, t_i], t_i] = dt.score[d_i]
     return TableMatches(iou_thresholds=thr, dt_tp=dt_tp, dt_fp=~matched, gt_best_score=best,
                         gt_object=~gt.iscrowd, dt_matched_gt=np.where(dt_tp, match, -1))
-
-
-def image_groups(gt: GroundTruth, key: str | None) -> tuple[list[str], np.ndarray]:
-    """Group labels and (I,) int64 group index of each image for ``--group-by key``."""
-    if key is None:
-        return [], np.zeros(gt.num_images, dtype=np.int64)
-    values = [attrs.get(key) for attrs in gt.image_attrs]
-    if gt.num_images and all(v is None for v in values):
-        known = sorted({k for attrs in gt.image_attrs for k in attrs})
-        raise InputError(f"{gt.source}: no image has the attribute '{key}' to group by (image attributes: "
-                         f"{', '.join(known) or 'none'})")
-    labels = [MISSING_GROUP if v is None else str(v) for v in values]
-    names = sorted(set(labels))
-    lookup = {name: i for i, name in enumerate(names)}
-    return names, np.array([lookup[v] for v in labels], dtype=np.int64)
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> list[float | None]:

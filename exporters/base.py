@@ -23,9 +23,9 @@ import numpy as np
 import pandas as pd
 
 from exporters.filters import HIDDEN, FilterSummary, ObjectFilter
-from exporters.io import atomic_dir, atomic_file, atomic_named_dir, write_json
 from exporters.source import ExportSource, RecordSource
 from exporters.splits import SplitSpec
+from exporters.writing import atomic_dir, atomic_file, atomic_named_dir, write_json
 
 log = logging.getLogger(__name__)
 

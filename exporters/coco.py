@@ -27,8 +27,8 @@ from tqdm import tqdm
 
 from exporters.base import BoxMode, CameraRows, Exporter, ExportOptions
 from exporters.filters import KEPT, FilterSummary
-from exporters.io import link_or_copy, write_json
 from exporters.source import ExportSource, FrameItem, safe_name
+from exporters.writing import link_or_copy, write_json
 from pipeline.core.classes import COCO_CATEGORIES
 
 log = logging.getLogger(__name__)

@@ -3,7 +3,7 @@ with the 3D cubes, and the ego pose.
 
 A layout names topics and frames, so it must match the file: a single-record MCAP uses the plain names
 (the shipped ``docs/foxglove_layout.json`` is :func:`layout` of such a file with camera ``front`` and LiDAR
-``top``); a merged MCAP prefixes every topic and frame per record (:class:`exporters.scene.Naming`), and its
+``top``); a merged MCAP prefixes every topic and frame per record (:class:`exporters.log_common.Naming`), and its
 layout has one tab per record. The MCAP exporter writes the layout of each export next to it
 (:func:`layout_path`); Foxglove does not read layouts from the MCAP itself (import it with Layouts →
 Import from file).
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from exporters.scene import prefixed_frame, prefixed_topic
+from exporters.log_common import prefixed_frame, prefixed_topic
 
 _PUBLISH = {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
             "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5, "poseEstimateYDeviation": 0.5,

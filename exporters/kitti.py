@@ -30,8 +30,8 @@ from tqdm import tqdm
 
 from exporters.base import CameraRows, Exporter, ExportError, ExportOptions
 from exporters.filters import KEPT, FilterSummary
-from exporters.io import link_or_copy
 from exporters.source import ExportSource, RecordSource, safe_name
+from exporters.writing import link_or_copy
 from pipeline.core.geometry import wrap_angle
 from pipeline.core.record import CameraInfo, LidarInfo
 

@@ -4,7 +4,7 @@ Chunked, zstd (level 1) by default (``--compression lz4|none``); every message's
 the simulation time of its frame (nanoseconds). Frames are read one or two ahead on a loader thread, and
 full chunks are compressed on worker threads while the next fill (:mod:`exporters.mcap_writer`: mcap's
 records, written in order, so the file's bytes do not depend on timing). Channels per record (names:
-:mod:`exporters.scene`):
+:mod:`exporters.log_common`):
 
 =================================  ==========================  ==========================================
 topic                              schema                      content
@@ -53,9 +53,7 @@ from tqdm import tqdm
 from exporters.base import Exporter, ExportOptions
 from exporters.filters import HIDDEN, KEPT, FilterSummary
 from exporters.foxglove_layout import RecordView, layout, layout_path
-from exporters.io import dumps_json
-from exporters.mcap_writer import PipelinedWriter, payload_size
-from exporters.scene import (
+from exporters.log_common import (
     CLASS_COLORS,
     DEFAULT_COLOR,
     POINT_FIELDS,
@@ -69,7 +67,9 @@ from exporters.scene import (
     quat_from_yaw,
     split_ns,
 )
+from exporters.mcap_writer import PipelinedWriter, payload_size
 from exporters.source import ExportSource, FrameItem, RecordSource
+from exporters.writing import dumps_json
 
 # A chunk is sealed once it exceeds this: about one frame of the default rig (0.75 MB PNG + 2.4 MB sweep) per
 # chunk: faster than two frames per chunk (4 MB) for the same file size (docs/performance.md).

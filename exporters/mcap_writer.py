@@ -43,7 +43,7 @@ from mcap.records import (
 from mcap.writer import MCAP0_MAGIC
 
 from exporters.base import Compression
-from exporters.io import ZSTD_LEVEL
+from exporters.writing import ZSTD_LEVEL
 
 Payload = bytes | bytearray | memoryview
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
@@ -58,7 +58,7 @@ def payload_size(part: Payload) -> int:
 
 
 def chunk_compressor(compression: Compression) -> Callable[[bytes], bytes]:
-    """The function that compresses one chunk: zstd at :data:`exporters.io.ZSTD_LEVEL` on the calling thread
+    """The function that compresses one chunk: zstd at :data:`exporters.writing.ZSTD_LEVEL` on the calling thread
     (one compressor per thread), lz4 frames as mcap writes them, or none."""
     if compression is Compression.ZSTD:
         return _zstd

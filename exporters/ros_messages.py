@@ -1,7 +1,7 @@
 """Builders of the ROS 2 messages of the rosbag2 export, one method per message, from record data.
 
 Messages are rosbags typestore dataclasses (:func:`exporters.ros_types.typestore`); times are
-simulation time in nanoseconds; frame ids come from :class:`exporters.scene.Naming`.
+simulation time in nanoseconds; frame ids come from :class:`exporters.log_common.Naming`.
 """
 
 from __future__ import annotations
@@ -11,8 +11,7 @@ from typing import Any
 import numpy as np
 
 from exporters.filters import KEPT, FilterSummary
-from exporters.ros_types import typestore
-from exporters.scene import (
+from exporters.log_common import (
     CLASS_COLORS,
     DEFAULT_COLOR,
     POINT_FIELDS,
@@ -22,6 +21,7 @@ from exporters.scene import (
     quat_from_yaw,
     split_ns,
 )
+from exporters.ros_types import typestore
 from exporters.source import FrameItem, RecordSource
 from pipeline.core.record import CameraInfo
 
@@ -91,7 +91,7 @@ class RosMessages:
                                                            do_rectify=False))
 
     def point_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
-        """PointCloud2 of one sweep packed by :func:`exporters.scene.pack_points`."""
+        """PointCloud2 of one sweep packed by :func:`exporters.log_common.pack_points`."""
         fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
                   for n, o, d in POINT_FIELDS]
         width = len(packed) // POINT_STRIDE

@@ -1,6 +1,6 @@
 """rosbag2 export (rosbags writer, MCAP storage, CDR messages): ``DIR/metadata.yaml`` + ``DIR/<name>.mcap``.
 
-Topics per record (names and frame ids as in :mod:`exporters.scene`); stamps are simulation time:
+Topics per record (names and frame ids as in :mod:`exporters.log_common`); stamps are simulation time:
 
 ======================================  ======================================  =================================
 topic                                   type                                    content
@@ -34,10 +34,10 @@ from typing import Any
 from tqdm import tqdm
 
 from exporters.base import Compression, Exporter, ExportError, ExportOptions
-from exporters.io import OrderedCalls, dumps_json, ordered_calls, zstd_compressor
+from exporters.log_common import FrameData, FrameRows, Naming, frames_with_data, nanoseconds
 from exporters.ros_messages import RosMessages
-from exporters.scene import FrameData, FrameRows, Naming, frames_with_data, nanoseconds
 from exporters.source import ExportSource, FrameItem
+from exporters.writing import OrderedCalls, dumps_json, ordered_calls, zstd_compressor
 
 log = logging.getLogger(__name__)
 

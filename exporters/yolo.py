@@ -26,8 +26,8 @@ from tqdm import tqdm
 
 from exporters.base import CameraRows, Exporter, ExportOptions
 from exporters.filters import KEPT, FilterSummary
-from exporters.io import link_or_copy
 from exporters.source import ExportSource, safe_name
+from exporters.writing import link_or_copy
 from pipeline.core.classes import COCO_CATEGORIES
 
 log = logging.getLogger(__name__)

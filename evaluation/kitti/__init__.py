@@ -10,7 +10,7 @@ Public API:
 """
 
 from evaluation.kitti.evaluate import evaluate_kitti
-from evaluation.kitti.io import (
+from evaluation.kitti.readers import (
     KittiCalib,
     KittiFormatError,
     KittiFrame,
@@ -18,7 +18,7 @@ from evaluation.kitti.io import (
     read_label_dir,
     read_label_file,
 )
-from evaluation.kitti.report import kitti_summary_markdown
+from evaluation.kitti.summary import kitti_summary_markdown
 
 __all__ = [
     "KittiCalib",

@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from evaluation.kitti.ap import N_SAMPLE_PTS, exact_curve, official_curve
-from evaluation.kitti.io import KittiFormatError, KittiFrame, read_calib, read_label_dir
 from evaluation.kitti.match import Problem
 from evaluation.kitti.prepare import (
     DIFFICULTIES,
@@ -29,6 +28,7 @@ from evaluation.kitti.prepare import (
     gt_flags,
     pairs,
 )
+from evaluation.kitti.readers import KittiFormatError, KittiFrame, read_calib, read_label_dir
 
 __all__ = ["METRICS", "MIN_OVERLAP_LOOSE", "MIN_OVERLAP_STRICT", "MODES", "RULES", "evaluate_kitti"]
 

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evaluation.kitti.io import KittiFrame
 from evaluation.kitti.iou import bev_iou, box3d_iou, image_box_overlap
+from evaluation.kitti.readers import KittiFrame
 
 __all__ = [
     "DIFFICULTIES", "NEIGHBOURS", "Difficulty", "Flat", "OverlapRules", "Pairs",

@@ -2,10 +2,12 @@
 condition, recall by distance and box height, and a strip of example frames with ground truth and
 detections drawn.
 
-Reads the evaluate stage's ``metrics.json``, the COCO ground truth and the detections (COCO results);
-writes OUT/report.md, OUT/examples.png and OUT/metrics.json (flat, per condition, for ``dvc metrics``).
-The ground truth and detections must be the files that were evaluated (their sha256 is in the
-evaluation's ``meta.json``) and the grouping the evaluation's ``--group-by``: the table comes from it.
+Renders from the evaluate stage's ``metrics.json`` (its table rows and its COCO stats per group) with the
+Markdown table helpers of :mod:`evaluation.markdown`; reads the COCO ground truth and the detections (COCO
+results) only to draw the example frames. Writes OUT/report.md, OUT/examples.png and OUT/metrics.json
+(flat, per condition, for ``dvc metrics``). The ground truth and detections must be the files that were
+evaluated (their sha256 is in the evaluation's ``meta.json``) and the grouping the evaluation's
+``--group-by``: the tables come from it.
 
 Several detectors (``--eval NAME=DIR --detections NAME=FILE``, once per detector, e.g. the baseline and
 a pretrained ONNX model) share one report: Table 1 puts their precision and recall side by side per
@@ -18,16 +20,15 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from evaluation import evaluate
-from evaluation.table import MISSING_GROUP
+from evaluation.inputs import MISSING_GROUP
+from evaluation.markdown import md_table, percent, pr_table
 from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
-from pipeline.stages.evaluated import check_evaluated_inputs
+from pipeline.stages.evaluated_inputs import check_evaluated_inputs
 
 log = logging.getLogger(__name__)
 
@@ -59,17 +60,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="report folder")
 
 
-def _table(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]], dict[str, dict[float, dict]]]:
-    """IoU thresholds, rows by image group ("all" and each value of the group-by attribute), and rows by
-    ground-truth bin (``distance_m:0-30``, ``occlusion:partial``...: recall only)."""
+def _table(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]]]:
+    """IoU thresholds and the table rows (all classes) by image group: "all" and each value of the group-by
+    attribute (the ground-truth bins, ``distance_m:0-30``..., are left out)."""
     rows = [r for r in metrics["table"]["rows"] if r["class"] == "all"]
     ious = sorted({r["iou"] for r in rows})
     by_group: dict[str, dict[float, dict]] = {}
-    by_bin: dict[str, dict[float, dict]] = {}
     for r in rows:
-        target = by_bin if ":" in str(r["group"]) else by_group
-        target.setdefault(str(r["group"]), {})[r["iou"]] = r
-    return ious, by_group, by_bin
+        if ":" not in str(r["group"]):
+            by_group.setdefault(str(r["group"]), {})[r["iou"]] = r
+    return ious, by_group
 
 
 def _group(image: dict, group_by: str) -> str:
@@ -78,52 +78,28 @@ def _group(image: dict, group_by: str) -> str:
     return MISSING_GROUP if value is None else str(value)
 
 
-def coco_by_group(gt_path: Path, det_path: Path, group_by: str) -> dict[str, list[float]]:
-    """COCO stats (12 numbers, pycocotools order) for each value of the image attribute ``group_by``."""
-    gt = json.loads(gt_path.read_text())
-    dets = json.loads(det_path.read_text())
-    values = sorted({_group(img, group_by) for img in gt["images"]})
-    out = {}
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        for value in values:
-            ids = {img["id"] for img in gt["images"] if _group(img, group_by) == value}
-            sub = dict(gt, images=[i for i in gt["images"] if i["id"] in ids],
-                       annotations=[a for a in gt["annotations"] if a["image_id"] in ids])
-            (tmp / "gt.json").write_text(json.dumps(sub))
-            (tmp / "dt.json").write_text(json.dumps([d for d in dets if d["image_id"] in ids]))
-            result = evaluate(tmp / "gt.json", tmp / "dt.json", metrics="coco")
-            out[value] = [float(s) for s in result.metrics["coco"]["stats"]]
-    return out
+def _coco_by_group(metrics: dict) -> dict[str, list[float]]:
+    """COCO stats (12 numbers, pycocotools order) of all images, then of each group (the evaluation's)."""
+    return {"all": metrics["coco"]["stats"], **metrics["coco"]["stats_by_group"]}
 
 
-def _percent(value: float | None) -> str:
-    """A share as a percentage with one decimal; "-" where it is undefined (no detections, no ground truth)."""
-    return "-" if value is None else f"{100 * value:.1f}"
-
-
-def _markdown(ious, table, bins, coco, group_by: str, score_threshold: float) -> str:
-    head = " | ".join(f"P@{t:g} | R@{t:g}" for t in ious)
+def _markdown(metrics: dict, ious: list[float], group_by: str, score_threshold: float) -> str:
+    """report.md of one detector: its table per group, recall by bin and COCO AP per group (its metrics.json)."""
+    rows = [r for r in metrics["table"]["rows"] if r["class"] == "all"]
+    groups = [r for r in rows if ":" not in str(r["group"])]
+    bins = [r for r in rows if ":" in str(r["group"])]
     lines = [
         "# Detection report", "",
         f"## Precision and recall (%) by IoU threshold, per {group_by} (score >= {score_threshold:g})", "",
-        f"| {group_by} | {head} |", "|---" * (1 + 2 * len(ious)) + "|",
+        *pr_table(groups, "group", ious, label=group_by, undefined="-"),
     ]
-    for group, by_iou in table.items():
-        cells = " | ".join(f"{_percent(by_iou[t]['precision'])} | {_percent(by_iou[t]['recall'])}" for t in ious)
-        lines.append(f"| {group} | {cells} |")
     if bins:
         lines += ["", "## Recall (%) by ground-truth distance, box height (px) and occlusion", "",
-                  "| bin | " + " | ".join(f"R@{t:g}" for t in ious) + " |", "|---" * (1 + len(ious)) + "|"]
-        lines += [f"| {name} | " + " | ".join(_percent(by_iou[t]["recall"]) for t in ious) + " |"
-                  for name, by_iou in bins.items()]
-    lines += ["", f"## COCO AP per {group_by}", "", f"| {group_by} | AP | AP50 | AP75 | AR100 |",
-              "|---|---|---|---|---|"]
-    for group, stats in coco.items():
-        fmt = [f"{100 * s:.1f}" if s >= 0 else "n/a" for s in (stats[0], stats[1], stats[2], stats[8])]
-        lines.append(f"| {group} | " + " | ".join(fmt) + " |")
-    lines += ["", "Example frames (green: ground truth, red: detections above the score threshold): "
-              "examples.png", ""]
+                  *pr_table(bins, "group", ious, recall_only=True, label="bin", undefined="-")]
+    coco = [[group, *(percent(stats[k], "n/a") for k in (0, 1, 2, 8))]
+            for group, stats in _coco_by_group(metrics).items()]
+    lines += ["", f"## COCO AP per {group_by}", "", *md_table([group_by, "AP", "AP50", "AP75", "AR100"], coco),
+              "", "Example frames (green: ground truth, red: detections above the score threshold): examples.png", ""]
     return "\n".join(lines)
 
 
@@ -175,35 +151,34 @@ def named_paths(values: list[str], option: str) -> dict[str, Path]:
 def paper_markdown(ious: list[float], per_detector: dict[str, dict[str, dict[float, dict]]], group_by: str,
                    paper: bool) -> str:
     """Table 1 laid out as in the paper (precision block, recall block), one row per (condition, source)."""
-    head = " | ".join([*(f"P@{t:g}" for t in ious), *(f"R@{t:g}" for t in ious)])
-    lines = [f"## Table 1: precision and recall by IoU threshold, per {group_by}", "",
-             f"| {group_by} | source | {head} |", "|---" * (2 + 2 * len(ious)) + "|"]
+    header = [group_by, "source", *(f"P@{t:g}" for t in ious), *(f"R@{t:g}" for t in ious)]
 
     def cell(value) -> str:
         return "-" if value is None else f"{value:.2f}"
 
-    groups = list(dict.fromkeys(g for table in per_detector.values() for g in table))
-    for group in groups:
+    rows = []
+    for group in dict.fromkeys(g for table in per_detector.values() for g in table):
         if paper and group in PAPER_TABLE1:
             ref = PAPER_TABLE1[group]
             at = {t: i for i, t in enumerate(PAPER_IOUS)}
-            cells = [cell(ref[k][at[t]]) if t in at else "-" for k in ("precision", "recall") for t in ious]
-            lines.append(f"| {group} | {PAPER_SOURCE} | " + " | ".join(cells) + " |")
+            rows.append([group, PAPER_SOURCE,
+                         *(cell(ref[k][at[t]]) if t in at else "-" for k in ("precision", "recall") for t in ious)])
         for name, table in per_detector.items():
             if group in table:
-                cells = [cell(table[group][t][k]) for k in ("precision", "recall") for t in ious]
-                lines.append(f"| {group} | {name} | " + " | ".join(cells) + " |")
+                rows.append([group, name, *(cell(table[group][t][k]) for k in ("precision", "recall") for t in ious)])
+    lines = [f"## Table 1: precision and recall by IoU threshold, per {group_by}", "", *md_table(header, rows)]
     return "\n".join(lines) + "\n"
 
 
-def _detector_report(metrics: dict, gt: Path, detections: Path, group_by: str):
-    ious, table, bins = _table(metrics)
-    coco = {"all": [float(s) for s in metrics["coco"]["stats"]], **coco_by_group(gt, detections, group_by)}
+def _detector_report(metrics: dict) -> tuple[list[float], dict[str, dict[float, dict]], dict]:
+    """IoU thresholds, the table rows by group (Table 1) and the flat metrics.json entries of one detector."""
+    ious, table = _table(metrics)
+    coco = _coco_by_group(metrics)
     flat = {group: {**{f"precision@{t:g}": by_iou[t]["precision"] for t in ious},
                     **{f"recall@{t:g}": by_iou[t]["recall"] for t in ious},
                     "coco_ap": coco.get(group, [None])[0], "coco_ap50": coco.get(group, [None, None])[1]}
             for group, by_iou in table.items()}
-    return ious, table, bins, coco, flat
+    return ious, table, flat
 
 
 def main(args: argparse.Namespace) -> int:
@@ -226,25 +201,28 @@ def main(args: argparse.Namespace) -> int:
             if key not in metrics.get(section, {}):
                 raise ValueError(f"{metrics_path}: {section}.{key} is missing ({section}: {metrics.get(section)!r}); "
                                  f"run `roadsynth evaluate` with --metrics including {section}")
+        if not isinstance(metrics["coco"].get("stats_by_group"), dict):
+            raise ValueError(f"{metrics_path}: coco.stats_by_group is missing (an evaluation older than its COCO stats "
+                             f"per group); re-run `roadsynth evaluate --group-by {group_by}`")
         score_threshold = float(metrics["table"]["score_threshold"]) if score_threshold is None else score_threshold
-        reports[name] = _detector_report(metrics, args.gt, dets[name], group_by)
+        reports[name] = (metrics, *_detector_report(metrics))
     images = args.images or args.gt.parent / "images"
     single = len(reports) == 1 and not args.paper
     with atomic_output_dir(args.out) as tmp:
         if single:
-            ious, table, bins, coco, flat = next(iter(reports.values()))
-            text, flat_metrics = _markdown(ious, table, bins, coco, group_by, score_threshold), flat
+            metrics, ious, _, flat_metrics = next(iter(reports.values()))
+            text = _markdown(metrics, ious, group_by, score_threshold)
         else:
-            ious = next(iter(reports.values()))[0]
-            text = "# Detection report\n\n" + paper_markdown(ious, {n: r[1] for n, r in reports.items()},
+            ious = next(iter(reports.values()))[1]
+            text = "# Detection report\n\n" + paper_markdown(ious, {n: r[2] for n, r in reports.items()},
                                                                group_by, args.paper)
             text += (f"\nScore >= {score_threshold:g}. Paper figures as published (CARLA frames, the paper's "
                      "detector), for comparison, not recomputed.\n")
-            for name, (d_ious, table, bins, coco, _) in reports.items():
-                body = _markdown(d_ious, table, bins, coco, group_by, score_threshold)
+            for name, (metrics, d_ious, _, _) in reports.items():
+                body = _markdown(metrics, d_ious, group_by, score_threshold)
                 body = body.replace("\n## ", "\n### ").replace("# Detection report", f"## Detector: {name}", 1)
                 text += "\n" + body
-            flat_metrics = {name: r[4] for name, r in reports.items()}
+            flat_metrics = {name: r[3] for name, r in reports.items()}
         (tmp / "report.md").write_text(text)
         first = next(iter(dets.values()))
         strip = examples_strip(args.gt, first, images, group_by, args.examples, score_threshold)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from evaluation.coco import accumulate_coco, summarize_coco
+from evaluation.coco_ap import accumulate_coco, summarize_coco
 from evaluation.io_coco import detections_from_list, ground_truth_from_dict
 
 

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from evaluation.coco import accumulate_coco, summarize_coco
+from evaluation.coco_ap import accumulate_coco, coco_stats_by_group, summarize_coco
+from evaluation.inputs import image_groups
 from evaluation.io_coco import detections_from_list, ground_truth_from_dict
 
 GRID = st.integers(0, 12).map(lambda v: v * 4)
@@ -111,6 +112,26 @@ def test_identical_to_pycocotools_on_random_problems(problem):
     if not results:  # pycocotools cannot load an empty results list (IndexError)
         return
     assert_identical(gt, results)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(problems())
+def test_stats_by_group_are_each_groups_images_evaluated_alone(problem):
+    """The stats of a group equal those of a COCO file holding only its images (read by the reader, exactly) and
+    pycocotools' on that file (to 1e-12): what the report stage's per-condition COCO AP is."""
+    gt, results = problem
+    g = ground_truth_from_dict(gt, "gt.json")
+    names, index = image_groups(g, "condition")
+    by_group = coco_stats_by_group(g, detections_from_list(results, g, "results.json"), index, names)
+    assert list(by_group) == sorted({img["condition"] for img in gt["images"]})
+    for name in names:
+        ids = {img["id"] for img in gt["images"] if img["condition"] == name}
+        alone = dict(gt, images=[img for img in gt["images"] if img["id"] in ids],
+                     annotations=[a for a in gt["annotations"] if a["image_id"] in ids])
+        alone_results = [r for r in results if r["image_id"] in ids]
+        assert by_group[name] == ours(alone, alone_results)[1]["stats"]
+        if alone_results:  # pycocotools cannot load an empty results list
+            np.testing.assert_allclose(by_group[name], reference(alone, alone_results).stats, rtol=0, atol=1e-12)
 
 
 def _random_problem(rng: np.random.Generator, n_img: int, n_cat: int = 3, crowd: float = 0.02):

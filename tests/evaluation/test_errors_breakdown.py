@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from evaluation.errors import error_breakdown
+from evaluation.error_breakdown import error_breakdown
 from evaluation.io_coco import detections_from_list, ground_truth_from_dict
 from evaluation.table import match_table, table_rows
 

@@ -72,3 +72,14 @@ def test_metric_selection_records_skips(inputs):
 def test_bad_options_fail_loudly(inputs, kwargs, message):
     with pytest.raises(InputError, match=message):
         evaluate(*inputs, **kwargs)
+
+
+def test_coco_stats_per_group(inputs):
+    """Per group, the COCO stats of its images alone: morning's exact box scores AP 1; night's detection has IoU
+    0.6 with its object, a match at 3 of COCO's 10 thresholds (0.5, 0.55, 0.6), so AP 0.3, AP50 1, AP75 0."""
+    coco = evaluate(*inputs, group_by="condition", metrics="coco").metrics["coco"]
+    assert coco["group_by"] == "condition" and list(coco["stats_by_group"]) == ["morning", "night"]
+    morning, night = coco["stats_by_group"]["morning"], coco["stats_by_group"]["night"]
+    assert morning[:3] == pytest.approx([1.0, 1.0, 1.0], abs=1e-12)
+    assert night[:3] == pytest.approx([0.3, 1.0, 0.0], abs=1e-12)
+    assert "stats_by_group" not in evaluate(*inputs, metrics="coco").metrics["coco"]  # no --group-by, no groups

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from evaluation import evaluate
-from evaluation.kitti.io import KittiFormatError
+from evaluation.kitti.readers import KittiFormatError
 from evaluation.validate import InputError
 from pipeline.stages.cli import main as cli_main
 

@@ -1,4 +1,4 @@
-"""Background writing (:class:`exporters.io.OrderedCalls`, MCAP chunk compression) and frame prefetching
+"""Background writing (:class:`exporters.writing.OrderedCalls`, MCAP chunk compression) and frame prefetching
 (``frames_with_data``)."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from exporters.base import get_exporter
-from exporters.io import ordered_calls
-from exporters.scene import POINT_FIELDS, POINT_STRIDE, frames_with_data, pack_points
+from exporters.log_common import POINT_FIELDS, POINT_STRIDE, frames_with_data, pack_points
 from exporters.source import ExportSource
+from exporters.writing import ordered_calls
 
 
 def test_ordered_calls_run_in_order_one_at_a_time_on_the_worker():

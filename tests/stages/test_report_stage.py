@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import cv2
 import pytest
 
 from pipeline.stages.cli import main as cli
+from tests.evaluation.test_coco_vs_pycocotools import reference
 from tests.exporters.synthetic_record import build_record
 
 
@@ -49,6 +51,36 @@ def test_flat_metrics_per_condition(scored):
     assert metrics["night"]["recall@0.5"] == pytest.approx(((night_seen + 1) // 2) / night_seen)
     assert metrics["morning"]["coco_ap"] == pytest.approx(1.0)
     assert metrics["night"]["coco_ap"] < metrics["morning"]["coco_ap"]
+
+
+def test_coco_ap_per_condition_is_pycocotools_on_that_conditions_images(scored):
+    """The COCO AP and AP50 of each condition (from the evaluation's metrics.json, grouped there) are pycocotools'
+    on a ground truth and results holding only that condition's images."""
+    root, _ = scored
+    gt = json.loads((root / "coco" / "annotations.json").read_text())
+    dets = json.loads((root / "dets.json").read_text())
+    metrics = json.loads((root / "report" / "metrics.json").read_text())
+    text = (root / "report" / "report.md").read_text()
+    for condition in ("morning", "night"):
+        ids = {img["id"] for img in gt["images"] if img["condition"] == condition}
+        alone = dict(gt, images=[img for img in gt["images"] if img["id"] in ids],
+                     annotations=[a for a in gt["annotations"] if a["image_id"] in ids])
+        stats = reference(alone, [d for d in dets if d["image_id"] in ids]).stats
+        assert [metrics[condition]["coco_ap"], metrics[condition]["coco_ap50"]] == pytest.approx(stats[:2], abs=1e-12)
+        row = f"| {condition} | " + " | ".join(f"{100 * stats[k]:.1f}" for k in (0, 1, 2, 8)) + " |"
+        assert row in text.split("## COCO AP per condition")[1]
+
+
+def test_report_needs_the_evaluations_coco_stats_per_group(scored, capsys, tmp_path):
+    root, _ = scored
+    fake = tmp_path / "eval"
+    shutil.copytree(root / "eval", fake)
+    metrics = json.loads((fake / "metrics.json").read_text())
+    del metrics["coco"]["stats_by_group"]
+    (fake / "metrics.json").write_text(json.dumps(metrics))
+    code, first, written = _report(root, capsys, eval_dir=fake)
+    assert (code, written) == (2, False)
+    assert first.startswith(f"roadsynth report: error: {fake / 'metrics.json'}: coco.stats_by_group is missing")
 
 
 def test_markdown_and_examples(scored):

@@ -1,4 +1,5 @@
-"""Write an evaluation: ``metrics.json`` (dvc metrics), ``plots/`` (dvc plots data + PNG), ``report.md``.
+"""The results of an evaluation (:class:`Evaluation`, what :func:`evaluation.evaluate` returns) and how they
+are written: ``metrics.json`` (dvc metrics), ``plots/`` (dvc plots data + PNG), ``report.md``.
 
 Plots read only the saved curve data (the render step never recomputes a metric):
 
@@ -13,6 +14,7 @@ Plots read only the saved curve data (the render step never recomputes a metric)
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import logging
 import math
@@ -22,9 +24,44 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.report import EvaluationData, report_markdown
+from evaluation.markdown import report_markdown
 
 log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Evaluation:
+    """Results of :func:`evaluation.evaluate`.
+
+    Attributes:
+        metrics: the content of metrics.json (keys table, coco, kitti, errors, ignored).
+        curves: PR curve data per group and IoU threshold (what plots read), empty without the table.
+        coco_precision: (T, R, K, A, M) float64 pycocotools-layout precision, or None without COCO.
+        kitti_markdown: the KITTI summary for the report, or None.
+    """
+
+    metrics: dict[str, Any]
+    curves: list[dict[str, Any]]
+    coco_precision: np.ndarray | None
+    kitti_markdown: str | None
+
+    def write(self, out_dir: str | Path, *, png: bool = True) -> None:
+        """Write metrics.json, plots/ (data; PNG renderings too with ``png``) and report.md into ``out_dir``.
+
+        PNG rendering imports matplotlib (about half a second), so it happens only when asked.
+        """
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "metrics.json").write_text(json.dumps(_clean(self.metrics), indent=2, sort_keys=True) + "\n")
+        plots = out_dir / "plots"
+        plots.mkdir(exist_ok=True)
+        write_plot_data(self, plots)
+        if png:
+            from evaluation.plots import render_pngs
+
+            render_pngs(plots)
+        (out_dir / "report.md").write_text(report_markdown(self.metrics, self.kitti_markdown))
+        log.info("wrote metrics.json, plots/ and report.md to %s", out_dir)
 
 
 def _clean(value: Any) -> Any:
@@ -51,7 +88,7 @@ def _write_csv(path: Path, header: list[str], rows: list[list[Any]]) -> None:
         writer.writerows([["" if v is None else v for v in row] for row in rows])
 
 
-def write_plot_data(evaluation: EvaluationData, plots: Path) -> list[Path]:
+def write_plot_data(evaluation: Evaluation, plots: Path) -> list[Path]:
     """Write the CSV/JSON plot data; returns the files written."""
     written = []
     keys = ["score", "precision", "recall", "tp", "fp", "f1"]
@@ -95,21 +132,3 @@ def _write_coco_pr(precision: np.ndarray, path: Path) -> Path:
             for name, curve in curves.items() for r, p in zip(recall, curve, strict=True)]
     _write_csv(path, ["iou", "recall", "precision"], rows)
     return path
-
-
-def write_outputs(evaluation: EvaluationData, out_dir: Path, *, png: bool = True) -> None:
-    """Write metrics.json, plots/ (data, and PNG with ``png``) and report.md into ``out_dir``.
-
-    PNG rendering imports matplotlib (about half a second), so it happens only when asked.
-    """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(_clean(evaluation.metrics), indent=2, sort_keys=True) + "\n")
-    plots = out_dir / "plots"
-    plots.mkdir(exist_ok=True)
-    write_plot_data(evaluation, plots)
-    if png:
-        from evaluation.plots import render_pngs
-
-        render_pngs(plots)
-    (out_dir / "report.md").write_text(report_markdown(evaluation))
-    log.info("wrote metrics.json, plots/ and report.md to %s", out_dir)

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
+from evaluation.markdown import md_table, percent
+
 __all__ = ["kitti_summary_markdown"]
 
 _METRIC_NAMES = {"bbox": "2D", "bev": "BEV", "3d": "3D", "aos": "AOS"}
 _DIFFICULTIES = ("easy", "moderate", "hard")
-
-
-def _percent(value: float | None) -> str:
-    return "–" if value is None else f"{100.0 * value:.2f}"
 
 
 def kitti_summary_markdown(result: dict) -> str:
@@ -23,23 +21,20 @@ def kitti_summary_markdown(result: dict) -> str:
     """
     settings = result["settings"]
     counts = result["counts"]
+    header = ["class", "metric", "IoU >", *(f"{d} R40" for d in _DIFFICULTIES), *(f"{d} R11" for d in _DIFFICULTIES)]
+    rows = []
+    for cls, per_difficulty in result["results"].items():
+        for metric in settings["metrics"]:
+            threshold = settings["min_overlap"][cls]["bbox" if metric == "aos" else metric]
+            aps = [percent(per_difficulty[d][metric][key], decimals=2) for key in ("ap_r40", "ap_r11")
+                   for d in _DIFFICULTIES]
+            rows.append([cls, _METRIC_NAMES[metric], f"{threshold:g}", *aps])
     lines = [
         f"KITTI AP ({result['mode']} mode), {counts['frames']} frames; percent; "
         "a detection matches when its overlap is strictly above the class threshold.",
         "",
-        "| class | metric | IoU > | "
-        + " | ".join(f"{d} R40" for d in _DIFFICULTIES)
-        + " | "
-        + " | ".join(f"{d} R11" for d in _DIFFICULTIES)
-        + " |",
-        "|---|---|---|" + "---:|" * 6,
+        *md_table(header, rows, align="lll" + "r" * 6),
     ]
-    for cls, per_difficulty in result["results"].items():
-        for metric in settings["metrics"]:
-            threshold = settings["min_overlap"][cls]["bbox" if metric == "aos" else metric]
-            r40 = [_percent(per_difficulty[d][metric]["ap_r40"]) for d in _DIFFICULTIES]
-            r11 = [_percent(per_difficulty[d][metric]["ap_r11"]) for d in _DIFFICULTIES]
-            lines.append(f"| {cls} | {_METRIC_NAMES[metric]} | {threshold:g} | " + " | ".join(r40 + r11) + " |")
     gt_counts = ", ".join(f"{cls} {result['results'][cls]['moderate']['num_gt']}" for cls in result["results"])
     lines += ["", f"Ground truth counted at moderate difficulty: {gt_counts}."]
     lines += [f"Note: {note}" for note in result.get("notes", [])]

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.data import Detections, GroundTruth
-from evaluation.iou import box_iou_dense
+from evaluation.box_iou import box_iou_dense
+from evaluation.inputs import Detections, GroundTruth
 from evaluation.matching import dense_index, segments
 from evaluation.table import TableMatches
 

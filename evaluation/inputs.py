@@ -9,6 +9,9 @@ Conventions:
   record's sorted ``image_ids`` / ``category_ids``; the original ids are kept for output.
 - Optional per-annotation attributes (``distance_m``, ``occlusion``) come with an explicit validity mask,
   never a sentinel value.
+- ``--group-by KEY`` groups images by their attribute ``KEY`` (:func:`image_groups`): one group per
+  distinct value as text, :data:`MISSING_GROUP` for images without it. The table, the PR curves and the
+  COCO stats per group all group this way.
 """
 
 from __future__ import annotations
@@ -17,6 +20,10 @@ import dataclasses
 from typing import Any
 
 import numpy as np
+
+from evaluation.validate import InputError
+
+MISSING_GROUP = "(none)"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +75,19 @@ class GroundTruth:
     def __len__(self) -> int:
         return len(self.ann_ids)
 
+    def select_images(self, keep: np.ndarray) -> GroundTruth:
+        """The ground truth of the images where ``keep`` ((I,) bool) holds, as if the file listed only those:
+        images and annotations keep their order, categories stay all."""
+        ann = keep[self.image_index]
+        new_index = np.cumsum(keep) - 1
+        attrs = [a for a, k in zip(self.image_attrs, keep, strict=True) if k]
+        return dataclasses.replace(
+            self, image_ids=self.image_ids[keep], image_attrs=attrs, ann_ids=self.ann_ids[ann],
+            image_index=new_index[self.image_index[ann]], category_index=self.category_index[ann],
+            bbox=self.bbox[ann], area=self.area[ann], iscrowd=self.iscrowd[ann], distance_m=self.distance_m[ann],
+            distance_valid=self.distance_valid[ann], occlusion=self.occlusion[ann],
+            occlusion_valid=self.occlusion_valid[ann])
+
 
 @dataclasses.dataclass(frozen=True)
 class Detections:
@@ -100,7 +120,30 @@ class Detections:
     def __len__(self) -> int:
         return len(self.score)
 
+    def select_images(self, keep: np.ndarray) -> Detections:
+        """The detections on the images where ``keep`` ((I,) bool over the ground truth's images) holds, in file
+        order, with image indices into :meth:`GroundTruth.select_images` of the same ``keep``."""
+        sel = keep[self.image_index]
+        new_index = np.cumsum(keep) - 1
+        return dataclasses.replace(self, image_index=new_index[self.image_index[sel]],
+                                   category_index=self.category_index[sel], bbox=self.bbox[sel], score=self.score[sel])
+
 
 def empty_attrs(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Invalid distance and occlusion columns for ``n`` annotations: (distance, valid, occlusion, valid)."""
     return np.zeros(n), np.zeros(n, bool), np.full(n, "", dtype=object), np.zeros(n, bool)
+
+
+def image_groups(gt: GroundTruth, key: str | None) -> tuple[list[str], np.ndarray]:
+    """Group labels (sorted) and the (I,) int64 group index of each image for ``--group-by key``."""
+    if key is None:
+        return [], np.zeros(gt.num_images, dtype=np.int64)
+    values = [attrs.get(key) for attrs in gt.image_attrs]
+    if gt.num_images and all(v is None for v in values):
+        known = sorted({k for attrs in gt.image_attrs for k in attrs})
+        raise InputError(f"{gt.source}: no image has the attribute '{key}' to group by (image attributes: "
+                         f"{', '.join(known) or 'none'})")
+    labels = [MISSING_GROUP if v is None else str(v) for v in values]
+    names = sorted(set(labels))
+    lookup = {name: i for i, name in enumerate(names)}
+    return names, np.array([lookup[v] for v in labels], dtype=np.int64)

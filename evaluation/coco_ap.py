@@ -21,7 +21,7 @@ import dataclasses
 
 import numpy as np
 
-from evaluation.data import Detections, GroundTruth
+from evaluation.inputs import Detections, GroundTruth
 from evaluation.matching import greedy_match
 
 STAT_NAMES = (
@@ -187,6 +187,32 @@ def _summarize(acc: CocoAccumulation, ap: bool, iou: float | None = None, area: 
     return -1.0 if len(defined) == 0 else float(np.mean(defined))
 
 
+def coco_stats(acc: CocoAccumulation) -> list[float]:
+    """The 12 stats in pycocotools' order (:data:`STAT_NAMES`); -1 where undefined."""
+    big = acc.params.max_dets[-1]
+    specs = [(True, None, "all", big), (True, 0.5, "all", big), (True, 0.75, "all", big),
+             (True, None, "small", big), (True, None, "medium", big), (True, None, "large", big)]
+    specs += [(False, None, "all", m) for m in acc.params.max_dets]
+    specs += [(False, None, "small", big), (False, None, "medium", big), (False, None, "large", big)]
+    return [_summarize(acc, *spec) for spec in specs]
+
+
+def coco_stats_by_group(gt: GroundTruth, dt: Detections, group_index: np.ndarray, group_names: list[str],
+                        params: CocoParams | None = None) -> dict[str, list[float]]:
+    """The 12 stats of each image group, each group's images evaluated on their own (as if the files held only
+    them: pycocotools on that subset gives the same numbers).
+
+    Args:
+        group_index: (I,) int64 group of each ground-truth image, an index into ``group_names``.
+        group_names: the group labels.
+    """
+    out = {}
+    for g, name in enumerate(group_names):
+        keep = group_index == g
+        out[name] = coco_stats(accumulate_coco(gt.select_images(keep), dt.select_images(keep), params))
+    return out
+
+
 def summarize_coco(acc: CocoAccumulation, category_names: list[str]) -> dict:
     """The 12 stats in pycocotools' order and per-class AP: the ``coco`` section of metrics.json.
 
@@ -195,11 +221,7 @@ def summarize_coco(acc: CocoAccumulation, category_names: list[str]) -> dict:
     pycocotools reports; ``valid`` says so explicitly), ``num_gt`` and ``num_dt`` are counts.
     """
     big = acc.params.max_dets[-1]
-    specs = [(True, None, "all", big), (True, 0.5, "all", big), (True, 0.75, "all", big),
-             (True, None, "small", big), (True, None, "medium", big), (True, None, "large", big)]
-    specs += [(False, None, "all", m) for m in acc.params.max_dets]
-    specs += [(False, None, "small", big), (False, None, "medium", big), (False, None, "large", big)]
-    stats = [_summarize(acc, *spec) for spec in specs]
+    stats = coco_stats(acc)
     per_class = {}
     for k, name in enumerate(category_names):
         sl = slice(k, k + 1)
