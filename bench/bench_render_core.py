@@ -21,11 +21,12 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass, SemanticClass
+from pipeline.core.config.sensors import CameraConfig, LidarConfig
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.groundtruth import camera_labels, project_actors
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.shading import shade, to_srgb8
 from pipeline.world.actor_shapes import cuboid, wheel
@@ -157,11 +158,11 @@ def main() -> None:
     static = StaticScene(static_meshes)
     static.cast(np.array([[0, 0, 50, 0, 0, -1]], np.float32))  # Embree builds its BVH on the first cast
     build_s = time.perf_counter() - start
-    camera = Camera(CameraConfig(mount=Transform.from_xyz_rpy((0.8, 0.0, 0.7))))
-    lidar = Lidar(LidarConfig(mount=Transform.from_xyz_rpy((0.0, 0.0, 1.0))))
+    camera = Camera(CameraConfig(name="front", mount={"xyz_m": (0.8, 0.0, 0.7)}))
+    lidar = Lidar(LidarConfig(name="top", mount={"xyz_m": (0.0, 0.0, 1.0)}))
     condition = get_condition(args.condition)
     lighting = condition.lighting
-    lidar_here = Lidar(condition.lidar(lidar.config))
+    lidar_here = Lidar(condition.lidar(lidar))
     _ = camera.pixel_directions, lidar.directions, lidar_here.directions
 
     bare_caster = BareCasts(static_meshes)

@@ -12,7 +12,6 @@ see the fog colour (d = infinity).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,12 +23,13 @@ from pipeline.core.config.sensors import (
     HeadlightConfig,
     LensConfig,
     LidarConditionConfig,
+    LidarConfig,
     RainConfig,
     SensorNoiseConfig,
     StreetLampConfig,
 )
 from pipeline.core.geometry import Transform
-from pipeline.sensors.lidar import LidarConfig
+from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.post import sensor_noise
 from pipeline.sensors.shading import Lighting
@@ -106,17 +106,16 @@ class Condition:
             parts.append(street_lamp_lights(street_lights_m, self.street_lamps, camera_xyz_m))
         return SpotLights.concatenate(parts)
 
-    def lidar(self, config: LidarConfig) -> LidarConfig:
-        """The LiDAR config under this condition (range, attenuation, noise, drop-out; intensity factor and
+    def lidar(self, lidar: Lidar) -> LidarConfig:
+        """``lidar``'s config under this condition (range, attenuation, noise, drop-out; intensity factor and
         detection threshold are applied by :func:`pipeline.sensors.lidar.render_lidar`)."""
-        fx = self.lidar_effects
-        return dataclasses.replace(
-            config,
-            range_max_m=max(config.range_max_m * fx.range_factor, config.range_min_m + 1e-3),
-            attenuation_per_m=config.attenuation_per_m * fx.attenuation_factor,
-            range_noise_std_m=config.range_noise_std_m * fx.noise_factor,
-            dropout_prob=min(0.99, config.dropout_prob + fx.extra_dropout),
-        )
+        fx, config = self.lidar_effects, lidar.config
+        return config.model_copy(update={
+            "range_m": max(config.range_m * fx.range_factor, lidar.range_min_m + 1e-3),
+            "attenuation_per_m": config.attenuation_per_m * fx.attenuation_factor,
+            "range_noise_std_m": config.range_noise_std_m * fx.noise_factor,
+            "dropout": min(0.99, config.dropout + fx.extra_dropout),
+        })
 
 
 def condition_from_config(cfg: ConditionConfig) -> Condition:

@@ -62,7 +62,7 @@ def actors_in_reach(
     radius = 0.5 * np.linalg.norm(actors.boxes.size, axis=1) * 1.001 + 1e-3
     for lidar in lidars:
         origin = lidar.lidar_to_world(ego_pose).translation
-        range_m = condition.lidar(lidar.config).range_max_m
+        range_m = condition.lidar(lidar).range_m
         reach |= np.linalg.norm(centre - origin, axis=1) - radius <= range_m
     lighting = condition.lighting
     sun_shadows = lighting.shadows and lighting.sun_elevation_deg > 0

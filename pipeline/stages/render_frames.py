@@ -166,7 +166,7 @@ def _lidar_rows(frame: int, name: str, lidar, sweep, cols: dict[str, np.ndarray]
     """Label columns of one LiDAR sweep; no 2D fields (null). An actor has a row when its box centre is within the
     range the sweep was rendered with (``sweep.range_max_m``: the rig's range times the condition's factor), or
     when it owns at least one point of the sweep (its centre may lie beyond the range)."""
-    world_to_lidar = (ego_pose @ lidar.config.mount).inverse()
+    world_to_lidar = (ego_pose @ lidar.mount).inverse()
     boxes = _boxes(cols)
     local = boxes.transformed(world_to_lidar) if abs(world_to_lidar.rotation[2, 2] - 1) < 1e-9 else None
     centre = world_to_lidar.apply(boxes.center)

@@ -11,14 +11,15 @@ import pytest
 from pipeline.core.classes import SemanticClass
 from pipeline.core.config import ConditionConfig, ConfigError, config_dir, load_config
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, condition_from_config, get_condition
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.shading import Lighting, shade
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
+from tests.sensors.conftest import camera_config, lidar_config
 
 SMALL = dict(width_px=160, height_px=120)
 
@@ -82,7 +83,7 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
     fog = get_condition("fog")
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[12.0, 1.0, 0.75], [35.0, -4.0, 0.75]],
                                                                            [[4.5, 1.8, 1.5]] * 2))
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 1.5)))
     rays = make_rays(to_world.translation, cam.pixel_directions, to_world.rotation)
     hits = scene.cast_rays(rays)
@@ -97,7 +98,7 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
 
 def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
     # The same dark box at 10 m and at 60 m in front of a bright wall: fog shrinks the far one's contrast.
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     contrast = []
     for x in (10.0, 60.0):
         scene = FrameScene(StaticScene([wall(x + 2.0, material="lane_paint")]),
@@ -114,7 +115,7 @@ def test_rain_near_road_is_darker_than_dry():
     rain = get_condition("rain")
     dry = dataclasses.replace(rain, lighting=dataclasses.replace(rain.lighting, wetness=0.0), rain=None)
     scene = FrameScene(StaticScene([ground()]), _no_actors())
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     pose = Transform.from_xyz_rpy((0.0, 0.0, 1.5))
     wet_img = render_camera(scene, cam, pose, rain).rgb.astype(float)
     dry_img = render_camera(scene, cam, pose, dry).rgb.astype(float)
@@ -131,7 +132,7 @@ def _no_actors():
 
 def test_same_seed_same_noisy_image(actors_factory, wall):
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[15.0, 1.0, 0.75]], [[4.5, 1.8, 1.5]]))
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     pose = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
     for name in ("night", "rain"):
         cond = get_condition(name)
@@ -144,8 +145,8 @@ def test_same_seed_same_noisy_image(actors_factory, wall):
 
 def test_fog_cuts_lidar_range_and_intensity(wall):
     fog = get_condition("fog")
-    lidar = Lidar(LidarConfig(channels=8, fov_upper_deg=2.0, fov_lower_deg=-2.0, horizontal_resolution_deg=1.0,
-                              dropout_prob=0.0, range_noise_std_m=0.0))
+    lidar = Lidar(lidar_config(channels=8, upper_fov_deg=2.0, lower_fov_deg=-2.0, horizontal_resolution_deg=1.0,
+                              dropout=0.0, range_noise_std_m=0.0))
     near = FrameScene(StaticScene([wall(30.0)]), _no_actors())
     clear = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0))
     foggy = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)
@@ -158,6 +159,6 @@ def test_fog_cuts_lidar_range_and_intensity(wall):
     d = np.linalg.norm(clear.points_m[both], axis=1)
     expected = clear.intensity[both] * fx.intensity_factor * np.exp(-a * (fx.attenuation_factor - 1.0) * d)
     np.testing.assert_allclose(foggy.intensity, expected, rtol=1e-4)
-    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_max_m)]), _no_actors())
+    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_m)]), _no_actors())
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0))) > 0
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)) == 0

@@ -8,7 +8,7 @@ import numpy as np
 
 from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.lights import ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.render import render_camera
@@ -17,6 +17,7 @@ from pipeline.world.actors import Actors
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import camera_config
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))  # a car's box centre is 0.75 m above the road
 MATTE = "concrete"  # no specular term: closed forms hold for the diffuse light alone
@@ -42,7 +43,7 @@ def down_ray(point: np.ndarray) -> np.ndarray:
 def test_night_is_darker_than_morning(actors_factory, wall):
     actors = actors_factory([[15.0, 1.0, 0.75], [30.0, -3.0, 0.75]], [[4.5, 1.8, 1.5]] * 2, brake=[True, False])
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors)
-    cam = Camera(CameraConfig(width_px=160, height_px=120))
+    cam = Camera(camera_config(width_px=160, height_px=120))
     morning = render_camera(scene, cam, EGO, get_condition("morning")).rgb.mean()
     night = render_camera(scene, cam, EGO, get_condition("night")).rgb.mean()
     assert night < 0.5 * morning
@@ -77,8 +78,8 @@ def test_headlight_on_axis_irradiance_is_closed_form():
 
 def test_road_in_the_ego_headlight_cone_is_brighter_than_outside():
     night = night_without_others()
-    cam = Camera(CameraConfig(width_px=320, height_px=240, hfov_deg=120.0,
-                              mount=Transform.from_xyz_rpy((0.6, 0.0, 0.65))))
+    cam = Camera(camera_config(width_px=320, height_px=240, hfov_deg=120.0,
+                              mount={"xyz_m": (0.6, 0.0, 0.65)}))
     scene = FrameScene(StaticScene([ground(material="asphalt")]), Actors.empty())
     frame = render_camera(scene, cam, EGO, night)
     world_to_cam = cam.camera_to_world(EGO).inverse()

@@ -10,25 +10,25 @@ import pytest
 
 from pipeline.core.classes import ObjectClass, SemanticClass
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.groundtruth import project_actors
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
 from pipeline.world.actors import Actors, place_actors
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
-from tests.sensors.conftest import make_actors
+from tests.sensors.conftest import camera_config, lidar_config, make_actors
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
 # Looks along +x: in view, |y| < x. Direct light only (the closed forms below); the realistic camera's sky-occlusion
 # and mirror rays reach every actor within INDIRECT_REACH_M of it.
-CAMERA = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="fast"))
-REALISTIC = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="realistic"))
-LIDAR = Lidar(LidarConfig(channels=16, fov_upper_deg=2.0, fov_lower_deg=-20.0, horizontal_resolution_deg=1.0,
-                          range_max_m=40.0, range_noise_std_m=0.0, dropout_prob=0.0))
+CAMERA = Camera(camera_config(width_px=160, height_px=120, hfov_deg=90.0, quality="fast"))
+REALISTIC = Camera(camera_config(width_px=160, height_px=120, hfov_deg=90.0, quality="realistic"))
+LIDAR = Lidar(lidar_config(channels=16, upper_fov_deg=2.0, lower_fov_deg=-20.0, horizontal_resolution_deg=1.0,
+                          range_m=40.0, range_noise_std_m=0.0, dropout=0.0))
 CAR = (4.5, 1.8, 1.5)
 
 
@@ -57,7 +57,7 @@ def test_a_realistic_camera_reaches_actors_its_mirror_rays_can_meet(actors_facto
     camera is reached up to INDIRECT_REACH_M (plus its sphere), not beyond."""
     from pipeline.sensors.indirect import INDIRECT_REACH_M
 
-    camera_x = EGO.apply(CAMERA.config.mount.translation[None])[0, 0]
+    camera_x = EGO.apply(CAMERA.mount.translation[None])[0, 0]
     r = 0.5 * np.linalg.norm(CAR)
     xs = [camera_x - INDIRECT_REACH_M - r + 0.5, camera_x - INDIRECT_REACH_M - r - 0.5]
     actors = actors_factory([[x, 0.0, 0.75] for x in xs], [CAR] * 2)

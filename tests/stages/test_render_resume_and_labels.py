@@ -100,7 +100,7 @@ def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
 
     lidar = build_sensors(small_rig)[1][0]
     n = 3  # on the LiDAR's x axis at 30, 70 and 70 m (ego at the origin); only the second owns points
-    z_m = lidar.config.mount.translation[2]
+    z_m = lidar.mount.translation[2]
     cols = {"track_id": np.array([1, 2, 3], np.int32), "cls": np.array(["car", "truck", "car"], object),
             "x_m": np.array([30.0, 70.0, 70.0]), "y_m": np.zeros(n), "z_m": np.full(n, z_m),
             "length_m": np.full(n, 4.0), "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5),
