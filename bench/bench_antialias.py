@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.bench_render_core import sim_frames
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.conditions import condition_from_config
+from pipeline.sensors.conditions import Condition
 from pipeline.sensors.render import edge_pixels, render_camera
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
 from pipeline.world.static import build_static_world
@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--condition", default="morning")
     args = ap.parse_args()
     rig, _ = load_config(RigConfig, "default", "rigs")
-    condition = condition_from_config(load_config(ConditionConfig, args.condition, "conditions")[0])
+    condition = Condition(load_config(ConditionConfig, args.condition, "conditions")[0])
     base = rig.cameras[0]
     variants = {
         "1 sample": base.model_copy(update=dict(samples_per_pixel=1)),

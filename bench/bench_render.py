@@ -62,7 +62,7 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
     static = StaticScene(world.meshes)
     caster = BareCasts(world.meshes)
     (camera,), (lidar,) = build_sensors(rig)
-    condition = conditions.condition_from_config(condition_cfg)
+    condition = conditions.Condition(condition_cfg)
     lidar = type(lidar)(condition.lidar(lidar.config))
     scenes = dict(zip(range(max(frames) + 1), sim_frames(sim, max(frames) + 1), strict=False))
     total = 0.0
@@ -73,7 +73,7 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
         mask = project_actors(scene, camera, cam_to_world).pixel_mask(camera.width, camera.height)
         crays = make_rays(cam_to_world.translation, camera.pixel_directions, cam_to_world.rotation)
         hits = scene.cast_rays(crays, actor_rays=mask)
-        rays = frame_rays(camera, lidar, scene, ego, condition.lighting, crays, mask, hits)
+        rays = frame_rays(camera, lidar, scene, ego, condition, crays, mask, hits)
         total += sum(caster.time(scene, rays).values())
     return total, caster.cpu_s
 

@@ -298,7 +298,7 @@ def _state(job: ShardJob) -> _WorkerState:
                 world = pickle.load(fh)
         static = StaticScene(world.meshes)
         cameras, lidars = build_sensors(job.rig)
-        _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.condition_from_config(job.condition),
+        _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
                                    _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
                                    _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
                                    rig_actor_meshes(job.rig))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -12,14 +11,14 @@ from pipeline.core.classes import SemanticClass
 from pipeline.core.config import ConditionConfig, ConfigError, config_dir, load_config
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, condition_from_config, get_condition
+from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, get_condition
 from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
-from pipeline.sensors.shading import Lighting, shade
+from pipeline.sensors.shading import shade
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
-from tests.sensors.conftest import camera_config, lidar_config
+from tests.sensors.conftest import camera_config, condition, lidar_config
 
 SMALL = dict(width_px=160, height_px=120)
 
@@ -37,7 +36,7 @@ def test_every_shipped_yaml_validates():
     for f in files:
         cfg, path = load_config(ConditionConfig, f.stem, "conditions")
         assert cfg.name == f.stem and path == f
-        assert condition_from_config(cfg).name == f.stem
+        assert Condition(cfg).name == f.stem
 
 
 @pytest.mark.parametrize(("body", "key"), [
@@ -64,11 +63,11 @@ def test_user_condition_from_any_path(tmp_path: Path):
     path = tmp_path / "storm.yaml"
     path.write_text("name: storm\nfog: {visibility_m: 40.0}\nrain: {intensity: 1.0}\n")
     cond = get_condition(path)
-    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.lighting.wetness > 0
+    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.wetness > 0
 
 
 def test_fog_follows_koschmieder():
-    cond = Condition("test", Lighting(), fog_visibility_m=100.0, fog_rgb=(0.5, 0.5, 0.5))
+    cond = condition(fog={"visibility_m": 100.0, "color_rgb": (0.5, 0.5, 0.5)})
     radiance = np.array([[1.0, 0.0, 0.2]] * 3, np.float32)
     out = cond.fog(radiance, np.array([0.0, 100.0, np.inf], np.float32), np.array([True, True, False]))
     np.testing.assert_allclose(out[0], radiance[0])
@@ -87,9 +86,9 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
     to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 1.5)))
     rays = make_rays(to_world.translation, cam.pixel_directions, to_world.rotation)
     hits = scene.cast_rays(rays)
-    clear = shade(scene, rays, hits, fog.lighting)
+    clear = shade(scene, rays, hits, fog)
     foggy = fog.fog(clear, hits.t_m, hits.hit)
-    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.lighting.exposure
+    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.exposure
     ok = hits.hit & (np.abs(clear[:, 0] - airlight[0]) > 0.05)
     assert ok.sum() > 1000 and np.ptp(hits.t_m[ok]) > 30.0
     ratio = (foggy[ok, 0] - airlight[0]) / (clear[ok, 0] - airlight[0])
@@ -113,7 +112,7 @@ def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
 def test_rain_near_road_is_darker_than_dry():
     # The near road, seen steeply, is darker when wet; at grazing angles it mirrors the sky (not tested here).
     rain = get_condition("rain")
-    dry = dataclasses.replace(rain, lighting=dataclasses.replace(rain.lighting, wetness=0.0), rain=None)
+    dry = Condition(rain.config.model_copy(update={"rain": None}))
     scene = FrameScene(StaticScene([ground()]), _no_actors())
     cam = Camera(camera_config(**SMALL))
     pose = Transform.from_xyz_rpy((0.0, 0.0, 1.5))

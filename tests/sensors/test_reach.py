@@ -3,15 +3,13 @@ leaves unchanged (real Embree scenes, with and without the actors it leaves out)
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from pipeline.core.classes import ObjectClass, SemanticClass
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import project_actors
 from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.reach import actors_in_reach
@@ -42,9 +40,9 @@ STATIC = StaticScene([ground()])
 
 
 def with_sun(name: str, azimuth_deg: float, elevation_deg: float):
-    condition = get_condition(name)
-    lighting = dataclasses.replace(condition.lighting, sun_azimuth_deg=azimuth_deg, sun_elevation_deg=elevation_deg)
-    return dataclasses.replace(condition, lighting=lighting)
+    config = get_condition(name).config
+    sun = config.sun.model_copy(update={"azimuth_deg": azimuth_deg, "elevation_deg": elevation_deg})
+    return Condition(config.model_copy(update={"sun": sun}))
 
 
 def reach(actors, condition, street_lights_m=None, camera=CAMERA):
@@ -89,8 +87,8 @@ def test_an_actor_out_of_view_is_reached_where_it_shadows_a_street_lamp_in_view(
     # A truck just left of the view (no LiDAR); a low, wide lamp further left lights the view, and the truck's
     # shadow from it falls there.
     night = get_condition("night")
-    night = dataclasses.replace(night, street_lamps=night.street_lamps.model_copy(
-        update={"half_angle_deg": 80.0, "range_m": 40.0, "shadows": True}))
+    night = Condition(night.config.model_copy(update={"street_lamps": night.street_lamps.model_copy(
+        update={"half_angle_deg": 80.0, "range_m": 40.0, "shadows": True})}))
     truck = make_actors([[12.0, 22.0, 2.0]], [(10.0, 2.5, 4.0)], classes=[ObjectClass.TRUCK])
     lamp = np.array([[12.0, 30.0, 5.0]])
 
@@ -129,7 +127,7 @@ def test_leaving_out_the_actors_out_of_reach_changes_no_output(seed, condition, 
     actors = random_actors(rng, 150, 1.0 if camera is CAMERA else 2.0)
     lamps = np.column_stack([rng.uniform(10.0, 90.0, 16), rng.uniform(-90.0, 90.0, 16), np.full(16, 8.0)])
     cond = get_condition(condition)
-    if cond.lighting.sun_elevation_deg > 0:  # a low sun from anywhere: long shadows
+    if cond.sun_elevation_deg > 0:  # a low sun from anywhere: long shadows
         cond = with_sun(condition, float(rng.uniform(-180.0, 180.0)), float(rng.uniform(8.0, 20.0)))
     active = reach(actors, cond, street_lights_m=lamps, camera=camera)
     assert 0.2 * len(actors) < np.count_nonzero(~active)  # a test of something: many are left out
