@@ -39,6 +39,8 @@ from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.outputs import output_lock
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
+from pipeline.core.record_writers.camera import camera_info
+from pipeline.core.record_writers.lidar import lidar_info
 from pipeline.core.scene_content import near_duplicate_rate
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
@@ -57,7 +59,7 @@ from pipeline.stages.render_frames import (
     reuse_freed_memory,
     rig_actor_meshes,
 )
-from pipeline.stages.rig import build_sensors, camera_info, lidar_info
+from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import embree_started
 from pipeline.world.static import StaticWorld
 

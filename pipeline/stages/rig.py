@@ -1,16 +1,11 @@
-"""The renderer's sensors and actor meshes of a validated rig config (pipeline.core.config), and the record's
-description of each sensor."""
+"""The renderer's sensors and actor meshes of a validated rig config (pipeline.core.config)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from pipeline.core.config import RigConfig
 from pipeline.core.digests import path_sha256
-from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
-from pipeline.core.record import CameraInfo, LidarInfo
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.lidar import Lidar
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Model
@@ -39,21 +34,3 @@ def build_actor_meshes(rig: RigConfig) -> ActorMeshes:
                               material=entry.material, where=f"actor_meshes[{i}]")
         (replace if entry.replace else extra).setdefault(entry.cls, []).append(Model(Path(entry.path).stem, mesh))
     return ActorMeshes(replace, extra)
-
-
-def _rows(matrix: np.ndarray) -> list[list[float]]:
-    return [[round(float(v), 12) for v in row] for row in matrix]
-
-
-def camera_info(camera: Camera) -> CameraInfo:
-    """Record description: K, distortion and T_ego_sensor (optical frame -> ego)."""
-    cfg = camera.config
-    optical_to_ego = camera.mount @ Transform(R_CAMERA_FROM_BODY.T, np.zeros(3))
-    return CameraInfo(name=cfg.name, width_px=cfg.width_px, height_px=cfg.height_px, K=_rows(camera.K),
-                      distortion=[float(d) for d in cfg.distortion], T_ego_sensor=_rows(optical_to_ego.matrix))
-
-
-def lidar_info(lidar: Lidar) -> LidarInfo:
-    cfg = lidar.config
-    return LidarInfo(name=cfg.name, channels=cfg.channels, range_m=cfg.range_m, rotation_hz=cfg.rotation_hz,
-                     T_ego_sensor=_rows(lidar.mount.matrix))

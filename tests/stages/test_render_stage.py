@@ -190,12 +190,3 @@ def test_a_rig_with_two_cameras_and_two_lidars(dense_highway_run, noon, tmp_path
     np.testing.assert_allclose(record.info.camera("rear").T_array[:3, 2], [-1.0, 0.0, 0.0], atol=1e-9)
     labels = record.labels
     assert set(labels["sensor"]) <= {"front", "rear", "top", "low"}
-
-
-def test_depth_png_values_round_half_to_even_and_clip():
-    from pipeline.core.record import DEPTH_SCALE
-    from pipeline.stages.render_frames import _depth_png
-
-    depth = np.float32([[1.5, 0.0, 300.0, 2.0], [384.5 / 256, 385.5 / 256, 0.5 / 256, 7.0]])
-    valid = np.array([[True, True, True, False], [True, True, True, True]])
-    assert _depth_png(depth, valid, np.float32(DEPTH_SCALE)).tolist() == [[384, 1, 65535, 0], [384, 386, 1, 1792]]
