@@ -9,11 +9,8 @@ it is rendered alone, in another shard, or by another worker.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import pickle
-import sys
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +21,7 @@ import pyarrow as pa
 
 from pipeline.core.config import ConditionConfig, RigConfig
 from pipeline.core.geometry import Transform
+from pipeline.core.processes import RENDER_THRESHOLDS, ProcessCache, keep_freed_memory
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, lidar_path
 from pipeline.core.record_writers.camera import camera_label_rows, write_camera_frame
 from pipeline.core.record_writers.lidar import lidar_label_rows, write_lidar_sweep
@@ -155,72 +153,45 @@ class _WorkerState:
     meshes: ActorMeshes
 
 
-_STATE: dict[tuple, _WorkerState] = {}
-_MESHES: dict[str, ActorMeshes] = {}  # the actor models of the last rig (its JSON) this process built them for
+_STATE = ProcessCache()  # the _WorkerState of the render this process serves
+_MESHES = ProcessCache()  # the actor models of the last rig (its JSON) this process built them for
+_WORLDS = ProcessCache()  # the static world this process built, by the path it was pickled to
 
 
 def rig_actor_meshes(rig: RigConfig) -> ActorMeshes:
     """The rig's actor models (:func:`pipeline.stages.rig.build_actor_meshes`), read once per process and rig:
     the render stage reads them before it starts its workers (bad files fail early), and workers forked from it
     find them here."""
-    key = rig.model_dump_json()
-    if key not in _MESHES:
-        _MESHES.clear()
-        _MESHES[key] = build_actor_meshes(rig)
-    return _MESHES[key]
-_WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by the path it was pickled to
+    return _MESHES.get(rig.model_dump_json(), lambda: build_actor_meshes(rig))
 
 
-@contextlib.contextmanager
-def remembered_world(path: Path, world: StaticWorld | None) -> Iterator[None]:
+def remembered_world(path: Path, world: StaticWorld | None) -> contextlib.AbstractContextManager[None]:
     """Within the block, :func:`_state` takes ``world``, just pickled to ``path`` by this process, as it is instead
     of unpickling it: in this process, and in workers forked from it (docs/performance.md). Forgotten at the end,
     so that a later render never mistakes it for another pickle at the same path. ``world`` None: nothing to keep
     (the pickle was there already)."""
-    if world is not None:
-        _WORLDS[str(path)] = world
-    try:
-        yield
-    finally:
-        _WORLDS.pop(str(path), None)
-
-
-def reuse_freed_memory() -> None:
-    """Let glibc keep freed memory for the next frame instead of returning it to the OS.
-
-    By default its dynamic thresholds unmap or trim most of a frame's large temporaries (image-sized arrays) when
-    they are freed, and the next frame pays the page faults again (docs/performance.md). Peak memory stays the
-    same (measured): only memory already used once stays mapped.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return
-    m_trim_threshold, m_mmap_threshold = -1, -3  # mallopt parameters (malloc.h)
-    libc.mallopt(m_mmap_threshold, 32 << 20)  # glibc's largest: blocks below this come from the reusable heap
-    libc.mallopt(m_trim_threshold, 1 << 30)
+    return _WORLDS.lent(str(path), world)
 
 
 def _state(job: ShardJob) -> _WorkerState:
     key = (str(job.static_pickle), str(job.sim_dir), job.rig.model_dump_json(), job.condition.model_dump_json())
-    if key not in _STATE:
-        from pipeline.sensors import conditions
+    return _STATE.get(key, lambda: _worker_state(job))
 
-        _STATE.clear()  # one render at a time per process
-        reuse_freed_memory()
-        world = _WORLDS.get(str(job.static_pickle))
-        if world is None:
-            with job.static_pickle.open("rb") as fh:
-                world = pickle.load(fh)
-        static = StaticScene(world.meshes)
-        cameras, lidars = build_sensors(job.rig)
-        _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
-                                   _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
-                                   _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
-                                   rig_actor_meshes(job.rig))
-    return _STATE[key]
+
+def _worker_state(job: ShardJob) -> _WorkerState:
+    from pipeline.sensors import conditions
+
+    keep_freed_memory(RENDER_THRESHOLDS)
+    world = _WORLDS.peek(str(job.static_pickle))
+    if world is None:
+        with job.static_pickle.open("rb") as fh:
+            world = pickle.load(fh)
+    static = StaticScene(world.meshes)
+    cameras, lidars = build_sensors(job.rig)
+    return _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
+                        _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
+                        _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
+                        rig_actor_meshes(job.rig))
 
 
 def render_shard(job: ShardJob) -> int:

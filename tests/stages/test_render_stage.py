@@ -16,7 +16,7 @@ from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.core.record import DatasetRecord, RecordError
 from pipeline.stages import render_frames
-from pipeline.stages.render import _pool_context, render
+from pipeline.stages.render import render, worker_context
 from tests.conftest import tree_hashes
 from tests.stages.conftest import kill_render_after
 
@@ -105,7 +105,7 @@ def test_world_and_sensor_boxes_agree(record_dir):
 
 def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_dir, tmp_path):
     # This process has cast rays (record_dir), so the workers fork from a server process, not from here.
-    assert _pool_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
+    assert worker_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
     again = tmp_path / "again"
     opencv_threads = cv2.getNumThreads()
     render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
@@ -120,8 +120,8 @@ _FRESH_RENDER = """
 import sys
 from pathlib import Path
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
-from pipeline.stages.render import _pool_context, render
-method = _pool_context().get_start_method()
+from pipeline.stages.render import render, worker_context
+method = worker_context().get_start_method()
 if method != "fork":
     sys.exit(f"a process that has not cast rays should fork its workers, not {method}")
 render(Path(sys.argv[1]), load_config(ConditionConfig, "noon", "conditions")[0],
