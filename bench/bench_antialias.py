@@ -13,7 +13,6 @@ is off by more than 8 levels (aliased edges), and camera time per frame (one pro
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -25,9 +24,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.bench_render_core import sim_frames
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.conditions import condition_from_config
+from pipeline.sensors.conditions import Condition
 from pipeline.sensors.render import edge_pixels, render_camera
-from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
 from pipeline.world.static import build_static_world
 
@@ -42,16 +40,16 @@ def main() -> None:
     ap.add_argument("--condition", default="morning")
     args = ap.parse_args()
     rig, _ = load_config(RigConfig, "default", "rigs")
-    condition = condition_from_config(load_config(ConditionConfig, args.condition, "conditions")[0])
-    base = build_sensors(rig)[0][0].config
+    condition = Condition(load_config(ConditionConfig, args.condition, "conditions")[0])
+    base = rig.cameras[0]
     variants = {
-        "1 sample": dataclasses.replace(base, samples_per_pixel=1),
-        f"{args.samples} at edges": dataclasses.replace(base, samples_per_pixel=args.samples),
-        f"{args.samples} everywhere": dataclasses.replace(base, samples_per_pixel=args.samples,
-                                                          samples_everywhere=True),
+        "1 sample": base.model_copy(update=dict(samples_per_pixel=1)),
+        f"{args.samples} at edges": base.model_copy(update=dict(samples_per_pixel=args.samples)),
+        f"{args.samples} everywhere": base.model_copy(update=dict(samples_per_pixel=args.samples,
+                                                          samples_everywhere=True)),
     }
     cameras = {name: Camera(cfg) for name, cfg in variants.items()}
-    reference = Camera(dataclasses.replace(base, samples_per_pixel=args.reference, samples_everywhere=True))
+    reference = Camera(base.model_copy(update=dict(samples_per_pixel=args.reference, samples_everywhere=True)))
     static = StaticScene(build_static_world(args.sim / "roads", seed=0).meshes)
     frames = sim_frames(args.sim, args.frames * args.step)[:: args.step]
     seconds = dict.fromkeys(cameras, 0.0)

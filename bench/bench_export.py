@@ -15,7 +15,7 @@ output (hard-linked images included, though linking writes no image bytes); ``MB
 For compressed logs, ``raw MB/s`` counts the bytes before compression instead (the size of the same
 export uncompressed / seconds), the usual measure of a compressor's speed. ``files/s`` = output files /
 seconds. Target: MCAP with zstd >= 150 MB/s. The allocator is set as ``roadsynth export`` sets it
-(:func:`pipeline.core.memory.keep_freed_memory`; ``--default-malloc`` leaves it as it is).
+(:func:`pipeline.core.processes.keep_freed_memory`; ``--default-malloc`` leaves it as it is).
 
     python bench/bench_export.py [--dataset DIR | --synthetic] [--frames 100] [--repeats 3]
 """
@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_records import rendered_record
 
 from exporters.base import Compression, ExportOptions, get_exporter
-from pipeline.core.memory import keep_freed_memory
+from pipeline.core.processes import keep_freed_memory
 from pipeline.core.record import DatasetRecord
 from tests.exporters.synthetic_record import build_record
 

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 from bench_records import rendered_record
 
 from pipeline.core import tables
-from pipeline.stages.render_frames import SWEEP_SCHEMA
+from pipeline.core.record_writers.lidar import SWEEP_SCHEMA
 
 _WRITE_TABLE = pq.write_table
 

@@ -21,7 +21,7 @@ import numpy as np
 from bench_records import rendered_record
 
 from pipeline.core.png import encode_png
-from pipeline.stages.render_frames import PNG_FILTER
+from pipeline.core.record_writers.camera import PNG_FILTER
 
 OPENCV_FILTER = {"none": cv2.IMWRITE_PNG_FILTER_NONE, "sub": cv2.IMWRITE_PNG_FILTER_SUB,
                  "up": cv2.IMWRITE_PNG_FILTER_UP}

@@ -62,7 +62,7 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
     static = StaticScene(world.meshes)
     caster = BareCasts(world.meshes)
     (camera,), (lidar,) = build_sensors(rig)
-    condition = conditions.condition_from_config(condition_cfg)
+    condition = conditions.Condition(condition_cfg)
     lidar = type(lidar)(condition.lidar(lidar.config))
     scenes = dict(zip(range(max(frames) + 1), sim_frames(sim, max(frames) + 1), strict=False))
     total = 0.0
@@ -73,7 +73,7 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
         mask = project_actors(scene, camera, cam_to_world).pixel_mask(camera.width, camera.height)
         crays = make_rays(cam_to_world.translation, camera.pixel_directions, cam_to_world.rotation)
         hits = scene.cast_rays(crays, actor_rays=mask)
-        rays = frame_rays(camera, lidar, scene, ego, condition.lighting, crays, mask, hits)
+        rays = frame_rays(camera, lidar, scene, ego, condition, crays, mask, hits)
         total += sum(caster.time(scene, rays).values())
     return total, caster.cpu_s
 
@@ -118,12 +118,12 @@ def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames:
     import dataclasses
     import pstats
 
-    from pipeline.stages.render import _check_sim, _static_world
+    from pipeline.stages.render import check_sim, pickle_static_world
     from pipeline.stages.render_frames import ShardJob, render_shard
 
     tmp.mkdir(parents=True, exist_ok=True)
-    seed = int(_check_sim(sim)["seed"])
-    _static_world(sim, seed, tmp / "static.pkl")
+    seed = int(check_sim(sim)["seed"])
+    pickle_static_world(sim, seed, tmp / "static.pkl")
     job = ShardJob(0, tuple(frames[:1]), sim, tmp / "static.pkl", tmp / "rec", tmp / "shards", rig, condition_cfg,
                    seed, threads=1)
     render_shard(job)  # loads the world and builds its BVH outside the profile
@@ -172,9 +172,9 @@ from pipeline.stages.render import WORKER_MODULES
 for name in WORKER_MODULES:
     __import__(name)
 imported = time.process_time()
-from pipeline.stages.render import _check_sim
+from pipeline.stages.render import check_sim
 from pipeline.world.static import build_static_world
-build_static_world(Path(sys.argv[1]) / "roads", seed=int(_check_sim(Path(sys.argv[1]))["seed"]))
+build_static_world(Path(sys.argv[1]) / "roads", seed=int(check_sim(Path(sys.argv[1]))["seed"]))
 print(imported - start, time.process_time() - imported)
 """
 

@@ -21,11 +21,12 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass, SemanticClass
+from pipeline.core.config.sensors import CameraConfig, LidarConfig
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.groundtruth import camera_labels, project_actors
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.shading import shade, to_srgb8
 from pipeline.world.actor_shapes import cuboid, wheel
@@ -122,11 +123,11 @@ class BareCasts:
         return out
 
 
-def frame_rays(camera, lidar, scene, ego, lighting, crays, mask, hits) -> dict[str, np.ndarray]:
+def frame_rays(camera, lidar, scene, ego, condition, crays, mask, hits) -> dict[str, np.ndarray]:
     """The rays of one frame: camera (+ actor-masked subset), shadow rays of sunlit hits, lidar (+ subset)."""
-    lit = hits.hit & (hits.normal @ lighting.sun_direction > 0) & lighting.shadows & (lighting.sun_elevation_deg > 0)
+    lit = hits.hit & (hits.normal @ condition.sun_direction > 0) & condition.shadows & (condition.sun_elevation_deg > 0)
     p = crays[lit, :3] + crays[lit, 3:] * hits.t_m[lit, None] + hits.normal[lit] * 1e-3
-    shadow = np.concatenate([p, np.broadcast_to(lighting.sun_direction, p.shape)], axis=1).astype(np.float32)
+    shadow = np.concatenate([p, np.broadcast_to(condition.sun_direction, p.shape)], axis=1).astype(np.float32)
     to_w = lidar.lidar_to_world(ego)
     lrays = make_rays(to_w.translation, lidar.directions, to_w.rotation)
     return {"camera": crays, "camera_actor": crays[mask], "shadow": shadow, "lidar": lrays,
@@ -157,11 +158,10 @@ def main() -> None:
     static = StaticScene(static_meshes)
     static.cast(np.array([[0, 0, 50, 0, 0, -1]], np.float32))  # Embree builds its BVH on the first cast
     build_s = time.perf_counter() - start
-    camera = Camera(CameraConfig(mount=Transform.from_xyz_rpy((0.8, 0.0, 0.7))))
-    lidar = Lidar(LidarConfig(mount=Transform.from_xyz_rpy((0.0, 0.0, 1.0))))
+    camera = Camera(CameraConfig(name="front", mount={"xyz_m": (0.8, 0.0, 0.7)}))
+    lidar = Lidar(LidarConfig(name="top", mount={"xyz_m": (0.0, 0.0, 1.0)}))
     condition = get_condition(args.condition)
-    lighting = condition.lighting
-    lidar_here = Lidar(condition.lidar(lidar.config))
+    lidar_here = Lidar(condition.lidar(lidar))
     _ = camera.pixel_directions, lidar.directions, lidar_here.directions
 
     bare_caster = BareCasts(static_meshes)
@@ -192,7 +192,7 @@ def main() -> None:
         image = np.where(hits.instance_id > 0, hits.actor_index + 1, 0).astype(np.int32).reshape(camera.height, -1)
         camera_labels(scene, camera, cam_to_world, amodal, image)
         c3 = time.perf_counter()
-        radiance = condition.noisy(condition.fog(shade(scene, crays, hits, lighting), hits.t_m, hits.hit),
+        radiance = condition.noisy(condition.fog(shade(scene, crays, hits, condition), hits.t_m, hits.hit),
                                    np.random.default_rng(f))
         c4 = time.perf_counter()
         to_srgb8(radiance)
@@ -204,7 +204,7 @@ def main() -> None:
                          ("  cam: tone map", c5 - c4)):
             stages[name] += dt
         # Bare Embree casts of this frame's rays, right after it (same machine load).
-        rays = frame_rays(camera, lidar, scene, ego, lighting, crays, mask, hits)
+        rays = frame_rays(camera, lidar, scene, ego, condition, crays, mask, hits)
         frame_bare = bare_caster.time(scene, rays)
         for name, dt in frame_bare.items():
             bare[name] += dt

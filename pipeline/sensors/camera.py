@@ -17,10 +17,11 @@ Conventions (docs/design.md, "Frames and conventions"):
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+import zlib
 
 import numpy as np
 
+from pipeline.core.config.sensors import CameraConfig
 from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform
 from pipeline.core.jit import kernel
 from pipeline.world.scene import rectangles_mask
@@ -31,73 +32,53 @@ _CORNER_BITS = np.array([[(k >> i) & 1 for i in range(3)] for k in range(8)], bo
 _BOX_EDGES = np.array([(k, k | 1 << i) for k in range(8) for i in range(3) if not k & 1 << i])
 
 
-QUALITIES = ("fast", "realistic")
-
-
-@dataclass(frozen=True)
-class CameraConfig:
-    """Attributes:
-    name: sensor name (unique in a rig).
-    width_px, height_px: image size.
-    hfov_deg: horizontal field of view, used when ``intrinsics`` is None (square pixels, centred).
-    intrinsics: explicit (fx, fy, cx, cy) in pixels, or None.
-    distortion: (k1, k2, p1, p2, k3), OpenCV order; zeros for an ideal pinhole.
-    mount: pose of the camera body frame (x fwd, y left, z up) in the ego frame.
-    samples_per_pixel: anti-aliasing samples for the colour image (labels use the pixel centre).
-    jitter_seed: seed of the fixed stratified sample pattern.
-    samples_everywhere: with several samples, take them at every pixel (else only at edge pixels; see
-        :func:`pipeline.sensors.render.edge_pixels`).
-    near_m: near plane for projection, metres.
-    quality: "realistic" traces sky occlusion and mirror reflections (:mod:`pipeline.sensors.indirect`); "fast"
-        shades direct light only.
-    """
-
-    name: str = "front"
-    width_px: int = 800
-    height_px: int = 600
-    hfov_deg: float = 90.0
-    intrinsics: tuple[float, float, float, float] | None = None
-    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
-    mount: Transform = field(default_factory=Transform.identity)
-    samples_per_pixel: int = 1
-    jitter_seed: int = 0
-    samples_everywhere: bool = False
-    near_m: float = 0.05
-    quality: str = "realistic"
-
-    def __post_init__(self) -> None:
-        if self.width_px <= 0 or self.height_px <= 0:
-            raise ValueError(f"camera {self.name!r}: image size must be positive, got {self.width_px}x{self.height_px}")
-        if self.intrinsics is None and not 0.0 < self.hfov_deg < 180.0:
-            raise ValueError(f"camera {self.name!r}: hfov_deg must be in (0, 180), got {self.hfov_deg}")
-        if self.intrinsics is not None and (len(self.intrinsics) != 4 or min(self.intrinsics[:2]) <= 0):
-            raise ValueError(f"camera {self.name!r}: intrinsics must be (fx, fy, cx, cy) with fx, fy > 0")
-        if len(self.distortion) != 5:
-            raise ValueError(f"camera {self.name!r}: distortion must be (k1, k2, p1, p2, k3)")
-        if self.samples_per_pixel < 1:
-            raise ValueError(f"camera {self.name!r}: samples_per_pixel must be >= 1")
-        if self.near_m <= 0:
-            raise ValueError(f"camera {self.name!r}: near_m must be positive")
-        if self.quality not in QUALITIES:
-            raise ValueError(f"camera {self.name!r}: quality must be one of {', '.join(QUALITIES)}, got "
-                             f"{self.quality!r}")
-        object.__setattr__(self, "distortion", tuple(float(d) for d in self.distortion))
+NEAR_M = 0.05  # near plane of :meth:`Camera.project`, metres
 
 
 class Camera:
-    """A camera built from its config; caches its ray directions (optical frame)."""
+    """A camera built from the rig's validated :class:`~pipeline.core.config.sensors.CameraConfig` (its one
+    definition of every field and check); derived values are properties, the ray directions are cached
+    (optical frame).
+
+    Attributes:
+        config: the validated config.
+        width, height: image size, pixels.
+        fx, fy, cx, cy: intrinsics, pixels (from ``config.K``, or from ``config.hfov_deg`` with square pixels and
+            the principal point at the image centre).
+        k1, k2, p1, p2, k3: distortion (OpenCV order); ``has_distortion`` when any is non-zero.
+    """
 
     def __init__(self, config: CameraConfig) -> None:
         self.config = config
         self.width, self.height = config.width_px, config.height_px
-        if config.intrinsics is None:
+        if config.K is None:
             f = 0.5 * self.width / np.tan(0.5 * np.radians(config.hfov_deg))
             self.fx = self.fy = float(f)
             self.cx, self.cy = 0.5 * self.width, 0.5 * self.height
         else:
-            self.fx, self.fy, self.cx, self.cy = (float(v) for v in config.intrinsics)
-        self.k1, self.k2, self.p1, self.p2, self.k3 = config.distortion
+            (fx, _, cx), (_, fy, cy), _ = config.K
+            self.fx, self.fy, self.cx, self.cy = float(fx), float(fy), float(cx), float(cy)
+        self.k1, self.k2, self.p1, self.p2, self.k3 = (float(d) for d in config.distortion)
         self.has_distortion = any(config.distortion)
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @functools.cached_property
+    def mount(self) -> Transform:
+        """Pose of the camera body frame (x forward, y left, z up) in the ego frame."""
+        return Transform.from_xyz_rpy(self.config.mount.xyz_m, self.config.mount.rpy_rad)
+
+    @property
+    def jitter_seed(self) -> int:
+        """Seed of the fixed stratified anti-aliasing pattern: the CRC-32 of the camera's name."""
+        return zlib.crc32(self.name.encode())
+
+    @property
+    def near_m(self) -> float:
+        """Near plane for projection, metres."""
+        return NEAR_M
 
     @property
     def K(self) -> np.ndarray:
@@ -106,7 +87,7 @@ class Camera:
 
     def camera_to_world(self, ego_pose: Transform) -> Transform:
         """Optical frame -> world, given the ego pose (ego frame -> world)."""
-        return ego_pose @ self.config.mount @ Transform(R_CAMERA_FROM_BODY.T, np.zeros(3))
+        return ego_pose @ self.mount @ Transform(R_CAMERA_FROM_BODY.T, np.zeros(3))
 
     # -- distortion -------------------------------------------------------------------------------
     def distort(self, xy: np.ndarray) -> np.ndarray:
@@ -154,7 +135,7 @@ class Camera:
         Returns the pixels and an (N,) bool mask of points in front of the near plane (others are NaN).
         """
         points_cam = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-        in_front = points_cam[:, 2] > self.config.near_m
+        in_front = points_cam[:, 2] > self.near_m
         z = np.where(in_front, points_cam[:, 2], np.nan)
         xy = self.distort(points_cam[:, :2] / z[:, None])
         return np.column_stack([self.fx * xy[:, 0] + self.cx, self.fy * xy[:, 1] + self.cy]), in_front
@@ -206,7 +187,7 @@ class Camera:
     def clip_near_m(self) -> float:
         """Depth at which geometry is clipped for projection: the near plane, a hair beyond so that points
         clipped onto it count as in front."""
-        return self.config.near_m * (1.0 + 1e-6)
+        return self.near_m * (1.0 + 1e-6)
 
     def spheres_in_view(self, centre_cam: np.ndarray, radius: np.ndarray, near_m: float | None = None) -> np.ndarray:
         """(N,) bool: spheres (optical-frame centres (N, 3), radii (N,), metres) that may meet a ray of the image:
@@ -298,7 +279,7 @@ class Camera:
         s = self.config.samples_per_pixel
         if s == 1:
             return self.pixel_directions[None]
-        rng = np.random.default_rng(self.config.jitter_seed)
+        rng = np.random.default_rng(self.jitter_seed)
         n = self.width * self.height
         rows, cols = np.divmod(np.arange(n), self.width)
         out = np.empty((s, n, 3), np.float32)

@@ -1,8 +1,8 @@
 """Environmental conditions: lighting, night lights, fog, rain, lens and sensor effects, LiDAR degradation.
 
 A condition is a YAML file under configs/conditions/ (or any path) validated into
-:class:`pipeline.core.config.ConditionConfig`; :func:`condition_from_config` turns it into the
-:class:`Condition` the renderer uses; :func:`get_condition` does both for a NAME or PATH. Users add a
+:class:`pipeline.core.config.ConditionConfig`; :class:`Condition` wraps it with the values the renderer derives
+from it; :func:`get_condition` does both for a NAME or PATH. Users add a
 condition by adding a YAML file.
 
 Fog (Koschmieder): L = L0 * T + L_fog * (1 - T), T = exp(-beta * d), beta = 3.912 / visibility (the
@@ -12,8 +12,6 @@ see the fog colour (d = infinity).
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -24,51 +22,138 @@ from pipeline.core.config.sensors import (
     HeadlightConfig,
     LensConfig,
     LidarConditionConfig,
+    LidarConfig,
     RainConfig,
     SensorNoiseConfig,
     StreetLampConfig,
 )
 from pipeline.core.geometry import Transform
-from pipeline.sensors.lidar import LidarConfig
+from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.post import sensor_noise
-from pipeline.sensors.shading import Lighting
 from pipeline.world.actors import Actors
 
 KOSCHMIEDER = 3.912  # -ln(0.02): contrast threshold of 2 %
 SHIPPED = ("morning", "noon", "dusk", "night", "fog", "rain")
 
 
-@dataclass(frozen=True)
 class Condition:
-    """Attributes:
-    name: condition name.
-    lighting: sun, sky, ambient, exposure, glowing lamps, road wetness.
-    fog_visibility_m: meteorological visibility, metres; None = clear air.
-    fog_rgb: fog (airlight) colour, linear RGB (before exposure).
-    headlights: headlight cones (None = off). street_lamps: street-lamp pools (None = off).
-    rain: streaks and drops (None = dry; wetness is ``lighting.wetness``).
-    noise: sensor noise. lens: exposure, vignetting, bloom, flare, motion blur.
-    lidar_effects: LiDAR degradation factors.
+    """One condition as the renderer uses it: the validated :class:`~pipeline.core.config.ConditionConfig` (its one
+    definition of every field, default and check) and the values derived from it, as properties.
+
+    Shading (:func:`pipeline.sensors.shading.shade`) reads the sun, sky, exposure, glow and wetness properties;
+    the camera's fog, noise and spot lights and the LiDAR's degradation are methods here.
     """
 
-    name: str
-    lighting: Lighting
-    fog_visibility_m: float | None = None
-    fog_rgb: tuple[float, float, float] = (0.62, 0.65, 0.68)
-    headlights: HeadlightConfig | None = None
-    street_lamps: StreetLampConfig | None = None
-    rain: RainConfig | None = None
-    noise: SensorNoiseConfig = field(default_factory=SensorNoiseConfig)
-    lens: LensConfig = field(default_factory=LensConfig)
-    lidar_effects: LidarConditionConfig = field(default_factory=LidarConditionConfig)
+    def __init__(self, config: ConditionConfig) -> None:
+        self.config = config
 
-    def __post_init__(self) -> None:
-        if self.fog_visibility_m is not None and self.fog_visibility_m <= 0:
-            raise ValueError(f"condition {self.name!r}: fog_visibility_m must be positive")
-        if self.lens.exposure != self.lighting.exposure:
-            # One exposure: the shading applies it, the noise model reads it as the gain.
-            object.__setattr__(self, "lens", self.lens.model_copy(update={"exposure": self.lighting.exposure}))
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    # -- light: sun, sky, exposure, glowing lamps, wet road ---------------------------------------
+    @property
+    def sun_elevation_deg(self) -> float:
+        return self.config.sun.elevation_deg
+
+    @property
+    def sun_azimuth_deg(self) -> float:
+        """CCW from east (world +x), degrees."""
+        return self.config.sun.azimuth_deg
+
+    @property
+    def sun_direction(self) -> np.ndarray:
+        """(3,) float32 unit vector towards the sun, world frame."""
+        el, az = np.radians(self.sun_elevation_deg), np.radians(self.sun_azimuth_deg)
+        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], np.float32)
+
+    @property
+    def sun_rgb(self) -> tuple[float, float, float]:
+        """Sun irradiance, linear RGB: colour x intensity; zero with the sun at or below the horizon."""
+        if self.sun_elevation_deg <= 0:
+            return (0.0, 0.0, 0.0)
+        return tuple(float(v) for v in np.asarray(self.config.sun.color_rgb) * self.config.sun.intensity)
+
+    @property
+    def shadows(self) -> bool:
+        """Cast shadow rays towards the sun."""
+        return self.config.sun.shadows
+
+    @property
+    def ambient_rgb(self) -> tuple[float, float, float]:
+        return self.config.sky.ambient_rgb
+
+    @property
+    def sky_zenith_rgb(self) -> tuple[float, float, float]:
+        return self.config.sky.zenith_rgb
+
+    @property
+    def sky_horizon_rgb(self) -> tuple[float, float, float]:
+        return self.config.sky.horizon_rgb
+
+    @property
+    def exposure(self) -> float:
+        """The one exposure: the shading applies it, the noise model reads it as the gain."""
+        return self.config.lens.exposure
+
+    @property
+    def lights_on(self) -> bool:
+        """Vehicles' head and tail lights and street lamps glow (the light they cast comes from
+        :meth:`frame_lights`)."""
+        return self.config.vehicle_lights.glow
+
+    @property
+    def tail_glow(self) -> float:
+        return self.config.vehicle_lights.tail_glow
+
+    @property
+    def head_glow(self) -> float:
+        return self.config.vehicle_lights.head_glow
+
+    @property
+    def lamp_glow(self) -> float:
+        return self.config.vehicle_lights.lamp_glow
+
+    @property
+    def wetness(self) -> float:
+        """0 dry .. 1 soaked road-like surfaces: the rain's wetness, 0 without rain."""
+        return self.config.rain.wetness if self.config.rain is not None else 0.0
+
+    # -- weather and sensor effects ---------------------------------------------------------------
+    @property
+    def fog_visibility_m(self) -> float | None:
+        """Meteorological visibility, metres; None = clear air."""
+        return self.config.fog.visibility_m if self.config.fog is not None else None
+
+    @property
+    def fog_rgb(self) -> tuple[float, float, float] | None:
+        """Airlight colour, linear RGB (before exposure); None = clear air."""
+        return self.config.fog.color_rgb if self.config.fog is not None else None
+
+    @property
+    def headlights(self) -> HeadlightConfig | None:
+        return self.config.headlights
+
+    @property
+    def street_lamps(self) -> StreetLampConfig | None:
+        return self.config.street_lamps
+
+    @property
+    def rain(self) -> RainConfig | None:
+        return self.config.rain
+
+    @property
+    def noise(self) -> SensorNoiseConfig:
+        return self.config.noise
+
+    @property
+    def lens(self) -> LensConfig:
+        return self.config.lens
+
+    @property
+    def lidar_effects(self) -> LidarConditionConfig:
+        return self.config.lidar
 
     def fog(self, radiance: np.ndarray, distance_m: np.ndarray, hit: np.ndarray) -> np.ndarray:
         """Apply fog to (N, 3) float32 radiance given (N,) distances along the rays and the (N,) hit mask."""
@@ -76,7 +161,7 @@ class Condition:
             return radiance
         beta = KOSCHMIEDER / self.fog_visibility_m
         transmittance = np.where(hit, np.exp(-beta * np.where(hit, distance_m, 0.0)), 0.0).astype(np.float32)
-        fog = np.asarray(self.fog_rgb, np.float32) * self.lighting.exposure
+        fog = np.asarray(self.fog_rgb, np.float32) * self.exposure
         # Per channel on (N,) arrays: numpy broadcasts over a trailing axis of 3 several times slower.
         channels = cv2.split(np.ascontiguousarray(radiance, np.float32).reshape(-1, 1, 3))
         haze = 1.0 - transmittance
@@ -106,53 +191,19 @@ class Condition:
             parts.append(street_lamp_lights(street_lights_m, self.street_lamps, camera_xyz_m))
         return SpotLights.concatenate(parts)
 
-    def lidar(self, config: LidarConfig) -> LidarConfig:
-        """The LiDAR config under this condition (range, attenuation, noise, drop-out; intensity factor and
+    def lidar(self, lidar: Lidar) -> LidarConfig:
+        """``lidar``'s config under this condition (range, attenuation, noise, drop-out; intensity factor and
         detection threshold are applied by :func:`pipeline.sensors.lidar.render_lidar`)."""
-        fx = self.lidar_effects
-        return dataclasses.replace(
-            config,
-            range_max_m=max(config.range_max_m * fx.range_factor, config.range_min_m + 1e-3),
-            attenuation_per_m=config.attenuation_per_m * fx.attenuation_factor,
-            range_noise_std_m=config.range_noise_std_m * fx.noise_factor,
-            dropout_prob=min(0.99, config.dropout_prob + fx.extra_dropout),
-        )
-
-
-def condition_from_config(cfg: ConditionConfig) -> Condition:
-    """The renderer's :class:`Condition` from a validated config."""
-    sun = np.asarray(cfg.sun.color_rgb) * cfg.sun.intensity
-    vl = cfg.vehicle_lights
-    lighting = Lighting(
-        sun_elevation_deg=cfg.sun.elevation_deg,
-        sun_azimuth_deg=cfg.sun.azimuth_deg,
-        sun_rgb=tuple(float(v) for v in sun) if cfg.sun.elevation_deg > 0 else (0.0, 0.0, 0.0),
-        ambient_rgb=cfg.sky.ambient_rgb,
-        sky_zenith_rgb=cfg.sky.zenith_rgb,
-        sky_horizon_rgb=cfg.sky.horizon_rgb,
-        exposure=cfg.lens.exposure,
-        shadows=cfg.sun.shadows,
-        lights_on=vl.glow,
-        tail_glow=vl.tail_glow,
-        head_glow=vl.head_glow,
-        lamp_glow=vl.lamp_glow,
-        wetness=cfg.rain.wetness if cfg.rain is not None else 0.0,
-    )
-    return Condition(
-        name=cfg.name,
-        lighting=lighting,
-        fog_visibility_m=cfg.fog.visibility_m if cfg.fog is not None else None,
-        fog_rgb=cfg.fog.color_rgb if cfg.fog is not None else (0.62, 0.65, 0.68),
-        headlights=cfg.headlights,
-        street_lamps=cfg.street_lamps,
-        rain=cfg.rain,
-        noise=cfg.noise,
-        lens=cfg.lens,
-        lidar_effects=cfg.lidar,
-    )
+        fx, config = self.lidar_effects, lidar.config
+        return config.model_copy(update={
+            "range_m": max(config.range_m * fx.range_factor, lidar.range_min_m + 1e-3),
+            "attenuation_per_m": config.attenuation_per_m * fx.attenuation_factor,
+            "range_noise_std_m": config.range_noise_std_m * fx.noise_factor,
+            "dropout": min(0.99, config.dropout + fx.extra_dropout),
+        })
 
 
 def get_condition(name_or_path: str | Path) -> Condition:
     """A condition by NAME (configs/conditions/NAME.yaml) or PATH, read afresh; unknown names and invalid files
     fail with a :class:`pipeline.core.config.ConfigError` naming the file and key (or listing the names)."""
-    return condition_from_config(load_config(ConditionConfig, name_or_path, "conditions")[0])
+    return Condition(load_config(ConditionConfig, name_or_path, "conditions")[0])

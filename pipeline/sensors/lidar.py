@@ -3,7 +3,7 @@
 Conventions:
 
 - LiDAR frame: x forward, y left, z up (KITTI velodyne); ``mount`` is its pose in the ego frame.
-- Rings: ring 0 is the highest beam (``fov_upper_deg``), ring ``channels - 1`` the lowest; beams are
+- Rings: ring 0 is the highest beam (``upper_fov_deg``), ring ``channels - 1`` the lowest; beams are
   evenly spaced in elevation.
 - Columns: the head turns clockwise seen from above, starting behind the sensor: column j has azimuth
   pi - j * resolution (CCW from +x) and fires at time j / (columns * rotation_hz) after the sweep start.
@@ -20,68 +20,17 @@ Conventions:
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.core.config.sensors import LidarConditionConfig
-from pipeline.core.config.sensors import LidarConfig as LidarSpec
+from pipeline.core.config.sensors import LidarConditionConfig, LidarConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
-
-def _spec_default(name: str) -> Any:
-    """The default of a field of the rig config's LiDAR (pipeline.core.config): one source for both."""
-    return LidarSpec.model_fields[name].default
-
-
-@dataclass(frozen=True)
-class LidarConfig:
-    """Attributes:
-    name: sensor name. channels: number of beams (rings).
-    fov_upper_deg, fov_lower_deg: elevation of the top and bottom beams.
-    horizontal_resolution_deg: azimuth step between columns (360 / columns).
-    range_min_m, range_max_m: hits outside are not reported.
-    rotation_hz: spin rate (sets per-point time offsets).
-    attenuation_per_m: a in I = I0 * exp(-a * d).
-    range_noise_std_m: standard deviation of Gaussian range noise. dropout_prob: chance a point is lost.
-    mount: pose of the LiDAR frame in the ego frame.
-    """
-
-    name: str = "top"
-    channels: int = _spec_default("channels")
-    fov_upper_deg: float = _spec_default("upper_fov_deg")
-    fov_lower_deg: float = _spec_default("lower_fov_deg")
-    horizontal_resolution_deg: float = _spec_default("horizontal_resolution_deg")
-    range_min_m: float = 0.5
-    range_max_m: float = _spec_default("range_m")
-    rotation_hz: float = _spec_default("rotation_hz")
-    attenuation_per_m: float = _spec_default("attenuation_per_m")
-    range_noise_std_m: float = _spec_default("range_noise_std_m")
-    dropout_prob: float = _spec_default("dropout")
-    mount: Transform = field(default_factory=Transform.identity)
-
-    def __post_init__(self) -> None:
-        if self.channels < 1:
-            raise ValueError(f"lidar {self.name!r}: channels must be >= 1, got {self.channels}")
-        if not -90.0 <= self.fov_lower_deg <= self.fov_upper_deg <= 90.0:
-            raise ValueError(f"lidar {self.name!r}: need -90 <= fov_lower_deg <= fov_upper_deg <= 90")
-        cols = 360.0 / self.horizontal_resolution_deg
-        if self.horizontal_resolution_deg <= 0 or abs(cols - round(cols)) > 1e-6:
-            raise ValueError(f"lidar {self.name!r}: horizontal_resolution_deg must divide 360")
-        if not 0.0 <= self.range_min_m < self.range_max_m:
-            raise ValueError(f"lidar {self.name!r}: need 0 <= range_min_m < range_max_m")
-        if self.rotation_hz <= 0 or self.attenuation_per_m < 0 or self.range_noise_std_m < 0:
-            raise ValueError(f"lidar {self.name!r}: rotation_hz > 0, attenuation_per_m >= 0, noise >= 0 required")
-        if not 0.0 <= self.dropout_prob < 1.0:
-            raise ValueError(f"lidar {self.name!r}: dropout_prob must be in [0, 1)")
-
-    @property
-    def columns(self) -> int:
-        return round(360.0 / self.horizontal_resolution_deg)
+RANGE_MIN_M = 0.5  # returns nearer than this are not reported (the sensor's own housing and blind zone)
 
 
 @dataclass(frozen=True)
@@ -113,13 +62,37 @@ class LidarSweep:
 
 
 class Lidar:
-    """A LiDAR built from its config; caches the ray pattern."""
+    """A LiDAR built from the rig's validated :class:`~pipeline.core.config.sensors.LidarConfig` (its one
+    definition of every field and check); derived values are properties, the ray pattern is cached.
+
+    Attributes:
+        config: the validated config (under a condition, :meth:`pipeline.sensors.conditions.Condition.lidar`
+            gives the degraded one).
+        elevation_rad: (channels,) float64 beam elevations, ring 0 (``upper_fov_deg``) first.
+        azimuth_rad: (columns,) float64 column azimuths, CCW from +x.
+    """
+
+    range_min_m = RANGE_MIN_M
 
     def __init__(self, config: LidarConfig) -> None:
         self.config = config
-        self.elevation_rad = np.radians(np.linspace(config.fov_upper_deg, config.fov_lower_deg, config.channels))
+        self.elevation_rad = np.radians(np.linspace(config.upper_fov_deg, config.lower_fov_deg, config.channels))
         res = np.radians(config.horizontal_resolution_deg)
-        self.azimuth_rad = np.pi - res * np.arange(config.columns)
+        self.azimuth_rad = np.pi - res * np.arange(self.columns)
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def columns(self) -> int:
+        """Azimuth steps per sweep: 360 / horizontal_resolution_deg."""
+        return round(360.0 / self.config.horizontal_resolution_deg)
+
+    @functools.cached_property
+    def mount(self) -> Transform:
+        """Pose of the LiDAR frame (x forward, y left, z up) in the ego frame."""
+        return Transform.from_xyz_rpy(self.config.mount.xyz_m, self.config.mount.rpy_rad)
 
     @functools.cached_property
     def directions(self) -> np.ndarray:
@@ -129,19 +102,19 @@ class Lidar:
         return d.reshape(-1, 3).astype(np.float32)
 
     def lidar_to_world(self, ego_pose: Transform) -> Transform:
-        return ego_pose @ self.config.mount
+        return ego_pose @ self.mount
 
     def actor_ray_mask(self, scene: FrameScene, lidar_to_world: Transform) -> np.ndarray:
         """(columns * channels,) bool superset of the beams that can reach an actor: per actor, the window of
         columns x rings that its bounding sphere's cone covers, widened by one step each side against rounding."""
         boxes = scene.actors.boxes
-        cols, chans = self.config.columns, self.config.channels
+        cols, chans = self.columns, self.config.channels
         if not len(boxes):
             return np.zeros(cols * chans, bool)
         c = lidar_to_world.inverse().apply(boxes.center)
         radius = 0.5 * np.linalg.norm(boxes.size, axis=1) * 1.001 + 1e-3
         dist = np.linalg.norm(c, axis=1)
-        near = dist - radius <= self.config.range_max_m  # farther actors cannot return a point
+        near = dist - radius <= self.config.range_m  # farther actors cannot return a point
         c, radius, dist = c[near], radius[near], dist[near]
         if not len(c):
             return np.zeros(cols * chans, bool)
@@ -181,7 +154,7 @@ def render_lidar(
     ``condition`` (a :class:`pipeline.sensors.conditions.Condition`, optional) degrades the sweep; do not also
     build ``lidar`` from ``condition.lidar(...)``, which would apply the factors twice.
     """
-    cfg = lidar.config if condition is None else condition.lidar(lidar.config)
+    cfg = lidar.config if condition is None else condition.lidar(lidar)
     effects = LidarConditionConfig() if condition is None else condition.lidar_effects
     to_world = lidar.lidar_to_world(ego_pose)
     dirs_l = lidar.directions
@@ -189,11 +162,11 @@ def render_lidar(
     rays = make_rays(to_world.translation, dirs_l, to_world.rotation)
     hits = scene.cast_rays(rays, actor_rays=lidar.actor_ray_mask(scene, to_world))
     noise = rng.standard_normal(n, dtype=np.float32) * np.float32(cfg.range_noise_std_m)
-    drop = rng.random(n) < cfg.dropout_prob if cfg.dropout_prob else np.zeros(n, bool)
+    drop = rng.random(n) < cfg.dropout if cfg.dropout else np.zeros(n, bool)
     keep, t, reflected = _returns(as_input(hits.hit, bool), as_input(hits.t_m, np.float32), as_input(hits.normal,
                                   np.float32), as_input(rays, np.float32), as_input(hits.material, np.int32),
                                   as_input(material_arrays()["reflectivity"], np.float32), drop,
-                                  np.float32(cfg.range_min_m), np.float32(cfg.range_max_m))
+                                  np.float32(lidar.range_min_m), np.float32(cfg.range_m))
     intensity = reflected * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
     if effects.min_intensity > 0:  # returns too weak to detect are lost
         strong = intensity >= effects.min_intensity
@@ -201,7 +174,7 @@ def render_lidar(
     points, ring, column, time_offset, instance, semantic, per_actor = _points(
         keep, t, noise, as_input(dirs_l, np.float32), as_input(hits.instance_id, np.int32),
         as_input(hits.semantic, np.uint8), as_input(hits.actor_index, np.int32), cfg.channels,
-        float(cfg.columns * cfg.rotation_hz), len(scene.actors))
+        float(lidar.columns * cfg.rotation_hz), len(scene.actors))
     return LidarSweep(
         points_m=points,
         intensity=intensity.astype(np.float32),
@@ -211,7 +184,7 @@ def render_lidar(
         instance_id=instance,
         semantic=semantic,
         points_per_actor=per_actor,
-        range_max_m=float(cfg.range_max_m),
+        range_max_m=float(cfg.range_m),
     )
 
 

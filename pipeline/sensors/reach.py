@@ -62,12 +62,11 @@ def actors_in_reach(
     radius = 0.5 * np.linalg.norm(actors.boxes.size, axis=1) * 1.001 + 1e-3
     for lidar in lidars:
         origin = lidar.lidar_to_world(ego_pose).translation
-        range_m = condition.lidar(lidar.config).range_max_m
+        range_m = condition.lidar(lidar).range_m
         reach |= np.linalg.norm(centre - origin, axis=1) - radius <= range_m
-    lighting = condition.lighting
-    sun_shadows = lighting.shadows and lighting.sun_elevation_deg > 0
+    sun_shadows = condition.shadows and condition.sun_elevation_deg > 0
     if sun_shadows:
-        sun = lighting.sun_direction.astype(np.float64)
+        sun = condition.sun_direction.astype(np.float64)
         floor = min(floor_z_m, float(np.min(centre[:, 2] - 0.5 * actors.boxes.size[:, 2])))
         length = np.maximum(centre[:, 2] + radius - floor + LIFT_MARGIN_M, 0.0) / sun[2]
         shadow_end = centre - length[:, None] * sun

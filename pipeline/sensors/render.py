@@ -73,7 +73,6 @@ def render_camera(
     (length, width, height) places the ego's headlights (a 4.5 x 1.8 x 1.5 m car by default).
     """
     condition = get_condition("noon") if condition is None else condition
-    lighting = condition.lighting
     h, w = camera.height, camera.width
     cam_to_world = camera.camera_to_world(ego_pose)
     amodal = project_actors(scene, camera, cam_to_world)
@@ -94,14 +93,14 @@ def render_camera(
     indirect = camera.config.quality == "realistic"
     texture_rad = 1.0 / camera.fx if indirect else 0.0  # the realistic camera textures the static world
     if len(samples) == 1:
-        radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect, texture_rad), hits.t_m,
+        radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad), hits.t_m,
                                  hits.hit)
     else:
         # Every pixel gets its centre sample; pixels on an edge (edge_pixels) get the stratified samples instead.
         if camera.config.samples_everywhere:
             radiance, where = np.zeros((h * w, 3), np.float32), np.arange(h * w)
         else:
-            radiance = condition.fog(shade(scene, rays, hits, lighting, lights, indirect, texture_rad), hits.t_m,
+            radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad), hits.t_m,
                                      hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
         mask = actor_rays.reshape(-1)[where]
@@ -109,7 +108,7 @@ def render_camera(
         for sample in samples:  # loop over samples; all chosen pixels vectorised
             sample_rays = make_rays(cam_to_world.translation, sample[where], cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, mask)
-            edge += condition.fog(shade(scene, sample_rays, sample_hits, lighting, lights, indirect,
+            edge += condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect,
                                         texture_rad), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
@@ -168,12 +167,11 @@ def edge_pixels(hits: Hits, depth_m: np.ndarray) -> np.ndarray:
 
 def _sky_level(condition: Condition) -> float:
     """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure."""
-    lighting = condition.lighting
     if condition.fog_visibility_m is not None:
         level = float(np.mean(condition.fog_rgb))
     else:
-        level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), lighting).mean())
-    return level * lighting.exposure
+        level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), condition).mean())
+    return level * condition.exposure
 
 
 @kernel("Tuple((int32[::1], float32[::1]))(int32[::1], int32[::1], bool_[::1], float32[::1], float32[:, ::1])")

@@ -2,10 +2,11 @@
 
 Radiance is linear RGB (arbitrary units, ~1 = white paper in full sun after ``exposure``); the image is
 tone-mapped to 8-bit sRGB by :func:`to_srgb8`. Directions are world frame (x east, y north, z up).
-The condition model (morning / night / fog / rain) builds a :class:`Lighting` and the frame's spot lights
-(:mod:`pipeline.sensors.lights`: headlights, street lamps); this module only shades.
+The condition (:class:`pipeline.sensors.conditions.Condition`: morning / night / fog / rain) gives the sun, sky,
+exposure, glow and wetness as properties, and the frame's spot lights (:mod:`pipeline.sensors.lights`: headlights,
+street lamps); this module only shades.
 
-Wet surfaces (``Lighting.wetness`` w in [0, 1], road-like materials only): albedo x (1 - 0.55 w), specular
+Wet surfaces (``Condition.wetness`` w in [0, 1], road-like materials only): albedo x (1 - 0.55 w), specular
 raised to at least 0.6 w with a sharper highlight, plus a Fresnel (Schlick, water F0 = 0.02) mirror of the
 sky scaled by w: the sheen of a wet road. Reflections of the scene itself are not traced.
 """
@@ -13,7 +14,7 @@ sky scaled by w: the sheen of a wet road. Reflections of the scene itself are no
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from pipeline.sensors.sunlight import sky_and_sun, sun_rays
 from pipeline.sensors.textures import textured_albedo
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.scene import FrameScene, Hits, rowdot
+
+if TYPE_CHECKING:  # the condition calls nothing here: shading only reads its properties
+    from pipeline.sensors.conditions import Condition
 
 BRAKE_LIGHT_RGB = np.array([2.0, 0.08, 0.05], np.float32)
 TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
@@ -36,64 +40,20 @@ SUN_MAP_RANGE_M = 100.0  # hits nearer than this test their sun shadow rays' cel
 WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
-@dataclass(frozen=True)
-class Lighting:
-    """Attributes:
-    sun_elevation_deg, sun_azimuth_deg: sun position; azimuth CCW from east (world +x).
-    sun_rgb: sun irradiance, linear RGB.
-    ambient_rgb: sky fill light on every surface, linear RGB.
-    sky_zenith_rgb, sky_horizon_rgb: background colour overhead and at the horizon.
-    exposure: scale applied before tone mapping.
-    shadows: cast shadow rays towards the sun.
-    lights_on: vehicles' head and tail lights and street lamps glow (dusk, night); the light they cast
-        on other surfaces comes from the spot lights passed to :func:`shade`.
-    tail_glow, head_glow, lamp_glow: emission scales of tail lights, headlights and street lamps.
-    wetness: 0 dry .. 1 soaked road-like surfaces (see the module docstring).
-    """
-
-    sun_elevation_deg: float = 50.0
-    sun_azimuth_deg: float = 135.0
-    sun_rgb: tuple[float, float, float] = (2.6, 2.45, 2.2)
-    ambient_rgb: tuple[float, float, float] = (0.45, 0.5, 0.6)
-    sky_zenith_rgb: tuple[float, float, float] = (0.18, 0.32, 0.65)
-    sky_horizon_rgb: tuple[float, float, float] = (0.65, 0.75, 0.85)
-    exposure: float = 1.0
-    shadows: bool = True
-    lights_on: bool = False
-    tail_glow: float = 1.0
-    head_glow: float = 1.0
-    lamp_glow: float = 1.0
-    wetness: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not -90.0 <= self.sun_elevation_deg <= 90.0:
-            raise ValueError(f"sun_elevation_deg must be in [-90, 90], got {self.sun_elevation_deg}")
-        if self.exposure <= 0:
-            raise ValueError(f"exposure must be positive, got {self.exposure}")
-        if not 0.0 <= self.wetness <= 1.0 or min(self.tail_glow, self.head_glow, self.lamp_glow) < 0:
-            raise ValueError("wetness must be in [0, 1] and glow scales >= 0")
-
-    @property
-    def sun_direction(self) -> np.ndarray:
-        """(3,) float32 unit vector towards the sun, world frame."""
-        el, az = np.radians(self.sun_elevation_deg), np.radians(self.sun_azimuth_deg)
-        return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], np.float32)
-
-
-def sky(directions: np.ndarray, lighting: Lighting) -> np.ndarray:
+def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
     """(N, 3) float32 sky radiance for (N, 3) unit view directions: horizon-to-zenith blend."""
-    return np.stack(_sky_channels(directions[:, 2], lighting), axis=1)
+    return np.stack(_sky_channels(directions[:, 2], condition), axis=1)
 
 
-def _sky_channels(up_z: np.ndarray, lighting: Lighting) -> list[np.ndarray]:
+def _sky_channels(up_z: np.ndarray, condition: Condition) -> list[np.ndarray]:
     """:func:`sky` as three (N,) float32 channels, from the (N,) z components of the view directions."""
     up = np.sqrt(np.clip(np.asarray(up_z, np.float32), 0.0, 1.0))
-    zen, hor = np.asarray(lighting.sky_zenith_rgb, np.float32), np.asarray(lighting.sky_horizon_rgb, np.float32)
+    zen, hor = np.asarray(condition.sky_zenith_rgb, np.float32), np.asarray(condition.sky_horizon_rgb, np.float32)
     return [hor[k] + (zen[k] - hor[k]) * up for k in range(3)]
 
 
 def shade(
-    scene: FrameScene, rays: np.ndarray, hits: Hits, lighting: Lighting, lights: SpotLights | None = None,
+    scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
     indirect: bool = False, pixel_angle_rad: float = 0.0,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
@@ -111,18 +71,18 @@ def shade(
         hits = dataclasses.replace(hits, color=textured_albedo(rays, hits.t_m, hits.hit, hits.instance_id,
                                                                hits.material, hits.normal, hits.color, pixel_angle_rad))
     wet = None
-    if lighting.wetness > 0:
-        wet, hits, mats = _wet(hits, mats, lighting.wetness)
-    sun = lighting.sun_direction
+    if condition.wetness > 0:
+        wet, hits, mats = _wet(hits, mats, condition.wetness)
+    sun = condition.sun_direction
     mat = hits.material
     rays = as_input(rays, np.float32)
     normal, t_m = as_input(hits.normal, np.float32), as_input(hits.t_m, np.float32)
     n_dot_l, lit, shadow = sun_rays(rays, normal, t_m, sun)
     unshadowed = np.ones(len(lit), bool)
-    if lighting.shadows and lighting.sun_elevation_deg > 0 and len(lit):
+    if condition.shadows and condition.sun_elevation_deg > 0 and len(lit):
         unshadowed = ~_sun_blocked(scene, shadow, t_m[lit], sun)
-    rgb = [np.asarray(c, np.float32) for c in (lighting.sun_rgb, lighting.ambient_rgb, lighting.sky_zenith_rgb,
-                                                lighting.sky_horizon_rgb)]
+    rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb, condition.sky_zenith_rgb,
+                                                condition.sky_horizon_rgb)]
     out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
                       as_input(hits.color, np.float32), n_dot_l, lit, unshadowed, mats["specular"],
                       mats["shininess"], sun, *rgb)
@@ -137,17 +97,17 @@ def shade(
     on_actor = hits.instance_id[glowing] > 0
     tail = glowing[(mat[glowing] == material_index("taillight")) & on_actor]
     out[tail[scene.actors.brake[hits.actor_index[tail]]]] += BRAKE_LIGHT_RGB
-    if lighting.lights_on:
-        out[tail] += TAIL_LIGHT_RGB * np.float32(lighting.tail_glow)
+    if condition.lights_on:
+        out[tail] += TAIL_LIGHT_RGB * np.float32(condition.tail_glow)
         out[glowing[(mat[glowing] == material_index("headlight")) & on_actor]] += HEAD_LIGHT_RGB * np.float32(
-            lighting.head_glow)
-        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB * np.float32(lighting.lamp_glow)
+            condition.head_glow)
+        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB * np.float32(condition.lamp_glow)
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
     if wet is not None and len(wet):
-        out[wet] += _wet_sheen(np.take(rays, wet, axis=0), np.take(hits.normal, wet, axis=0), lighting)
-    if lighting.exposure != 1.0:
-        out *= lighting.exposure
+        out[wet] += _wet_sheen(np.take(rays, wet, axis=0), np.take(hits.normal, wet, axis=0), condition)
+    if condition.exposure != 1.0:
+        out *= condition.exposure
     return out
 
 
@@ -176,13 +136,13 @@ def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.nd
     return wet, dataclasses.replace(hits, color=color), mats
 
 
-def _wet_sheen(rays: np.ndarray, normal: np.ndarray, lighting: Lighting) -> np.ndarray:
+def _wet_sheen(rays: np.ndarray, normal: np.ndarray, condition: Condition) -> np.ndarray:
     """(M, 3) float32 sky mirrored by a water film: wetness * Fresnel(Schlick) * sky(reflected direction)."""
     d = rays[:, 3:]
     cos_v = np.clip(-rowdot(d, normal), 0.0, 1.0)
     fresnel = WATER_F0 + (1.0 - WATER_F0) * (1.0 - cos_v) ** 5
     reflected = d + 2.0 * cos_v[:, None] * normal
-    return (sky(reflected, lighting) * (WET_SHEEN * lighting.wetness * fresnel)[:, None]).astype(np.float32)
+    return (sky(reflected, condition) * (WET_SHEEN * condition.wetness * fresnel)[:, None]).astype(np.float32)
 
 
 def _materials() -> dict[str, np.ndarray]:

@@ -8,16 +8,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
 import hashlib
 import json
 import logging
 import math
-import os
-import signal
 import sys
-import threading
-import time
 from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
@@ -126,32 +121,6 @@ def atomic_output_dir(out_dir: Path) -> Iterator[Path]:
     out_dir = Path(out_dir)
     with atomic_dir(out_dir) as tmp:
         yield tmp
-
-
-_PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-
-def die_with_parent() -> None:
-    """Initializer of a stage's worker processes: leave Ctrl-C to the main process (which stops the
-    pool and reports), and die when the worker's parent dies, even by ``kill -9``, instead of waiting forever for
-    work that will not come. On Linux the kernel kills it (PR_SET_PDEATHSIG; with a forkserver the parent is the
-    server, which exits with the main process); elsewhere a thread watches the parent's pid."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    parent = os.getppid()
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(None, use_errno=True)
-        if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
-            if os.getppid() != parent:  # the parent died before the request
-                os._exit(1)
-            return
-        log.debug("prctl(PR_SET_PDEATHSIG) failed (errno %d); watching the parent instead", ctypes.get_errno())
-    threading.Thread(target=_exit_when_orphaned, args=(parent,), name="parent-watch", daemon=True).start()
-
-
-def _exit_when_orphaned(parent: int) -> None:
-    while os.getppid() == parent:
-        time.sleep(0.5)
-    os._exit(1)
 
 
 def int_at_least(minimum: int) -> Callable[[str], int]:

@@ -102,10 +102,10 @@ def _check_applicable(args: argparse.Namespace) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from exporters.base import get_exporter
-    from pipeline.core.memory import keep_freed_memory
+    from pipeline.core.processes import keep_freed_memory
 
     _check_applicable(args)
-    keep_freed_memory()  # this process ends with the export: keep freed buffers mapped (pipeline.core.memory)
+    keep_freed_memory()  # this process ends with the export: keep freed buffers mapped (pipeline.core.processes)
     args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)
     config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}

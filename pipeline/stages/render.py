@@ -1,33 +1,30 @@
 """``roadsynth render``: one simulated run under one condition -> one canonical dataset record.
 
-Frames are split into shards rendered by this process and a local process pool (see :func:`_run`). Finished
+Frames are split into shards rendered by this process and a local process pool
+(:func:`pipeline.core.processes.run_in_pool`). Finished
 shards live in a hidden work folder next to OUT (``.OUT.partial``) keyed by the hash of everything that
 determines the output, so an interrupted render resumes with the shards already done; OUT itself appears only
 when the whole record is complete (renamed into place). A shard counts as done only when its done file lists
 exactly the shard's frames: ``--shard-size`` is not part of the key, and a resume with another shard size gives
 the same shard index other frames; a done shard whose tables do not read back whole is rendered again. A render
 holds OUT's lock (:mod:`pipeline.core.outputs`), so no two renders share the work folder. Worker
-processes die with the render (:func:`pipeline.stages.common.die_with_parent`); on Ctrl-C they are killed and the
+processes die with the render (:func:`pipeline.core.processes.die_with_parent`); on Ctrl-C they are killed and the
 shards done so far are kept for the resume. Layout of the record: pipeline/core/record.py and docs/dataset.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import collections
-import concurrent.futures as cf
 import contextlib
-import gc
+import functools
 import hashlib
-import importlib
 import json
 import logging
 import multiprocessing
 import os
 import pickle
 import shutil
-import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
@@ -38,12 +35,14 @@ from tqdm import tqdm
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.outputs import output_lock
+from pipeline.core.processes import RENDER_THRESHOLDS, frozen_heap, keep_freed_memory, pool_context, run_in_pool
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
+from pipeline.core.record_writers.camera import camera_info
+from pipeline.core.record_writers.lidar import lidar_info
 from pipeline.core.scene_content import near_duplicate_rate
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
     config_hash,
-    die_with_parent,
     int_at_least,
     software_versions,
     write_json,
@@ -54,10 +53,9 @@ from pipeline.stages.render_frames import (
     ShardJob,
     remembered_world,
     render_shard,
-    reuse_freed_memory,
     rig_actor_meshes,
 )
-from pipeline.stages.rig import build_sensors, camera_info, lidar_info
+from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import embree_started
 from pipeline.world.static import StaticWorld
 
@@ -149,7 +147,9 @@ def record_rate_hz(frames: list[int], sim_rate_hz: float) -> float:
     return float(sim_rate_hz) * (len(frames) - 1) / (frames[-1] - frames[0])
 
 
-def _check_sim(sim_dir: Path) -> dict:
+def check_sim(sim_dir: Path) -> dict:
+    """The meta.json of the simulate output ``sim_dir``, after checking that the files the render reads are there;
+    a clear error otherwise."""
     for name in SIM_FILES:
         if not (sim_dir / name).is_file():
             raise FileNotFoundError(f"{sim_dir}: not a simulate output ({name} is missing); "
@@ -200,7 +200,7 @@ def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
     return True
 
 
-def _static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
+def pickle_static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
     """Build and pickle the static world to ``path`` and return it, unless the pickle is there already (None)."""
     if path.is_file():
         return None
@@ -217,33 +217,25 @@ def _static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
            workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
     """Render the record; returns a summary (frames, labels, shards resumed)."""
-    reuse_freed_memory()  # from the start: the static world build's large temporaries too
-    with output_lock(out, "render"), _frozen_heap():  # one writer of OUT and its work folder
+    keep_freed_memory(RENDER_THRESHOLDS)  # from the start: the static world build's large temporaries too
+    with output_lock(out, "render"), frozen_heap():  # one writer of OUT and its work folder
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
                        progress=progress)
 
 
-@contextlib.contextmanager
-def _frozen_heap() -> Iterator[None]:
-    """Keep the objects alive when the render starts out of the cyclic garbage collector's reach while it runs.
-
-    They are mostly the imported modules' objects, and each full collection visited all of them, in the main
-    process and during the static world build that the workers wait for (docs/performance.md). Frozen
-    (gc.freeze), they are skipped, and workers forked from this process keep sharing their pages (a collection
-    writes to every object it visits). Thawed (gc.unfreeze) at the end.
-    """
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
+def worker_context() -> multiprocessing.context.BaseContext:
+    """The start method of the render's worker processes (:func:`pipeline.core.processes.pool_context`): fork
+    from this process while it has cast no Embree scene (Embree's threads do not survive a fork; the case of a
+    `roadsynth render` process, which forks its workers before it renders), else a forkserver that imports
+    :data:`WORKER_MODULES`."""
+    return pool_context(WORKER_MODULES, fork_safe=not embree_started())
 
 
 def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None,
             workers: int, shard_size: int, progress: bool) -> dict[str, object]:
     if shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
-    sim_meta = _check_sim(sim_dir)
+    sim_meta = check_sim(sim_dir)
     rig_actor_meshes(rig)  # read the rig's mesh files now: a bad one fails before any work, and workers inherit them
     seed = int(sim_meta["seed"])
     trajectories = read_parquet(sim_dir / "trajectories.parquet")
@@ -257,95 +249,20 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=1 if workers > 1 else 0)
             for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
-    context = _pool_context() if workers > 1 and len(jobs) > 1 else None  # a forkserver starts now (see there)
-    world = _static_world(sim_dir, seed, work / "static.pkl")
+    context = worker_context() if workers > 1 and len(jobs) > 1 else None  # a forkserver starts now (see there)
+    world = pickle_static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
     if resumed:
         log.info("resuming: %d of %d shards already rendered", resumed, len(shards))
     initial = len(selection) - sum(len(j.frames) for j in jobs)
-    with remembered_world(work / "static.pkl", world):
-        _run(jobs, workers, context, lambda: tqdm(total=len(selection), initial=initial, unit="frame",
-                                                  desc=f"render {condition.name}", disable=not progress))
+    progress_bar = functools.partial(tqdm, total=len(selection), initial=initial, unit="frame",
+                                     desc=f"render {condition.name}", disable=not progress)
+    # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
+    with remembered_world(work / "static.pkl", world), _restored_opencv_threads():
+        run_in_pool(jobs, render_shard, workers, context, progress_bar)
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed
     return summary
-
-
-def _pool_context() -> multiprocessing.context.BaseContext:
-    """The process pool's start method.
-
-    A worker needs the renderer's modules imported: seconds of CPU (open3d, pandas, pyarrow, the pipeline). Plain
-    fork gives it this process's for nothing, but Embree's worker threads do not survive a fork of a process that
-    has started them. So on Linux workers fork from this process while it has made no Embree scene yet (the case
-    of a `roadsynth render` process; :func:`_run` forks them before this process renders). Otherwise they fork
-    from a server process that imports the renderer once and never casts (forkserver; started here, so that its
-    imports run while this process builds the static world), or, where the platform has neither, spawn.
-    """
-    methods = multiprocessing.get_all_start_methods()
-    if sys.platform.startswith("linux") and "fork" in methods and not embree_started():
-        for module in WORKER_MODULES:  # imported once here, for this process's own shards and every child
-            importlib.import_module(module)
-        return multiprocessing.get_context("fork")
-    if "forkserver" not in methods:
-        return multiprocessing.get_context("spawn")
-    from multiprocessing import forkserver
-
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(list(WORKER_MODULES))
-    forkserver.ensure_running()
-    return context
-
-
-def _run(jobs: list[ShardJob], workers: int, context: multiprocessing.context.BaseContext | None,
-         progress: Callable[[], tqdm]) -> None:
-    """Render the shards, with a progress bar from ``progress``: here, or with ``context`` in a pool of
-    ``workers - 1`` processes plus this process, which has everything imported and so renders while the pool
-    starts up (in a thread; the main thread only hands out shards). Each worker holds one shard at a time, so all
-    finish within about one shard of each other.
-
-    The pool gets its first shards before this process starts any thread (the progress bar's monitor, its own
-    rendering): a fork context forks every child at the first submit, and a fork must not copy a process
-    mid-work in another thread.
-    """
-    if context is None:
-        with progress() as bar:
-            for job in jobs:
-                bar.update(render_shard(job))
-        return
-    queue = collections.deque(jobs)
-    children = min(workers, len(jobs)) - 1
-    # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
-    with _restored_opencv_threads(), _stopped_on_failure(cf.ProcessPoolExecutor(
-            children, mp_context=context, initializer=die_with_parent)) as pool:
-        busy: dict[cf.Future, cf.Executor] = {pool.submit(render_shard, queue.popleft()): pool
-                                              for _ in range(children)}
-        with progress() as bar, _stopped_on_failure(cf.ThreadPoolExecutor(1)) as here:
-            idle: list[cf.Executor] = [here]
-            while queue or busy:
-                while queue and idle:
-                    executor = idle.pop()
-                    busy[executor.submit(render_shard, queue.popleft())] = executor
-                done, _ = cf.wait(busy, return_when=cf.FIRST_COMPLETED)
-                for future in done:
-                    idle.append(busy.pop(future))
-                    bar.update(future.result())
-
-
-@contextlib.contextmanager
-def _stopped_on_failure(executor: cf.Executor) -> Iterator[cf.Executor]:
-    """``executor`` for the block; shut down at its end, and when the block fails (an error, Ctrl-C) without
-    starting its queued shards: a pool's workers are killed at once (a shard of theirs is lost, the rest of the
-    render is kept), this process's own shard in progress is waited for (a thread cannot be stopped), so that
-    nothing writes into the work folder once the render has returned and released its lock."""
-    try:
-        yield executor
-    except BaseException:
-        processes = getattr(executor, "_processes", None) or {}  # ProcessPoolExecutor's workers, by pid
-        for process in list(processes.values()):
-            process.kill()
-        executor.shutdown(wait=True, cancel_futures=True)
-        raise
-    executor.shutdown(wait=True)
 
 
 @contextlib.contextmanager

@@ -9,11 +9,8 @@ it is rendered alone, in another shard, or by another worker.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import pickle
-import sys
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,13 +19,14 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ConditionConfig, RigConfig
-from pipeline.core.geometry import Boxes3D, Transform, wrap_angle
-from pipeline.core.jit import as_input, kernel
-from pipeline.core.png import write_png
-from pipeline.core.record import DEPTH_SCALE, FRAME_COLUMNS, LABEL_COLUMNS, POINT_COLUMNS, camera_path, lidar_path
-from pipeline.core.tables import read_parquet, write_ipc, write_sweep
+from pipeline.core.geometry import Transform
+from pipeline.core.processes import RENDER_THRESHOLDS, ProcessCache, keep_freed_memory
+from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, lidar_path
+from pipeline.core.record_writers.camera import camera_label_rows, write_camera_frame
+from pipeline.core.record_writers.lidar import lidar_label_rows, write_lidar_sweep
+from pipeline.core.record_writers.rows import actor_boxes
+from pipeline.core.tables import read_parquet, write_ipc
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
@@ -37,14 +35,6 @@ from pipeline.world.actors import ActorMeshes, Actors, actor_variants, srgb8_to_
 from pipeline.world.materials import material_index
 from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
-
-# A sweep's columns are never null: declared so (Parquet's "required"), they are written without definition levels,
-# a large part of a sweep's write time (see write_sweep, docs/performance.md).
-SWEEP_SCHEMA = pa.schema([pa.field(c, pa.from_numpy_dtype(np.dtype(t)), nullable=False)
-                          for c, t in POINT_COLUMNS.items()])
-# One fixed PNG row filter per image kind (libpng's adaptive choice per row costs more than it saves): Up for the
-# noisy RGB image, Sub for depth (smooth along rows), none for the label images (runs of one value).
-PNG_FILTER = {"rgb": "up", "instance": "none", "semantic": "none", "depth": "sub"}
 
 
 @dataclass(frozen=True)
@@ -89,10 +79,8 @@ class _SignalState:
         self.scene.set_triangle_materials(self.mesh_index, self.triangles, material)
 
 
-BOX_KEYS = ("x1", "y1", "x2", "y2")
 ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad", "color_r",
                  "color_g", "color_b", "braking")
-_COCO_ID = {c.value: c.coco_id for c in ObjectClass}
 
 
 class _Trajectories:
@@ -111,82 +99,10 @@ class _Trajectories:
         return {c: v[ego] for c, v in self.columns.items()}, {c: self.columns[c][others] for c in ACTOR_COLUMNS}
 
 
-def _boxes(cols: dict[str, np.ndarray]) -> Boxes3D:
-    return Boxes3D(np.column_stack([cols["x_m"], cols["y_m"], cols["z_m"]]),
-                   np.column_stack([cols["length_m"], cols["width_m"], cols["height_m"]]), cols["yaw_rad"])
-
-
 def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:
     color = srgb8_to_linear(np.column_stack([cols["color_r"], cols["color_g"], cols["color_b"]]))
-    return Actors(cols["track_id"], cols["cls"].tolist(), _boxes(cols), color, cols["braking"],
+    return Actors(cols["track_id"], cols["cls"].tolist(), actor_boxes(cols), color, cols["braking"],
                   actor_variants(cols["track_id"], seed))
-
-
-def _write_png(path: Path, image: np.ndarray, kind: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_png(path, image, PNG_FILTER[kind])
-
-
-def _identity_columns(frame: int, sensor: str, sensor_type: str, cols: dict[str, np.ndarray],
-                      index: np.ndarray) -> dict[str, np.ndarray]:
-    """Label columns naming the rows ``index`` of one frame's actors: frame, sensor, track, class, world box."""
-    n = len(index)
-    cls = cols["cls"][index]
-    out = {"frame": np.full(n, frame), "sensor": np.full(n, sensor, object),
-           "sensor_type": np.full(n, sensor_type, object), "track_id": cols["track_id"][index], "cls": cls,
-           "category_id": np.array([_COCO_ID[c] for c in cls], np.int64)}
-    out.update({k: cols[k][index] for k in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")})
-    return out
-
-
-def _camera_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray],
-                 lidar_points: np.ndarray) -> dict[str, np.ndarray]:
-    """Label columns of one camera frame; ``lidar_points`` (K,) counts each actor's points over the rig's LiDARs."""
-    lab = cam.labels
-    out = _identity_columns(frame, name, "camera", cols, lab.actor_index)
-    heading = lab.rotation_cam[:, :, 0]  # the box's forward axis in the optical frame
-    tight = np.where(lab.visible[:, None], lab.box_tight, np.nan)  # NaN becomes null when typed Float64
-    out.update({
-        "sensor_x_m": lab.center_cam[:, 0], "sensor_y_m": lab.center_cam[:, 1], "sensor_z_m": lab.center_cam[:, 2],
-        # KITTI rotation_y: the heading in the optical frame is (cos ry, 0, -sin ry).
-        "sensor_yaw_rad": wrap_angle(np.arctan2(-heading[:, 2], heading[:, 0])),
-        "distance_m": lab.distance_m.astype(np.float64), "visible": lab.visible,
-        "visible_px": lab.visible_px, "unoccluded_px": lab.unoccluded_px,
-        "occlusion": lab.occlusion.astype(np.float64), "truncation": lab.truncation.astype(np.float64),
-        "lidar_points": lidar_points[lab.actor_index],
-    })
-    for j, key in enumerate(BOX_KEYS):
-        out[key], out[f"amodal_{key}"], out[f"amodal_clip_{key}"] = (
-            tight[:, j], lab.box_amodal[:, j], lab.box_amodal_clipped[:, j])
-    return out
-
-
-def _lidar_rows(frame: int, name: str, lidar, sweep, cols: dict[str, np.ndarray],
-                ego_pose: Transform) -> dict[str, np.ndarray]:
-    """Label columns of one LiDAR sweep; no 2D fields (null). An actor has a row when its box centre is within the
-    range the sweep was rendered with (``sweep.range_max_m``: the rig's range times the condition's factor), or
-    when it owns at least one point of the sweep (its centre may lie beyond the range)."""
-    world_to_lidar = (ego_pose @ lidar.config.mount).inverse()
-    boxes = _boxes(cols)
-    local = boxes.transformed(world_to_lidar) if abs(world_to_lidar.rotation[2, 2] - 1) < 1e-9 else None
-    centre = world_to_lidar.apply(boxes.center)
-    dist = np.linalg.norm(centre, axis=1)
-    keep = np.flatnonzero((dist <= sweep.range_max_m) | (sweep.points_per_actor > 0))
-    heading = world_to_lidar.apply_vectors(np.column_stack([np.cos(boxes.yaw_rad), np.sin(boxes.yaw_rad),
-                                                            np.zeros(len(boxes))]))
-    yaw = local.yaw_rad if local is not None else np.arctan2(heading[:, 1], heading[:, 0])
-    out = _identity_columns(frame, name, "lidar", cols, keep)
-    null = np.full(len(keep), np.nan)  # NaN becomes null when typed Float64 / Int64
-    out.update({
-        "sensor_x_m": centre[keep, 0], "sensor_y_m": centre[keep, 1], "sensor_z_m": centre[keep, 2],
-        "sensor_yaw_rad": wrap_angle(yaw[keep]), "distance_m": dist[keep], "visible": np.zeros(len(keep), bool),
-        "lidar_points": sweep.points_per_actor[keep],
-    })
-    for key in ("visible_px", "unoccluded_px", "occlusion", "truncation") + BOX_KEYS:
-        out[key] = null
-    for key in BOX_KEYS:
-        out[f"amodal_{key}"] = out[f"amodal_clip_{key}"] = null
-    return out
 
 
 def _shard_type(dtype: str) -> pa.DataType:
@@ -237,72 +153,45 @@ class _WorkerState:
     meshes: ActorMeshes
 
 
-_STATE: dict[tuple, _WorkerState] = {}
-_MESHES: dict[str, ActorMeshes] = {}  # the actor models of the last rig (its JSON) this process built them for
+_STATE = ProcessCache()  # the _WorkerState of the render this process serves
+_MESHES = ProcessCache()  # the actor models of the last rig (its JSON) this process built them for
+_WORLDS = ProcessCache()  # the static world this process built, by the path it was pickled to
 
 
 def rig_actor_meshes(rig: RigConfig) -> ActorMeshes:
     """The rig's actor models (:func:`pipeline.stages.rig.build_actor_meshes`), read once per process and rig:
     the render stage reads them before it starts its workers (bad files fail early), and workers forked from it
     find them here."""
-    key = rig.model_dump_json()
-    if key not in _MESHES:
-        _MESHES.clear()
-        _MESHES[key] = build_actor_meshes(rig)
-    return _MESHES[key]
-_WORLDS: dict[str, StaticWorld] = {}  # the static world this process built, by the path it was pickled to
+    return _MESHES.get(rig.model_dump_json(), lambda: build_actor_meshes(rig))
 
 
-@contextlib.contextmanager
-def remembered_world(path: Path, world: StaticWorld | None) -> Iterator[None]:
+def remembered_world(path: Path, world: StaticWorld | None) -> contextlib.AbstractContextManager[None]:
     """Within the block, :func:`_state` takes ``world``, just pickled to ``path`` by this process, as it is instead
     of unpickling it: in this process, and in workers forked from it (docs/performance.md). Forgotten at the end,
     so that a later render never mistakes it for another pickle at the same path. ``world`` None: nothing to keep
     (the pickle was there already)."""
-    if world is not None:
-        _WORLDS[str(path)] = world
-    try:
-        yield
-    finally:
-        _WORLDS.pop(str(path), None)
-
-
-def reuse_freed_memory() -> None:
-    """Let glibc keep freed memory for the next frame instead of returning it to the OS.
-
-    By default its dynamic thresholds unmap or trim most of a frame's large temporaries (image-sized arrays) when
-    they are freed, and the next frame pays the page faults again (docs/performance.md). Peak memory stays the
-    same (measured): only memory already used once stays mapped.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return
-    m_trim_threshold, m_mmap_threshold = -1, -3  # mallopt parameters (malloc.h)
-    libc.mallopt(m_mmap_threshold, 32 << 20)  # glibc's largest: blocks below this come from the reusable heap
-    libc.mallopt(m_trim_threshold, 1 << 30)
+    return _WORLDS.lent(str(path), world)
 
 
 def _state(job: ShardJob) -> _WorkerState:
     key = (str(job.static_pickle), str(job.sim_dir), job.rig.model_dump_json(), job.condition.model_dump_json())
-    if key not in _STATE:
-        from pipeline.sensors import conditions
+    return _STATE.get(key, lambda: _worker_state(job))
 
-        _STATE.clear()  # one render at a time per process
-        reuse_freed_memory()
-        world = _WORLDS.get(str(job.static_pickle))
-        if world is None:
-            with job.static_pickle.open("rb") as fh:
-                world = pickle.load(fh)
-        static = StaticScene(world.meshes)
-        cameras, lidars = build_sensors(job.rig)
-        _STATE[key] = _WorkerState(world, static, cameras, lidars, conditions.condition_from_config(job.condition),
-                                   _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
-                                   _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
-                                   rig_actor_meshes(job.rig))
-    return _STATE[key]
+
+def _worker_state(job: ShardJob) -> _WorkerState:
+    from pipeline.sensors import conditions
+
+    keep_freed_memory(RENDER_THRESHOLDS)
+    world = _WORLDS.peek(str(job.static_pickle))
+    if world is None:
+        with job.static_pickle.open("rb") as fh:
+            world = pickle.load(fh)
+    static = StaticScene(world.meshes)
+    cameras, lidars = build_sensors(job.rig)
+    return _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
+                        _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
+                        _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
+                        rig_actor_meshes(job.rig))
 
 
 def render_shard(job: ShardJob) -> int:
@@ -331,15 +220,15 @@ def render_shard(job: ShardJob) -> int:
         for k, lidar in enumerate(lidars):
             sweep = render_lidar(scene, lidar, ego_pose, frame_rng(job.seed, condition.name, frame, 1000 + k),
                                  condition=condition)
-            _write_points(lidar_path(job.record_dir, lidar.config.name, frame), sweep)
-            label_parts.append(_lidar_rows(frame, lidar.config.name, lidar, sweep, others, ego_pose))
+            write_lidar_sweep(lidar_path(job.record_dir, lidar.name, frame), sweep)
+            label_parts.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
             lidar_points += sweep.points_per_actor
         for k, camera in enumerate(cameras):
             cam = render_camera(scene, camera, ego_pose, condition, frame_rng(job.seed, condition.name, frame, k),
                                 street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
                                 ego_size_m=ego_size_m)
-            _write_camera(job.record_dir, camera.config.name, frame, cam)
-            label_parts.append(_camera_rows(frame, camera.config.name, cam, others, lidar_points))
+            write_camera_frame(job.record_dir, camera.name, frame, cam)
+            label_parts.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
         frame_rows.append((frame, float(ego["time_s"]), int(ego["track_id"]), ego["x_m"], ego["y_m"], ego["z_m"],
                            ego["yaw_rad"], ego["speed_mps"]))
     frames = _shard_table({c: [row[i] for row in frame_rows] for i, c in enumerate(FRAME_COLUMNS)}, SHARD_FRAMES)
@@ -348,35 +237,3 @@ def render_shard(job: ShardJob) -> int:
     write_ipc(_label_table(label_parts), job.shard_dir / f"labels-{job.index:05d}.arrow")
     (job.shard_dir / f"done-{job.index:05d}").write_text(" ".join(map(str, job.frames)) + "\n")
     return len(job.frames)
-
-
-def _write_camera(root: Path, name: str, frame: int, cam) -> None:
-    if cam.instance_id.max(initial=0) > np.iinfo(np.uint16).max:
-        raise ValueError(f"track id {cam.instance_id.max()} does not fit the uint16 instance image")
-    depth = _depth_png(as_input(cam.depth_m, np.float32), as_input(cam.depth_valid, bool), np.float32(DEPTH_SCALE))
-    images = {"rgb": cam.rgb, "instance": cam.instance_id.astype(np.uint16),
-              "semantic": cam.semantic.astype(np.uint8), "depth": depth}
-    for kind, image in images.items():
-        _write_png(camera_path(root, name, kind, frame), image, kind)
-
-
-@kernel("uint16[:, ::1](float32[:, ::1], bool_[:, ::1], float32)")
-def _depth_png(depth_m, valid, scale):
-    """The depth PNG's (H, W) uint16 values: round(depth * scale) clipped to [1, 65535] where valid, 0 elsewhere."""
-    out = np.zeros(depth_m.shape, np.uint16)
-    for y in range(depth_m.shape[0]):
-        for x in range(depth_m.shape[1]):
-            if valid[y, x]:
-                out[y, x] = min(max(np.rint(depth_m[y, x] * scale), np.float32(1)), np.float32(65535))
-    return out
-
-
-def _write_points(path: Path, sweep) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    columns = {
-        "x_m": sweep.points_m[:, 0], "y_m": sweep.points_m[:, 1], "z_m": sweep.points_m[:, 2],
-        "intensity": sweep.intensity, "ring": sweep.ring, "instance_id": sweep.instance_id, "semantic": sweep.semantic,
-    }
-    # Straight to Arrow (no DataFrame): half the time of a DataFrame.
-    arrays = [pa.array(np.ascontiguousarray(columns[c], dtype=t)) for c, t in POINT_COLUMNS.items()]
-    write_sweep(pa.Table.from_arrays(arrays, schema=SWEEP_SCHEMA), path)

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from pipeline.core.classes import ObjectClass, SemanticClass
+from pipeline.core.config import ConditionConfig
+from pipeline.core.config.sensors import CameraConfig, LidarConfig
 from pipeline.core.geometry import Boxes3D
+from pipeline.sensors.conditions import Condition
 from pipeline.world.actors import ActorMeshes, Actors
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
@@ -56,3 +59,18 @@ def actors_factory():
 def wall():
     """:func:`wall_mesh`, as a fixture."""
     return wall_mesh
+
+
+def camera_config(**fields) -> CameraConfig:
+    """A validated camera config named "front", mounted at the ego's origin unless ``fields`` say otherwise."""
+    return CameraConfig(**{"name": "front", "mount": {"xyz_m": (0.0, 0.0, 0.0)}, **fields})
+
+
+def lidar_config(**fields) -> LidarConfig:
+    """A validated LiDAR config named "top", mounted at the ego's origin unless ``fields`` say otherwise."""
+    return LidarConfig(**{"name": "top", "mount": {"xyz_m": (0.0, 0.0, 0.0)}, **fields})
+
+
+def condition(**sections) -> Condition:
+    """A condition named "test" from config sections (``sun={"elevation_deg": 10.0}``, ...); the rest default."""
+    return Condition(ConditionConfig(name="test", **sections))

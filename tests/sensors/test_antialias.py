@@ -7,11 +7,12 @@ import numpy as np
 
 from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.render import edge_pixels, render_camera
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
+from tests.sensors.conftest import camera_config
 
 EGO = Transform.identity()  # the camera looks along +x from the origin
 
@@ -30,7 +31,7 @@ def centre_hits(scene: FrameScene, camera: Camera):
 
 def test_a_plane_at_any_slant_has_edges_only_at_its_horizon(actors_factory):
     """Depth along a road seen at a grazing angle changes fast, but 1/z is affine on a plane: no edge there."""
-    camera = Camera(CameraConfig(width_px=200, height_px=150))
+    camera = Camera(camera_config(width_px=200, height_px=150))
     scene = FrameScene(StaticScene([ground()]), actors_factory(np.zeros((0, 3)), np.zeros((0, 3))))
     hits, depth = centre_hits(scene, camera)
     hit = hits.hit.reshape(camera.height, camera.width)
@@ -42,7 +43,7 @@ def test_a_plane_at_any_slant_has_edges_only_at_its_horizon(actors_factory):
 
 
 def test_edges_cover_a_box_silhouette_and_little_else(box_meshes, actors_factory, wall):
-    camera = Camera(CameraConfig(width_px=200, height_px=150))
+    camera = Camera(camera_config(width_px=200, height_px=150))
     actors = actors_factory([[15.0, 1.0, 0.0]], [[4.0, 2.0, 1.5]], yaws=[0.35])
     scene = FrameScene(StaticScene([wall(40.0)]), actors, box_meshes)
     hits, depth = centre_hits(scene, camera)
@@ -64,15 +65,15 @@ def test_extra_samples_change_only_edge_pixels(box_meshes, actors_factory, wall)
     """With N samples the colour of a non-edge pixel is its centre sample's, byte for byte; labels never change."""
     actors = actors_factory([[15.0, 1.0, 0.0]], [[4.0, 2.0, 1.5]], yaws=[0.35])
     scene = FrameScene(StaticScene([wall(40.0)]), actors, box_meshes)
-    one = render_camera(scene, Camera(CameraConfig(width_px=200, height_px=150)), EGO)
-    four_camera = Camera(CameraConfig(width_px=200, height_px=150, samples_per_pixel=4))
+    one = render_camera(scene, Camera(camera_config(width_px=200, height_px=150)), EGO)
+    four_camera = Camera(camera_config(width_px=200, height_px=150, samples_per_pixel=4))
     four = render_camera(scene, four_camera, EGO)
     edge = edge_pixels(*centre_hits(scene, four_camera))
     changed = (one.rgb != four.rgb).any(axis=2)
     assert changed.any() and not changed[~edge].any()
     np.testing.assert_array_equal(one.instance_id, four.instance_id)
     np.testing.assert_array_equal(one.labels.box_tight, four.labels.box_tight)
-    everywhere = render_camera(scene, Camera(CameraConfig(width_px=200, height_px=150, samples_per_pixel=4,
+    everywhere = render_camera(scene, Camera(camera_config(width_px=200, height_px=150, samples_per_pixel=4,
                                                           samples_everywhere=True)), EGO)
     np.testing.assert_array_equal(everywhere.rgb[edge], four.rgb[edge])  # the same samples where both take them
 

@@ -7,39 +7,41 @@ import numpy as np
 import pytest
 
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
+from tests.sensors.conftest import camera_config
 
 DISTORTION = (-0.12, 0.02, 0.001, -0.0015, -0.002)
 
 
 def test_intrinsics_from_hfov():
-    cam = Camera(CameraConfig(width_px=800, height_px=600, hfov_deg=90.0))
+    cam = Camera(camera_config(width_px=800, height_px=600, hfov_deg=90.0))
     assert cam.fx == pytest.approx(400.0) and cam.fy == pytest.approx(400.0)
     assert (cam.cx, cam.cy) == (400.0, 300.0)
-    explicit = Camera(CameraConfig(intrinsics=(500.0, 510.0, 401.0, 299.0)))
+    explicit = Camera(camera_config(hfov_deg=None, K=((500.0, 0.0, 401.0), (0.0, 510.0, 299.0), (0.0, 0.0, 1.0))))
     np.testing.assert_allclose(explicit.K, [[500, 0, 401], [0, 510, 299], [0, 0, 1]])
 
 
 @pytest.mark.parametrize(
     "kwargs",
     [dict(width_px=0), dict(hfov_deg=180.0), dict(distortion=(0.1, 0.2)), dict(samples_per_pixel=0),
-     dict(intrinsics=(0.0, 1.0, 2.0, 3.0))],
+     dict(hfov_deg=None, K=((0.0, 0.0, 2.0), (0.0, 1.0, 3.0), (0.0, 0.0, 1.0)))],
 )
 def test_bad_config_raises(kwargs):
     with pytest.raises(ValueError):
-        CameraConfig(**kwargs)
+        camera_config(**kwargs)
 
 
 def test_pixel_centre_rays():
-    cam = Camera(CameraConfig(width_px=8, height_px=6, hfov_deg=90.0))
-    d = cam.pixel_directions.reshape(6, 8, 3)
-    # pixel (col 4, row 3) has its centre at (4.5, 3.5): x = 0.5 / fx, y = 0.5 / fy in the optical frame.
+    cam = Camera(camera_config(width_px=16, height_px=16, hfov_deg=90.0))
+    d = cam.pixel_directions.reshape(16, 16, 3)
+    # pixel (col 8, row 8) has its centre at (8.5, 8.5): x = 0.5 / fx, y = 0.5 / fy in the optical frame.
     expected = np.array([0.5 / cam.fx, 0.5 / cam.fy, 1.0])
-    np.testing.assert_allclose(d[3, 4], expected / np.linalg.norm(expected), atol=1e-7)
+    np.testing.assert_allclose(d[8, 8], expected / np.linalg.norm(expected), atol=1e-7)
 
 
-@pytest.mark.parametrize("config", [CameraConfig(), CameraConfig(width_px=37, height_px=23, hfov_deg=70.0),
-                                    CameraConfig(width_px=64, height_px=48, intrinsics=(50.5, 61.0, 30.25, 25.0))])
+@pytest.mark.parametrize("config", [camera_config(), camera_config(width_px=37, height_px=23, hfov_deg=70.0),
+                                    camera_config(width_px=64, height_px=48, hfov_deg=None,
+                                                  K=((50.5, 0.0, 30.25), (0.0, 61.0, 25.0), (0.0, 0.0, 1.0)))])
 def test_pixel_directions_without_distortion_are_unprojects_bytes(config):
     """Without distortion pixel_directions takes a compiled path of its own: the same bytes as unproject."""
     cam = Camera(config)
@@ -50,7 +52,7 @@ def test_pixel_directions_without_distortion_are_unprojects_bytes(config):
 
 
 def test_camera_to_world_looks_along_ego_x():
-    cam = Camera(CameraConfig(mount=Transform.from_xyz_rpy((1.0, 0.0, 1.5))))
+    cam = Camera(camera_config(mount={"xyz_m": (1.0, 0.0, 1.5)}))
     pose = cam.camera_to_world(Transform.from_xyz_rpy((10.0, 5.0, 0.0), (0.0, 0.0, np.pi / 2)))
     np.testing.assert_allclose(pose.translation, [10.0, 6.0, 1.5], atol=1e-12)
     np.testing.assert_allclose(pose.apply_vectors([0.0, 0.0, 1.0]), [0.0, 1.0, 0.0], atol=1e-12)  # optical z = heading
@@ -59,7 +61,7 @@ def test_camera_to_world_looks_along_ego_x():
 
 
 def test_distortion_round_trip():
-    cam = Camera(CameraConfig(distortion=DISTORTION))
+    cam = Camera(camera_config(distortion=DISTORTION))
     rng = np.random.default_rng(0)
     uv = rng.uniform([0, 0], [800, 600], size=(5000, 2))
     dirs, invertible = cam.unproject(uv)
@@ -69,7 +71,7 @@ def test_distortion_round_trip():
 
 
 def test_projection_matches_opencv():
-    cam = Camera(CameraConfig(distortion=DISTORTION))
+    cam = Camera(camera_config(distortion=DISTORTION))
     rng = np.random.default_rng(1)
     pts = np.column_stack([rng.uniform(-4, 4, 500), rng.uniform(-3, 3, 500), rng.uniform(5, 30, 500)])
     ours, _ = cam.project(pts)
@@ -78,17 +80,17 @@ def test_projection_matches_opencv():
 
 
 def test_points_behind_are_masked():
-    cam = Camera(CameraConfig())
+    cam = Camera(camera_config())
     _, in_front = cam.project(np.array([[0.0, 0.0, 5.0], [0.0, 0.0, -5.0], [1.0, 0.0, 0.0]]))
     assert in_front.tolist() == [True, False, False]
 
 
 def test_samples_are_stratified_inside_their_pixel_and_seeded():
-    cfg = CameraConfig(width_px=16, height_px=12, samples_per_pixel=4, distortion=DISTORTION, jitter_seed=3)
+    cfg = camera_config(width_px=16, height_px=16, samples_per_pixel=4, distortion=DISTORTION, name="cam3")
     cam = Camera(cfg)
     s = cam.sample_directions
-    assert s.shape == (4, 16 * 12, 3)
-    rows, cols = np.divmod(np.arange(16 * 12), 16)
+    assert s.shape == (4, 16 * 16, 3)
+    rows, cols = np.divmod(np.arange(16 * 16), 16)
     for k in range(4):
         uv, _ = cam.project(s[k].astype(np.float64))
         assert np.all((uv[:, 0] >= cols - 1e-4) & (uv[:, 0] < cols + 1 + 1e-4))
@@ -99,7 +101,7 @@ def test_samples_are_stratified_inside_their_pixel_and_seeded():
 
 
 def test_distortion_beyond_its_fold_is_refused():
-    cam = Camera(CameraConfig(hfov_deg=100.0, distortion=(-0.28, 0.09, 0.0, 0.0, -0.012)))
+    cam = Camera(camera_config(hfov_deg=100.0, distortion=(-0.28, 0.09, 0.0, 0.0, -0.012)))
     _, invertible = cam.unproject(np.array([[400.0, 300.0], [0.0, 0.0]]))
     assert invertible.tolist() == [True, False]
     with pytest.raises(ValueError, match="cannot be inverted"):
@@ -119,7 +121,7 @@ def _box_hits(cam: Camera, cam_to_world: Transform, lo, hi) -> np.ndarray:
 
 
 def test_boxes_pixel_mask_of_a_box_in_front_is_its_projected_rectangle():
-    cam = Camera(CameraConfig(width_px=800, height_px=600, hfov_deg=90.0))  # fx = fy = 400, centre (400, 300)
+    cam = Camera(camera_config(width_px=800, height_px=600, hfov_deg=90.0))  # fx = fy = 400, centre (400, 300)
     optical = Transform.identity()  # the optical frame is the world: x right, y down, z forward
     mask = cam.boxes_pixel_mask(optical, [[-1.0, -0.5, 4.0]], [[1.0, 0.5, 6.0]]).reshape(600, 800)
     # The nearest face spans x/z in [-1/4, 1/4], y/z in [-1/8, 1/8]: columns [300, 500], rows [250, 350],
@@ -138,7 +140,7 @@ def test_boxes_pixel_mask_of_a_box_in_front_is_its_projected_rectangle():
     ((-5.0, -5.0, -1.0), (5.0, 5.0, 5.0)),  # around the camera: every ray
 ])
 def test_boxes_pixel_mask_covers_every_ray_through_a_box(distortion, box):
-    cam = Camera(CameraConfig(width_px=160, height_px=120, distortion=distortion))
+    cam = Camera(camera_config(width_px=160, height_px=120, distortion=distortion))
     cam_to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 0.75), (0.0, 0.05, 0.1)))
     lo, hi = np.array([box[0]]), np.array([box[1]])
     hits = _box_hits(cam, cam_to_world, lo[0], hi[0])
@@ -148,7 +150,7 @@ def test_boxes_pixel_mask_covers_every_ray_through_a_box(distortion, box):
 
 
 def test_boxes_pixel_mask_is_empty_behind_the_camera_and_full_around_it():
-    cam = Camera(CameraConfig(width_px=80, height_px=60))
+    cam = Camera(camera_config(width_px=80, height_px=60))
     optical = Transform.identity()
     assert not cam.boxes_pixel_mask(optical, [[-1.0, -1.0, -6.0]], [[1.0, 1.0, -4.0]]).any()
     assert not cam.boxes_pixel_mask(optical, np.zeros((0, 3)), np.zeros((0, 3))).any()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -11,14 +10,15 @@ import pytest
 from pipeline.core.classes import SemanticClass
 from pipeline.core.config import ConditionConfig, ConfigError, config_dir, load_config
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
-from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, condition_from_config, get_condition
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.camera import Camera
+from pipeline.sensors.conditions import KOSCHMIEDER, SHIPPED, Condition, get_condition
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
-from pipeline.sensors.shading import Lighting, shade
+from pipeline.sensors.shading import shade
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
+from tests.sensors.conftest import camera_config, condition, lidar_config
 
 SMALL = dict(width_px=160, height_px=120)
 
@@ -36,7 +36,7 @@ def test_every_shipped_yaml_validates():
     for f in files:
         cfg, path = load_config(ConditionConfig, f.stem, "conditions")
         assert cfg.name == f.stem and path == f
-        assert condition_from_config(cfg).name == f.stem
+        assert Condition(cfg).name == f.stem
 
 
 @pytest.mark.parametrize(("body", "key"), [
@@ -63,11 +63,11 @@ def test_user_condition_from_any_path(tmp_path: Path):
     path = tmp_path / "storm.yaml"
     path.write_text("name: storm\nfog: {visibility_m: 40.0}\nrain: {intensity: 1.0}\n")
     cond = get_condition(path)
-    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.lighting.wetness > 0
+    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.wetness > 0
 
 
 def test_fog_follows_koschmieder():
-    cond = Condition("test", Lighting(), fog_visibility_m=100.0, fog_rgb=(0.5, 0.5, 0.5))
+    cond = condition(fog={"visibility_m": 100.0, "color_rgb": (0.5, 0.5, 0.5)})
     radiance = np.array([[1.0, 0.0, 0.2]] * 3, np.float32)
     out = cond.fog(radiance, np.array([0.0, 100.0, np.inf], np.float32), np.array([True, True, False]))
     np.testing.assert_allclose(out[0], radiance[0])
@@ -82,13 +82,13 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
     fog = get_condition("fog")
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[12.0, 1.0, 0.75], [35.0, -4.0, 0.75]],
                                                                            [[4.5, 1.8, 1.5]] * 2))
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     to_world = cam.camera_to_world(Transform.from_xyz_rpy((0.0, 0.0, 1.5)))
     rays = make_rays(to_world.translation, cam.pixel_directions, to_world.rotation)
     hits = scene.cast_rays(rays)
-    clear = shade(scene, rays, hits, fog.lighting)
+    clear = shade(scene, rays, hits, fog)
     foggy = fog.fog(clear, hits.t_m, hits.hit)
-    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.lighting.exposure
+    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.exposure
     ok = hits.hit & (np.abs(clear[:, 0] - airlight[0]) > 0.05)
     assert ok.sum() > 1000 and np.ptp(hits.t_m[ok]) > 30.0
     ratio = (foggy[ok, 0] - airlight[0]) / (clear[ok, 0] - airlight[0])
@@ -97,7 +97,7 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
 
 def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
     # The same dark box at 10 m and at 60 m in front of a bright wall: fog shrinks the far one's contrast.
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     contrast = []
     for x in (10.0, 60.0):
         scene = FrameScene(StaticScene([wall(x + 2.0, material="lane_paint")]),
@@ -112,9 +112,9 @@ def test_fog_lowers_contrast_with_distance(box_meshes, actors_factory, wall):
 def test_rain_near_road_is_darker_than_dry():
     # The near road, seen steeply, is darker when wet; at grazing angles it mirrors the sky (not tested here).
     rain = get_condition("rain")
-    dry = dataclasses.replace(rain, lighting=dataclasses.replace(rain.lighting, wetness=0.0), rain=None)
+    dry = Condition(rain.config.model_copy(update={"rain": None}))
     scene = FrameScene(StaticScene([ground()]), _no_actors())
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     pose = Transform.from_xyz_rpy((0.0, 0.0, 1.5))
     wet_img = render_camera(scene, cam, pose, rain).rgb.astype(float)
     dry_img = render_camera(scene, cam, pose, dry).rgb.astype(float)
@@ -131,7 +131,7 @@ def _no_actors():
 
 def test_same_seed_same_noisy_image(actors_factory, wall):
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors_factory([[15.0, 1.0, 0.75]], [[4.5, 1.8, 1.5]]))
-    cam = Camera(CameraConfig(**SMALL))
+    cam = Camera(camera_config(**SMALL))
     pose = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
     for name in ("night", "rain"):
         cond = get_condition(name)
@@ -144,8 +144,8 @@ def test_same_seed_same_noisy_image(actors_factory, wall):
 
 def test_fog_cuts_lidar_range_and_intensity(wall):
     fog = get_condition("fog")
-    lidar = Lidar(LidarConfig(channels=8, fov_upper_deg=2.0, fov_lower_deg=-2.0, horizontal_resolution_deg=1.0,
-                              dropout_prob=0.0, range_noise_std_m=0.0))
+    lidar = Lidar(lidar_config(channels=8, upper_fov_deg=2.0, lower_fov_deg=-2.0, horizontal_resolution_deg=1.0,
+                              dropout=0.0, range_noise_std_m=0.0))
     near = FrameScene(StaticScene([wall(30.0)]), _no_actors())
     clear = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0))
     foggy = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)
@@ -158,6 +158,6 @@ def test_fog_cuts_lidar_range_and_intensity(wall):
     d = np.linalg.norm(clear.points_m[both], axis=1)
     expected = clear.intensity[both] * fx.intensity_factor * np.exp(-a * (fx.attenuation_factor - 1.0) * d)
     np.testing.assert_allclose(foggy.intensity, expected, rtol=1e-4)
-    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_max_m)]), _no_actors())
+    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_m)]), _no_actors())
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0))) > 0
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)) == 0

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.sensors.camera import Camera, CameraConfig
+from pipeline.sensors.camera import Camera
 from pipeline.sensors.render import render_camera
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import camera_config
 
 FX = CX = 400.0  # 800 x 600, hfov 90 deg: fx = fy = 400, (cx, cy) = (400, 300)
 CY = 300.0
@@ -24,7 +25,7 @@ def analytic_bbox(corners_world: np.ndarray) -> np.ndarray:
 
 def render(actors, box_meshes, static=(), **camera_kwargs):
     scene = FrameScene(StaticScene(list(static)), actors, box_meshes)
-    return render_camera(scene, Camera(CameraConfig(**camera_kwargs)), EGO)
+    return render_camera(scene, Camera(camera_config(**camera_kwargs)), EGO)
 
 
 def row_of(labels, track_id):
@@ -124,7 +125,7 @@ def test_procedural_meshes_tight_within_amodal(actors_factory):
     actors = actors_factory(centers, [[4.5, 1.8, 1.5]] * len(classes), yaws=np.linspace(-3, 3, len(classes)),
                             classes=classes)
     scene = FrameScene(StaticScene([]), actors)
-    lab = render_camera(scene, Camera(CameraConfig()), EGO).labels
+    lab = render_camera(scene, Camera(camera_config()), EGO).labels
     assert (lab.visible_px <= lab.unoccluded_px).all()
     vis = lab.visible & (lab.occlusion == 0)
     assert vis.any()
@@ -151,7 +152,7 @@ def test_actor_ray_mask_is_a_superset(actors_factory):
     actors = actors_factory(np.column_stack([rng.uniform(-5, 60, n), rng.uniform(-15, 15, n), rng.uniform(-2, 1, n)]),
                             rng.uniform(0.5, 10, (n, 3)), yaws=rng.uniform(-3, 3, n), classes=classes)
     scene = FrameScene(StaticScene([]), actors)
-    cam = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=100))
+    cam = Camera(camera_config(width_px=160, height_px=120, hfov_deg=100))
     from pipeline.sensors.groundtruth import project_actors
 
     to_world = cam.camera_to_world(EGO)
@@ -165,7 +166,7 @@ def test_actor_ray_mask_is_a_superset(actors_factory):
 def test_boxes3d_world_round_trip(box_meshes, actors_factory):
     actors = actors_factory([[20.0, 1.0, -0.5]], [[4.0, 2.0, 1.5]], yaws=[0.35])
     lab = render(actors, box_meshes).labels
-    cam_to_world = Camera(CameraConfig()).camera_to_world(EGO)
+    cam_to_world = Camera(camera_config()).camera_to_world(EGO)
     back = Boxes3D(cam_to_world.apply(lab.center_cam), lab.size, [0.35])
     np.testing.assert_allclose(back.corners(), actors.boxes.corners(), atol=1e-9)
 
@@ -173,7 +174,7 @@ def test_boxes3d_world_round_trip(box_meshes, actors_factory):
 def test_empty_world_is_all_sky_and_has_no_labels():
     from pipeline.world.actors import Actors
 
-    frame = render_camera(FrameScene(StaticScene([]), Actors.empty()), Camera(CameraConfig(width_px=40, height_px=30)),
+    frame = render_camera(FrameScene(StaticScene([]), Actors.empty()), Camera(camera_config(width_px=40, height_px=30)),
                           EGO)
     assert len(frame.labels) == 0 and not frame.depth_valid.any() and not frame.instance_id.any()
     assert (frame.rgb[0, :, 2] > frame.rgb[0, :, 0]).all()  # blue sky
@@ -232,7 +233,7 @@ def test_amodal_boxes_from_hull_vertices_equal_those_from_all_vertices(distortio
                     rng.uniform(0, 1, (n, 3)), variant=actor_variants(np.arange(1, n + 1), 3))
     scene = FrameScene(StaticScene([]), actors)
     kwargs = {} if distortion is None else {"distortion": distortion, "hfov_deg": 70.0}
-    camera = Camera(CameraConfig(**kwargs))
+    camera = Camera(camera_config(**kwargs))
     cam_to_world = camera.camera_to_world(EGO)
     fast = project_actors(scene, camera, cam_to_world)
     assert scene.geometry.vertex_on_hull.mean() < 0.5  # the hulls leave most vertices out

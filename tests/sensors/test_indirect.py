@@ -17,11 +17,12 @@ from pipeline.sensors.indirect import (
     occlusion_rays,
     sky_visibility,
 )
-from pipeline.sensors.shading import FILMIC_GAIN, Lighting, shade, sky, to_srgb8
+from pipeline.sensors.shading import FILMIC_GAIN, shade, sky, to_srgb8
 from pipeline.world.actors import Actors
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import condition
 
 
 def plane(material: str = "asphalt", half_m: float = 200.0) -> Mesh:
@@ -110,7 +111,7 @@ def test_mirror_rays_closed_form():
 def test_paint_under_an_open_sky_mirrors_it():
     """Straight down onto a painted plane, no sun: with reflections the radiance is (1 - F0) x its own plus F0 x
     the sky straight up (F0 at normal incidence); sky occlusion changes nothing (no actors)."""
-    lighting = Lighting(sun_elevation_deg=-10.0, sun_rgb=(0.0, 0.0, 0.0), ambient_rgb=(0.4, 0.4, 0.4))
+    lighting = condition(sun={"elevation_deg": -10.0}, sky={"ambient_rgb": (0.4, 0.4, 0.4)})
     scene = FrameScene(StaticScene([plane("paint")]), Actors.empty())
     rays = down_rays(np.array([[0.0, 0.0]]))
     hits = scene.cast_rays(rays)

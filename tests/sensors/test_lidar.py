@@ -6,35 +6,36 @@ import numpy as np
 import pytest
 
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.camera import Camera
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.render import render_camera
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import camera_config, lidar_config
 
 EGO = Transform.identity()
-EXACT = dict(range_noise_std_m=0.0, dropout_prob=0.0)
+EXACT = dict(range_noise_std_m=0.0, dropout=0.0)
 
 
 def sweep(scene, seed=0, **cfg):
-    return render_lidar(scene, Lidar(LidarConfig(**{**EXACT, **cfg})), EGO, np.random.default_rng(seed))
+    return render_lidar(scene, Lidar(lidar_config(**{**EXACT, **cfg})), EGO, np.random.default_rng(seed))
 
 
 def test_ray_pattern():
-    lidar = Lidar(LidarConfig(channels=4, fov_upper_deg=10.0, fov_lower_deg=-20.0, horizontal_resolution_deg=90.0))
-    d = lidar.directions.reshape(4, 4, 3)  # (column, ring)
+    lidar = Lidar(lidar_config(channels=4, upper_fov_deg=10.0, lower_fov_deg=-20.0, horizontal_resolution_deg=10.0))
+    d = lidar.directions.reshape(36, 4, 3)  # (column, ring)
     np.testing.assert_allclose(np.degrees(np.arcsin(d[0, :, 2])), [10.0, 0.0, -10.0, -20.0], atol=1e-5)
-    az = np.degrees(np.arctan2(d[:, 0, 1], d[:, 0, 0]))
+    az = np.degrees(np.arctan2(d[::9, 0, 1], d[::9, 0, 0]))
     np.testing.assert_allclose(az, [180.0, 90.0, 0.0, -90.0], atol=1e-5)  # clockwise from behind
     with pytest.raises(ValueError):
-        LidarConfig(horizontal_resolution_deg=0.7)
+        lidar_config(horizontal_resolution_deg=0.7)
     with pytest.raises(ValueError):
-        LidarConfig(dropout_prob=1.0)
+        lidar_config(dropout=1.0)
 
 
 def test_range_to_a_wall_at_a_known_distance(wall):
     scene = FrameScene(StaticScene([wall(25.0)]), _no_actors())
-    s = sweep(scene, range_max_m=200.0)
+    s = sweep(scene, range_m=200.0)
     assert len(s) > 1000
     np.testing.assert_allclose(s.points_m[:, 0], 25.0, atol=1e-3)  # every point lies on the wall
     assert (s.points_m[:, 0] > 0).all() and (s.instance_id == 0).all()
@@ -55,16 +56,15 @@ def test_intensity_follows_exp_minus_a_d(wall):
 
 
 def s_elev(ring: int) -> float:
-    cfg = LidarConfig()
-    return np.linspace(cfg.fov_upper_deg, cfg.fov_lower_deg, cfg.channels)[ring]
+    cfg = lidar_config()
+    return np.linspace(cfg.upper_fov_deg, cfg.lower_fov_deg, cfg.channels)[ring]
 
 
 def test_object_points_lie_in_their_box_and_project_into_their_tight_box(box_meshes, actors_factory, wall):
     actors = actors_factory([[12.0, 2.0, -0.8], [25.0, -3.0, -0.6], [40.0, 4.0, 0.0]],
                             [[4.5, 1.8, 1.5], [8.0, 2.5, 3.0], [12.0, 2.5, 3.2]], yaws=[0.2, -0.4, 3.0])
     scene = FrameScene(StaticScene([wall(80.0)]), actors, box_meshes)
-    mount = Transform.from_xyz_rpy((0.3, 0.0, 0.4))
-    lidar = Lidar(LidarConfig(mount=mount, **EXACT))
+    lidar = Lidar(lidar_config(mount={"xyz_m": (0.3, 0.0, 0.4)}, **EXACT))
     s = render_lidar(scene, lidar, EGO, np.random.default_rng(0))
     world = lidar.lidar_to_world(EGO).apply(s.points_m)
     inside = actors.boxes.contains(world, margin_m=1e-3)  # (K, M)
@@ -73,10 +73,10 @@ def test_object_points_lie_in_their_box_and_project_into_their_tight_box(box_mes
         assert mine.sum() == s.points_per_actor[k] > 20
         assert inside[k, mine].all()
         assert not inside[k, s.instance_id == 0].any()
-    frame = render_camera(scene, Camera(CameraConfig()), EGO)
+    frame = render_camera(scene, Camera(camera_config()), EGO)
     cam_to_world = frame.cam_to_world
     for row, tid in enumerate(frame.labels.track_id):
-        uv, in_front = Camera(CameraConfig()).project(cam_to_world.inverse().apply(world[s.instance_id == tid]))
+        uv, in_front = Camera(camera_config()).project(cam_to_world.inverse().apply(world[s.instance_id == tid]))
         x1, y1, x2, y2 = frame.labels.box_tight[row]
         on_image = in_front & (uv[:, 0] >= 0) & (uv[:, 0] < 800) & (uv[:, 1] >= 0) & (uv[:, 1] < 600)
         assert on_image.any()
@@ -86,7 +86,7 @@ def test_object_points_lie_in_their_box_and_project_into_their_tight_box(box_mes
 
 def test_same_seed_same_sweep_noise_and_dropout(wall):
     scene = FrameScene(StaticScene([wall(20.0)]), _no_actors())
-    cfg = dict(range_noise_std_m=0.05, dropout_prob=0.1)
+    cfg = dict(range_noise_std_m=0.05, dropout=0.1)
     a, b, c = sweep(scene, 1, **cfg), sweep(scene, 1, **cfg), sweep(scene, 2, **cfg)
     np.testing.assert_array_equal(a.points_m, b.points_m)
     np.testing.assert_array_equal(a.intensity, b.intensity)
@@ -104,8 +104,8 @@ def test_actor_ray_mask_is_a_superset(actors_factory):
     actors = actors_factory(np.column_stack([r * np.cos(phi), r * np.sin(phi), rng.uniform(-2, 2, n)]),
                             rng.uniform(0.5, 12, (n, 3)), yaws=rng.uniform(-3, 3, n))
     scene = FrameScene(StaticScene([]), actors)
-    mount = Transform.from_xyz_rpy((0, 0, 1.0), (0.05, -0.1, 0.3))
-    lidar = Lidar(LidarConfig(horizontal_resolution_deg=0.5, mount=mount))
+    lidar = Lidar(lidar_config(horizontal_resolution_deg=0.5,
+                               mount={"xyz_m": (0, 0, 1.0), "rpy_rad": (0.05, -0.1, 0.3)}))
     to_world = lidar.lidar_to_world(EGO)
     mask = lidar.actor_ray_mask(scene, to_world)
     d = lidar.directions @ to_world.rotation.T.astype(np.float32)

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
-from pipeline.sensors.camera import Camera, CameraConfig
-from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.camera import Camera
+from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.lights import ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.shading import shade
@@ -17,6 +15,7 @@ from pipeline.world.actors import Actors
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import camera_config
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))  # a car's box centre is 0.75 m above the road
 MATTE = "concrete"  # no specular term: closed forms hold for the diffuse light alone
@@ -31,7 +30,8 @@ def ground(half_m: float = 300.0, material: str = MATTE) -> Mesh:
 
 def night_without_others():
     night = get_condition("night")
-    return dataclasses.replace(night, headlights=night.headlights.model_copy(update={"others": False}))
+    headlights = night.headlights.model_copy(update={"others": False})
+    return Condition(night.config.model_copy(update={"headlights": headlights}))
 
 
 def down_ray(point: np.ndarray) -> np.ndarray:
@@ -42,7 +42,7 @@ def down_ray(point: np.ndarray) -> np.ndarray:
 def test_night_is_darker_than_morning(actors_factory, wall):
     actors = actors_factory([[15.0, 1.0, 0.75], [30.0, -3.0, 0.75]], [[4.5, 1.8, 1.5]] * 2, brake=[True, False])
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors)
-    cam = Camera(CameraConfig(width_px=160, height_px=120))
+    cam = Camera(camera_config(width_px=160, height_px=120))
     morning = render_camera(scene, cam, EGO, get_condition("morning")).rgb.mean()
     night = render_camera(scene, cam, EGO, get_condition("night")).rgb.mean()
     assert night < 0.5 * morning
@@ -61,24 +61,24 @@ def test_headlight_on_axis_irradiance_is_closed_form():
     assert abs(on_axis[2]) < 1e-9
     scene = FrameScene(StaticScene([ground()]), Actors.empty())
     rays = down_ray(on_axis)
-    out = shade(scene, rays, scene.cast_rays(rays), night.lighting, light)
+    out = shade(scene, rays, scene.cast_rays(rays), night, light)
     window = (1.0 - (s / cfg.range_m) ** 4) ** 2
     irradiance = 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * np.sin(p) * window / s**2
-    ambient = np.asarray(night.lighting.ambient_rgb)
-    expected = ALBEDO * (ambient + irradiance) * night.lighting.exposure
+    ambient = np.asarray(night.ambient_rgb)
+    expected = ALBEDO * (ambient + irradiance) * night.exposure
     np.testing.assert_allclose(out[0], expected, rtol=1e-4)
     # Beyond the horizontal half-angle: no headlight at all, only the ambient light.
     angle = np.radians(cfg.half_angle_h_deg + 5.0)
     outside = np.array([s * np.cos(angle), s * np.sin(angle), 0.0])
     rays = down_ray(outside)
-    out = shade(scene, rays, scene.cast_rays(rays), night.lighting, light)
-    np.testing.assert_allclose(out[0], ALBEDO * ambient * night.lighting.exposure, rtol=1e-5)
+    out = shade(scene, rays, scene.cast_rays(rays), night, light)
+    np.testing.assert_allclose(out[0], ALBEDO * ambient * night.exposure, rtol=1e-5)
 
 
 def test_road_in_the_ego_headlight_cone_is_brighter_than_outside():
     night = night_without_others()
-    cam = Camera(CameraConfig(width_px=320, height_px=240, hfov_deg=120.0,
-                              mount=Transform.from_xyz_rpy((0.6, 0.0, 0.65))))
+    cam = Camera(camera_config(width_px=320, height_px=240, hfov_deg=120.0,
+                              mount={"xyz_m": (0.6, 0.0, 0.65)}))
     scene = FrameScene(StaticScene([ground(material="asphalt")]), Actors.empty())
     frame = render_camera(scene, cam, EGO, night)
     world_to_cam = cam.camera_to_world(EGO).inverse()
@@ -95,18 +95,18 @@ def test_street_lamp_pool_and_its_shadow(actors_factory):
     lights = street_lamp_lights(lamp, cfg, np.zeros(3))
     below = np.array([10.0, 0.0, 0.0])
     rays = down_ray(below)
-    ambient = np.asarray(night.lighting.ambient_rgb)
+    ambient = np.asarray(night.ambient_rgb)
     window = (1.0 - (7.0 / cfg.range_m) ** 4) ** 2
-    lit = ALBEDO * (ambient + cfg.intensity * np.asarray(cfg.color_rgb) * window / 49.0) * night.lighting.exposure
+    lit = ALBEDO * (ambient + cfg.intensity * np.asarray(cfg.color_rgb) * window / 49.0) * night.exposure
     empty = FrameScene(StaticScene([ground()]), Actors.empty())
-    np.testing.assert_allclose(shade(empty, rays, empty.cast_rays(rays), night.lighting, lights)[0], lit, rtol=1e-4)
+    np.testing.assert_allclose(shade(empty, rays, empty.cast_rays(rays), night, lights)[0], lit, rtol=1e-4)
     # A box between the lamp and the road (but not over the ray's start) shades the pool.
     blocker = FrameScene(StaticScene([ground()]), actors_factory([[10.0, 0.0, 4.0]], [[1.0, 1.0, 0.2]]))
     rays_below = np.array([[10.3, 0.3, 0.5, 0.0, 0.0, -1.0]], np.float32)  # starts under the box
     hits = blocker.cast_rays(rays_below)
     assert hits.instance_id[0] == 0
-    np.testing.assert_allclose(shade(blocker, rays_below, hits, night.lighting, lights)[0],
-                               ALBEDO * ambient * night.lighting.exposure, rtol=1e-4)
+    np.testing.assert_allclose(shade(blocker, rays_below, hits, night, lights)[0],
+                               ALBEDO * ambient * night.exposure, rtol=1e-4)
 
 
 def test_oncoming_headlights_light_the_road_in_front_of_them(actors_factory):
@@ -117,7 +117,7 @@ def test_oncoming_headlights_light_the_road_in_front_of_them(actors_factory):
     scene = FrameScene(StaticScene([ground()]), oncoming)
     rays = np.concatenate([down_ray(np.array([15.0, 0.0, 0.0])), down_ray(np.array([45.0, 0.0, 0.0]))])
     hits = scene.cast_rays(rays)
-    out, unlit = shade(scene, rays, hits, night.lighting, lights), shade(scene, rays, hits, night.lighting)
+    out, unlit = shade(scene, rays, hits, night, lights), shade(scene, rays, hits, night)
     np.testing.assert_array_equal(out[1], unlit[1])  # behind the car: ambient only
     # In front: lit, by far more than the sensor's noise (0.0015 read noise x exposure 2.5) and 2/3 of the ambient.
     assert out[0, 0] - unlit[0, 0] > max(0.015, 0.66 * unlit[0, 0])

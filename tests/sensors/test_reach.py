@@ -3,32 +3,30 @@ leaves unchanged (real Embree scenes, with and without the actors it leaves out)
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from pipeline.core.classes import ObjectClass, SemanticClass
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.sensors.camera import Camera, CameraConfig
-from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.camera import Camera
+from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import project_actors
-from pipeline.sensors.lidar import Lidar, LidarConfig, render_lidar
+from pipeline.sensors.lidar import Lidar, render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
 from pipeline.world.actors import Actors, place_actors
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
-from tests.sensors.conftest import make_actors
+from tests.sensors.conftest import camera_config, lidar_config, make_actors
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))
 # Looks along +x: in view, |y| < x. Direct light only (the closed forms below); the realistic camera's sky-occlusion
 # and mirror rays reach every actor within INDIRECT_REACH_M of it.
-CAMERA = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="fast"))
-REALISTIC = Camera(CameraConfig(width_px=160, height_px=120, hfov_deg=90.0, quality="realistic"))
-LIDAR = Lidar(LidarConfig(channels=16, fov_upper_deg=2.0, fov_lower_deg=-20.0, horizontal_resolution_deg=1.0,
-                          range_max_m=40.0, range_noise_std_m=0.0, dropout_prob=0.0))
+CAMERA = Camera(camera_config(width_px=160, height_px=120, hfov_deg=90.0, quality="fast"))
+REALISTIC = Camera(camera_config(width_px=160, height_px=120, hfov_deg=90.0, quality="realistic"))
+LIDAR = Lidar(lidar_config(channels=16, upper_fov_deg=2.0, lower_fov_deg=-20.0, horizontal_resolution_deg=1.0,
+                          range_m=40.0, range_noise_std_m=0.0, dropout=0.0))
 CAR = (4.5, 1.8, 1.5)
 
 
@@ -42,9 +40,9 @@ STATIC = StaticScene([ground()])
 
 
 def with_sun(name: str, azimuth_deg: float, elevation_deg: float):
-    condition = get_condition(name)
-    lighting = dataclasses.replace(condition.lighting, sun_azimuth_deg=azimuth_deg, sun_elevation_deg=elevation_deg)
-    return dataclasses.replace(condition, lighting=lighting)
+    config = get_condition(name).config
+    sun = config.sun.model_copy(update={"azimuth_deg": azimuth_deg, "elevation_deg": elevation_deg})
+    return Condition(config.model_copy(update={"sun": sun}))
 
 
 def reach(actors, condition, street_lights_m=None, camera=CAMERA):
@@ -57,7 +55,7 @@ def test_a_realistic_camera_reaches_actors_its_mirror_rays_can_meet(actors_facto
     camera is reached up to INDIRECT_REACH_M (plus its sphere), not beyond."""
     from pipeline.sensors.indirect import INDIRECT_REACH_M
 
-    camera_x = EGO.apply(CAMERA.config.mount.translation[None])[0, 0]
+    camera_x = EGO.apply(CAMERA.mount.translation[None])[0, 0]
     r = 0.5 * np.linalg.norm(CAR)
     xs = [camera_x - INDIRECT_REACH_M - r + 0.5, camera_x - INDIRECT_REACH_M - r - 0.5]
     actors = actors_factory([[x, 0.0, 0.75] for x in xs], [CAR] * 2)
@@ -89,8 +87,8 @@ def test_an_actor_out_of_view_is_reached_where_it_shadows_a_street_lamp_in_view(
     # A truck just left of the view (no LiDAR); a low, wide lamp further left lights the view, and the truck's
     # shadow from it falls there.
     night = get_condition("night")
-    night = dataclasses.replace(night, street_lamps=night.street_lamps.model_copy(
-        update={"half_angle_deg": 80.0, "range_m": 40.0, "shadows": True}))
+    night = Condition(night.config.model_copy(update={"street_lamps": night.street_lamps.model_copy(
+        update={"half_angle_deg": 80.0, "range_m": 40.0, "shadows": True})}))
     truck = make_actors([[12.0, 22.0, 2.0]], [(10.0, 2.5, 4.0)], classes=[ObjectClass.TRUCK])
     lamp = np.array([[12.0, 30.0, 5.0]])
 
@@ -129,7 +127,7 @@ def test_leaving_out_the_actors_out_of_reach_changes_no_output(seed, condition, 
     actors = random_actors(rng, 150, 1.0 if camera is CAMERA else 2.0)
     lamps = np.column_stack([rng.uniform(10.0, 90.0, 16), rng.uniform(-90.0, 90.0, 16), np.full(16, 8.0)])
     cond = get_condition(condition)
-    if cond.lighting.sun_elevation_deg > 0:  # a low sun from anywhere: long shadows
+    if cond.sun_elevation_deg > 0:  # a low sun from anywhere: long shadows
         cond = with_sun(condition, float(rng.uniform(-180.0, 180.0)), float(rng.uniform(8.0, 20.0)))
     active = reach(actors, cond, street_lights_m=lamps, camera=camera)
     assert 0.2 * len(actors) < np.count_nonzero(~active)  # a test of something: many are left out

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from pipeline.core.classes import ObjectClass
-from pipeline.sensors.shading import Lighting, shade, sky, to_srgb8
+from pipeline.sensors.shading import shade, sky, to_srgb8
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.scene import FrameScene, StaticScene
+from tests.sensors.conftest import condition
 
 
 def test_tone_map_is_srgb_per_channel():
@@ -35,7 +36,7 @@ def test_tone_map_follows_the_srgb_curve_with_its_shoulder_everywhere():
 def test_sun_shadow_and_sky(box_meshes, actors_factory, wall):
     # Wall x = 10 facing the origin; the sun 10 deg high behind the camera (towards -x) lights it with
     # n.l = cos 10 deg. A thin box at x = 7, y in [2, 4], z in [-1, 1] shades the wall around (10, 3, 0).
-    lighting = Lighting(sun_elevation_deg=10.0, sun_azimuth_deg=180.0)
+    lighting = condition(sun={"elevation_deg": 10.0, "azimuth_deg": 180.0})
     scene = FrameScene(StaticScene([wall(10.0, half_size_m=5.0)]), actors_factory([[7.0, 3.0, 0.0]], [[0.5, 2.0, 2.0]]),
                        box_meshes)
     origins = np.array([[0.0, 0.0, 0.0], [8.0, 1.0, 0.0], [0.0, 0.0, 0.0]])  # (8, 1, 0) sees past the box
@@ -50,7 +51,8 @@ def test_sun_shadow_and_sky(box_meshes, actors_factory, wall):
     np.testing.assert_allclose(out[0], albedo * (ambient + np.cos(np.radians(10.0)) * sun), rtol=1e-5)
     np.testing.assert_allclose(out[1], albedo * ambient, rtol=1e-5)  # in the box's shadow
     np.testing.assert_allclose(out[2], sky(rays[2:, 3:], lighting)[0])
-    lit_no_shadows = shade(scene, rays, hits, Lighting(sun_elevation_deg=10.0, sun_azimuth_deg=180.0, shadows=False))
+    lit_no_shadows = shade(scene, rays, hits,
+                           condition(sun={"elevation_deg": 10.0, "azimuth_deg": 180.0, "shadows": False}))
     np.testing.assert_allclose(lit_no_shadows[1], out[0], rtol=1e-5)
 
 
@@ -70,12 +72,12 @@ def test_brake_lights_glow(actors_factory):
     rays = np.asarray(rays, np.float32)
     hits = scene.cast_rays(rays)
     assert (hits.material == tail).all()
-    out = shade(scene, rays, hits, Lighting(shadows=False))
+    out = shade(scene, rays, hits, condition(sun={"shadows": False}))
     assert out[0, 0] > out[1, 0] + 1.0
 
 
-def test_lighting_validation():
+def test_condition_validation():
     with pytest.raises(ValueError):
-        Lighting(sun_elevation_deg=120.0)
+        condition(sun={"elevation_deg": 120.0})
     with pytest.raises(ValueError):
-        Lighting(exposure=0.0)
+        condition(lens={"exposure": 0.0})

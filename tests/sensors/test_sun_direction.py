@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from pipeline.core.config import ConditionConfig, load_config
-from pipeline.sensors.conditions import SHIPPED, condition_from_config
-from pipeline.sensors.shading import Lighting
+from pipeline.sensors.conditions import SHIPPED, Condition
+from tests.sensors.conftest import condition
 
 # The 16 compass points and their bearings (degrees clockwise from north), longest names first for matching.
 _POINTS = ["north", "north-north-east", "north-east", "east-north-east", "east", "east-south-east", "south-east",
@@ -34,7 +34,7 @@ def test_the_direction_reader():
 
 def test_azimuth_counts_counter_clockwise_from_east():
     for azimuth, towards in [(0, (1, 0)), (90, (0, 1)), (180, (-1, 0)), (270, (0, -1))]:
-        d = Lighting(sun_azimuth_deg=azimuth, sun_elevation_deg=0.0).sun_direction
+        d = condition(sun={"azimuth_deg": azimuth, "elevation_deg": 0.0}).sun_direction
         np.testing.assert_allclose(d, [*towards, 0.0], atol=1e-7)
 
 
@@ -54,7 +54,7 @@ def test_the_day_conditions_name_a_direction():
 def test_the_sun_is_where_the_description_says(name):
     cfg = _described(name)
     bearing = named_bearing(cfg.description)
-    sun = condition_from_config(cfg).lighting.sun_direction  # towards the sun, world frame (x east, y north)
+    sun = Condition(cfg).sun_direction  # towards the sun, world frame (x east, y north)
     named = np.array([np.sin(np.radians(bearing)), np.cos(np.radians(bearing))])  # compass: x = sin, y = cos
     horizontal = sun[:2] / np.linalg.norm(sun[:2])
     # within half a compass octant (22.5 deg) of the named direction
@@ -62,7 +62,7 @@ def test_the_sun_is_where_the_description_says(name):
 
 
 def test_the_shipped_directions_by_sign():
-    sun = {n: condition_from_config(load_config(ConditionConfig, n, "conditions")[0]).lighting.sun_direction
+    sun = {n: Condition(load_config(ConditionConfig, n, "conditions")[0]).sun_direction
            for n in ("morning", "noon", "dusk")}
     assert sun["morning"][0] > 0 and sun["morning"][0] > abs(sun["morning"][1])  # east (a little north)
     assert sun["noon"][1] < 0 and abs(sun["noon"][1]) > abs(sun["noon"][0])  # south

@@ -94,13 +94,13 @@ def test_lidar_rows_in_fog_follow_the_shortened_range(dense_highway_run, small_r
 
 
 def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
+    from pipeline.core.record_writers.lidar import lidar_label_rows
     from pipeline.sensors.lidar import LidarSweep
-    from pipeline.stages.render_frames import _lidar_rows
     from pipeline.stages.rig import build_sensors
 
     lidar = build_sensors(small_rig)[1][0]
     n = 3  # on the LiDAR's x axis at 30, 70 and 70 m (ego at the origin); only the second owns points
-    z_m = lidar.config.mount.translation[2]
+    z_m = lidar.mount.translation[2]
     cols = {"track_id": np.array([1, 2, 3], np.int32), "cls": np.array(["car", "truck", "car"], object),
             "x_m": np.array([30.0, 70.0, 70.0]), "y_m": np.zeros(n), "z_m": np.full(n, z_m),
             "length_m": np.full(n, 4.0), "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5),
@@ -108,7 +108,7 @@ def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
     empty = np.zeros(0)
     sweep = LidarSweep(np.zeros((0, 3), np.float32), empty, empty, empty, empty, empty, empty,
                        points_per_actor=np.array([0, 5, 0]), range_max_m=60.0)
-    rows = _lidar_rows(4, "top", lidar, sweep, cols, Transform.identity())
+    rows = lidar_label_rows(4, "top", lidar.mount, sweep, cols, Transform.identity())
     assert rows["track_id"].tolist() == [1, 2]
     assert rows["lidar_points"].tolist() == [0, 5]
     assert rows["distance_m"] == pytest.approx([30.0, 70.0])

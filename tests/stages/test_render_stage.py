@@ -16,7 +16,7 @@ from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.core.record import DatasetRecord, RecordError
 from pipeline.stages import render_frames
-from pipeline.stages.render import _pool_context, render
+from pipeline.stages.render import render, worker_context
 from tests.conftest import tree_hashes
 from tests.stages.conftest import kill_render_after
 
@@ -105,7 +105,7 @@ def test_world_and_sensor_boxes_agree(record_dir):
 
 def test_two_workers_give_the_same_bytes(dense_highway_run, rig, noon, record_dir, tmp_path):
     # This process has cast rays (record_dir), so the workers fork from a server process, not from here.
-    assert _pool_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
+    assert worker_context().get_start_method() == ("forkserver" if sys.platform.startswith("linux") else "spawn")
     again = tmp_path / "again"
     opencv_threads = cv2.getNumThreads()
     render(dense_highway_run, noon, rig, again, frames=FRAMES, workers=2, shard_size=2, progress=False)
@@ -120,8 +120,8 @@ _FRESH_RENDER = """
 import sys
 from pathlib import Path
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
-from pipeline.stages.render import _pool_context, render
-method = _pool_context().get_start_method()
+from pipeline.stages.render import render, worker_context
+method = worker_context().get_start_method()
 if method != "fork":
     sys.exit(f"a process that has not cast rays should fork its workers, not {method}")
 render(Path(sys.argv[1]), load_config(ConditionConfig, "noon", "conditions")[0],
@@ -190,12 +190,3 @@ def test_a_rig_with_two_cameras_and_two_lidars(dense_highway_run, noon, tmp_path
     np.testing.assert_allclose(record.info.camera("rear").T_array[:3, 2], [-1.0, 0.0, 0.0], atol=1e-9)
     labels = record.labels
     assert set(labels["sensor"]) <= {"front", "rear", "top", "low"}
-
-
-def test_depth_png_values_round_half_to_even_and_clip():
-    from pipeline.core.record import DEPTH_SCALE
-    from pipeline.stages.render_frames import _depth_png
-
-    depth = np.float32([[1.5, 0.0, 300.0, 2.0], [384.5 / 256, 385.5 / 256, 0.5 / 256, 7.0]])
-    valid = np.array([[True, True, True, False], [True, True, True, True]])
-    assert _depth_png(depth, valid, np.float32(DEPTH_SCALE)).tolist() == [[384, 1, 65535, 0], [384, 386, 1, 1792]]

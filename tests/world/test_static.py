@@ -243,11 +243,12 @@ def test_chunk_boxes_contain_every_triangle(grid_world) -> None:
                                   ((-20.0, 20.0, 3.0), (0.1, 0.05, -0.7)), ((150.0, 98.0, 0.3), (0.0, 0.1, 3.0))])
 def test_camera_skips_only_rays_that_cannot_hit_the_static_world(grid_world, pose) -> None:
     """The camera's static mask (chunk boxes projected) leaves out rays, and every hit is the same as without it."""
-    from pipeline.sensors.camera import Camera, CameraConfig
+    from pipeline.sensors.camera import Camera
     from pipeline.world.scene import StaticScene, make_rays
+    from tests.sensors.conftest import camera_config
 
     scene = StaticScene(grid_world.meshes)
-    cam = Camera(CameraConfig(width_px=400, height_px=300))
+    cam = Camera(camera_config(width_px=400, height_px=300))
     cam_to_world = cam.camera_to_world(Transform.from_xyz_rpy(*pose))
     rays = make_rays(cam_to_world.translation, cam.pixel_directions, cam_to_world.rotation)
     where = cam.boxes_pixel_mask(cam_to_world, *scene.chunk_boxes)

@@ -44,6 +44,10 @@ class CameraConfig(_Model):
     def _check_intrinsics(self) -> CameraConfig:
         if (self.K is None) == (self.hfov_deg is None):
             raise ValueError("give exactly one of hfov_deg and K")
+        if self.K is not None:
+            (fx, s, _), (r, fy, _), bottom = self.K
+            if s != 0 or r != 0 or tuple(bottom) != (0, 0, 1) or fx <= 0 or fy <= 0:
+                raise ValueError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {self.K}")
         return self
 
 
@@ -66,6 +70,9 @@ class LidarConfig(_Model):
     def _check_fov(self) -> LidarConfig:
         if not self.lower_fov_deg < self.upper_fov_deg:
             raise ValueError(f"lower_fov_deg ({self.lower_fov_deg}) must be below upper_fov_deg ({self.upper_fov_deg})")
+        columns = 360.0 / self.horizontal_resolution_deg
+        if abs(columns - round(columns)) > 1e-6:
+            raise ValueError(f"horizontal_resolution_deg ({self.horizontal_resolution_deg}) must divide 360")
         return self
 
 

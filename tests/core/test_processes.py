@@ -1,4 +1,5 @@
-"""keep_freed_memory: freed large blocks stay mapped (glibc), checked by resident memory in fresh processes."""
+"""pipeline.core.processes: keep_freed_memory keeps freed large blocks mapped (glibc), checked by resident memory
+in fresh processes; ProcessCache builds once per key."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 # default thresholds glibc maps a block of 48 MB (over its 32 MB ceiling) on its own and unmaps it on free.
 PROBE = """
 import sys
-from pipeline.core.memory import keep_freed_memory
+from pipeline.core.processes import keep_freed_memory
 set_ = keep_freed_memory() if sys.argv[1] == "on" else None
 def resident_mb():
     with open("/proc/self/statm") as f:
@@ -41,3 +42,22 @@ def test_freed_blocks_stay_mapped_only_when_set():
     flag, before, holding, after = _probe("off")
     assert flag == "None"
     assert holding - before >= 45 and after - before <= 5  # returned to the system at once: the default
+
+
+def test_process_cache_builds_once_per_key_and_forgets_what_it_lent():
+    from pipeline.core.processes import ProcessCache
+
+    cache, built = ProcessCache(), []
+
+    def build(value):
+        built.append(value)
+        return value
+
+    assert cache.get("a", lambda: build(1)) == 1 and cache.get("a", lambda: build(2)) == 1
+    assert cache.get("b", lambda: build(3)) == 3 and built == [1, 3] and cache.peek("a") is None
+    with cache.lent("c", 4):
+        assert cache.peek("c") == 4 and cache.get("c", lambda: build(5)) == 4
+    assert not cache and cache.peek("c") is None and built == [1, 3]
+    with cache.lent("d", None):  # nothing lent: nothing kept, nothing dropped
+        assert not cache
+
