@@ -95,7 +95,7 @@ class Ends:
     plate_front_z: float
     plate_rear_z: float
     head_size: tuple[float, float] = (0.34, 0.12)
-    tail_size: tuple[float, float] = (0.34, 0.14)
+    tail_size: tuple[float, float] = (0.42, 0.17)
     lamp_y: float = 0.66
     grille: tuple[float, float] = (0.0, 0.13)  # (width, height) between the headlamps; width 0 = the gap between
     bumper_z: float | None = None  # a dark band across the rear bumper's lower part (0.1 m tall)

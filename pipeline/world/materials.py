@@ -51,7 +51,7 @@ MATERIALS: dict[str, Material] = {
     "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
     "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80,  # clear lens
                           fresnel_f0=0.05),
-    "taillight": Material((0.45, 0.02, 0.02), specular=0.5, reflectivity=0.70),
+    "taillight": Material((0.5, 0.015, 0.015), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
     "lamp": Material((0.9, 0.85, 0.7), reflectivity=0.5),
     "skin": Material((0.60, 0.45, 0.35), reflectivity=0.30),
     "cloth": Material((0.20, 0.22, 0.30), reflectivity=0.25),
