@@ -99,6 +99,18 @@ class _Trajectories:
         return {c: v[ego] for c, v in self.columns.items()}, {c: self.columns[c][others] for c in ACTOR_COLUMNS}
 
 
+def _body_sized(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
+    """The trajectories with every actor's box length as its body is proportioned
+    (:meth:`ActorMeshes.body_lengths`: pedestrians); the camera, the LiDAR, the label rows and so the exports all
+    see that box."""
+    tracks, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
+    cols = {c: table[c].to_numpy()[first] for c in ACTOR_COLUMNS}  # an actor's class and size hold for its track
+    length = meshes.body_lengths(_actors(cols, seed))[inverse.reshape(-1)]
+    if np.array_equal(length, table["length_m"].to_numpy()):
+        return table
+    return table.assign(length_m=length)
+
+
 def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:
     color = srgb8_to_linear(np.column_stack([cols["color_r"], cols["color_g"], cols["color_b"]]))
     return Actors(cols["track_id"], cols["cls"].tolist(), actor_boxes(cols), color, cols["braking"],
@@ -189,7 +201,8 @@ def _worker_state(job: ShardJob) -> _WorkerState:
     static = StaticScene(world.meshes)
     cameras, lidars = build_sensors(job.rig)
     return _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
-                        _Trajectories(read_parquet(job.sim_dir / "trajectories.parquet")),
+                        _Trajectories(_body_sized(read_parquet(job.sim_dir / "trajectories.parquet"),
+                                                  rig_actor_meshes(job.rig), job.seed)),
                         _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
                         rig_actor_meshes(job.rig))
 

@@ -187,6 +187,7 @@ class ActorMeshes:
         self.model_class: list[ObjectClass] = []
         self.model_names: list[str] = []
         self.model_extent: list[np.ndarray] = []
+        self._known_extent: list[bool] = []  # per model: its extent is as modelled (not the unit box's stand-in)
         # Per class code: the first model index, and each model's (low, high) suitable length in metres.
         self._first = np.zeros(len(ObjectClass), np.int64)
         self._suits: list[np.ndarray] = []
@@ -200,9 +201,12 @@ class ActorMeshes:
                 suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in families]
                 names = [f.__name__ for f in families]
                 extents = [family_extent(f) for f in families]
+            known = [True] * len(meshes)
             for model in replaced.get(object_class, []) + added.get(object_class, []):
                 meshes, suits, names = [*meshes, model.mesh], [*suits, (0.0, np.inf)], [*names, model.name]
                 extents = [*extents, np.ones(3) if model.extent_m is None else np.asarray(model.extent_m, float)]
+                known.append(model.extent_m is not None)
+            self._known_extent += known
             self.model_names += names
             self.model_extent += extents
             self.models += meshes
@@ -257,7 +261,27 @@ class ActorMeshes:
             out[idx] = self._first[code] + family
         return out
 
+    def body_lengths(self, actors: Actors) -> np.ndarray:
+        """(N,) float64 the actors' box lengths as their bodies are proportioned. SUMO's length of a pedestrian
+        (0.215 m) is its walking model's footprint, not the body: a walking person's stride spans about 0.8 m, a
+        standing one is about 0.3 m deep, and a model stretched to 0.215 m would be squashed in a side view. For the
+        classes in :data:`BODY_SIZED_CLASSES`, an actor whose model has known proportions (the built-in families; a
+        given model with ``extent_m``) gets the model's length as modelled times the box's height over the model's;
+        every other actor keeps its length."""
+        length = np.asarray(actors.boxes.size[:, 0], np.float64).copy() if len(actors) else np.zeros(0)
+        sized = np.flatnonzero(np.isin(actors.class_codes, [list(ObjectClass).index(c) for c in BODY_SIZED_CLASSES]))
+        if len(sized) == 0:
+            return length
+        codes = self.model_codes(actors)[sized]
+        extent = np.array([self.model_extent[m] for m in codes], np.float64).reshape(-1, 3)
+        known = np.array([self._known_extent[m] for m in codes], bool)
+        height = np.asarray(actors.boxes.size[sized, 2], np.float64)
+        length[sized[known]] = extent[known, 0] * height[known] / extent[known, 2]
+        return length
 
+
+# Classes whose SUMO box is not the body's (see ActorMeshes.body_lengths).
+BODY_SIZED_CLASSES = (ObjectClass.PEDESTRIAN,)
 DEFAULT_MESHES = ActorMeshes()
 
 

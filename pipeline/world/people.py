@@ -1,8 +1,9 @@
 """Pedestrian body families: people walking and standing, in a few builds and outfits (:mod:`.figures`).
 
 Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, z up, ground at z = 0, metres at
-a stature of 1.75 m; normalised to each actor's box later). SUMO's pedestrian box is 0.215 m deep, so a stride
-is squeezed along x by the placement; the poses keep strides moderate for that reason.
+a stature of 1.75 m; normalised to each actor's box later). SUMO's pedestrian box is 0.215 m deep; the render
+gives each person the depth of its own model at its height instead (:meth:`pipeline.world.actors.ActorMeshes.
+body_lengths`), so a stride is not squeezed.
 """
 
 from __future__ import annotations

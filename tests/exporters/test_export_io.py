@@ -140,7 +140,7 @@ def test_zstd_chunks_do_not_depend_on_the_worker_count(monkeypatch):
     the same on any machine), one zstd frame that decompresses to the chunk."""
     import zstandard
 
-    from exporters import io
+    from exporters import writing as io
 
     rng = np.random.default_rng(3)
     points = np.repeat(rng.normal(0, 30, (1 << 18, 1)).astype(np.float32), 3, axis=1)  # compressible, ~3 MB

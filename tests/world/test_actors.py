@@ -240,6 +240,33 @@ def test_variants_pick_families_that_suit_the_length():
     assert [meshes.model_names[c] for c in meshes.model_codes(trucks)] == ["semi_trailer", "box_truck"]
 
 
+def test_pedestrian_boxes_take_their_bodys_depth():
+    """SUMO's 0.215 m pedestrian depth is replaced by the picked model's own depth at the actor's height (a walker's
+    stride ~0.8 m, a standing person ~0.3 m), so the placed body is not squashed; cars keep their length, and a
+    user's model of unknown proportions keeps SUMO's."""
+    meshes = ActorMeshes()
+    n = 40
+    boxes = Boxes3D(np.zeros((n + 1, 3)), [[0.215, 0.478, 1.719]] * n + [[4.5, 1.8, 1.5]], np.zeros(n + 1))
+    actors = Actors(np.arange(1, n + 2), ["pedestrian"] * n + ["car"], boxes, np.zeros((n + 1, 3)),
+                    variant=actor_variants(np.arange(1, n + 2), 3))
+    length = meshes.body_lengths(actors)
+    assert length[-1] == 4.5
+    codes = meshes.model_codes(actors)[:n]
+    for code, got in zip(codes, length[:n], strict=True):
+        extent = meshes.model_extent[code]
+        assert got == pytest.approx(extent[0] * 1.719 / extent[2], rel=1e-12)
+    names = {meshes.model_names[c]: got for c, got in zip(codes, length[:n], strict=True)}
+    assert 0.6 < names["pedestrian"] < 1.0 and 0.2 < names["pedestrian_standing"] < 0.4
+    # re-picking with the new lengths picks the same models (a person's family does not depend on length)
+    resized = Actors(actors.track_id, ["pedestrian"] * n + ["car"],
+                     Boxes3D(np.zeros((n + 1, 3)), np.column_stack([length, boxes.size[:, 1:]]), np.zeros(n + 1)),
+                     np.zeros((n + 1, 3)), variant=actors.variant)
+    np.testing.assert_array_equal(meshes.model_codes(resized)[:n], codes)
+    user = ActorMeshes(overrides={ObjectClass.PEDESTRIAN: normalise_to_unit_box(family_mesh(FAMILIES[
+        ObjectClass.PEDESTRIAN][0]))})
+    np.testing.assert_array_equal(user.body_lengths(actors), boxes.size[:, 0])
+
+
 def test_actor_variants_depend_on_seed_and_track_only():
     a = actor_variants(np.array([1, 2, 3, 1]), 5)
     assert a.dtype == np.uint32 and a[0] == a[3] and len(set(a[:3].tolist())) == 3
