@@ -62,7 +62,7 @@ def main() -> None:
                    time_limit_s=max(60.0, args.steps * 0.2), nearby_k=args.nearby_k)
     inner = env.unwrapped
     try:
-        sumocfg, _ = inner.sumo_inputs(args.seed)
+        sumocfg, _, _ = inner.sumo_inputs(args.seed)
         # The env's reset steps warm-up + 1 times before its first step.
         warmup_steps = round(inner.sim.warmup_s / inner.sim.step_length_s) + 1
         bare = max(bare_steps_per_s(sumocfg, warmup_steps, args.steps) for _ in range(args.repeat))
