@@ -47,6 +47,7 @@ from pipeline.traffic.simulation import (
     RunRecorder,
     choose_ego,
     close_sumo,
+    require_sumo,
     start_sumo,
     to_trajectories,
     write_sumocfg,
@@ -128,7 +129,8 @@ class RoadsynthEnv(gym.Env):
         run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
         sumocfg, candidates, _ = self.sumo_inputs(run_seed)
         sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true", "--no-step-log", "true",
-                           "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner)
+                           "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner,
+                          yielding=True)
         self._sumo = sumo
         self._run_seed = run_seed
         dt = self.sim.step_length_s
@@ -173,6 +175,7 @@ class RoadsynthEnv(gym.Env):
     def step(self, action):
         if self._sumo is None:
             raise RuntimeError("step() before reset()")
+        require_sumo(self._owner)
         sumo, ego, o, dt = self._sumo, self.ego_id, self.options, self.sim.step_length_s
         a_lon, a_lat = self._accelerations(np.asarray(action, dtype=np.float64))
         speed = min(max(self._speed + a_lon * dt, 0.0), o.max_speed_mps)
@@ -248,6 +251,7 @@ class RoadsynthEnv(gym.Env):
             return None
         if self._sumo is None:
             raise RuntimeError("render() before reset()")
+        require_sumo(self._owner)
         if self._topview is None:
             return self._obs["camera"]
         return self._topview.draw(self._sumo, self.ego_id)
@@ -263,10 +267,12 @@ class RoadsynthEnv(gym.Env):
 
     def ego_length_m(self) -> float:
         """The ego's length (its leader's gap is ds minus half of both lengths)."""
+        require_sumo(self._owner)
         return self._sumo.vehicle.getLength(self.ego_id)
 
     def lane_width_m(self) -> float:
         """Width of the ego's lane."""
+        require_sumo(self._owner)
         return self._sumo.lane.getWidth(self._sumo.vehicle.getLaneID(self.ego_id))
 
     def action_from_mps2(self, lon_mps2: float, lat_mps2: float) -> np.ndarray:
@@ -337,6 +343,7 @@ class RoadsynthEnv(gym.Env):
 
     def lane_drivable(self, index: int) -> bool:
         """Whether lane ``index`` of the ego's current edge exists and admits the ego's vehicle class."""
+        require_sumo(self._owner)
         sumo = self._sumo
         road = sumo.vehicle.getRoadID(self.ego_id)
         return 0 <= index < sumo.edge.getLaneNumber(road) and self._drivable(f"{road}_{index}")

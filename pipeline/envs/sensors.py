@@ -10,8 +10,9 @@ Observations:
     lidar: (N, 4) float32 x, y, z (metres, LiDAR frame: x forward, y left, z up) and intensity [0, 1] of the rig's
         first LiDAR, one row per beam (N = channels x columns, row = ring x columns + column); zeros where the beam
         has no return. lidar_mask: (N,) int8, 1 where the row holds a return.
-Ground truth (``info["sensors"]``): ``labels``, a DataFrame of the frame's label rows with the record's columns
-(pipeline.core.record.LABEL_COLUMNS: boxes 3D and 2D, visibility, occlusion, truncation, distance, LiDAR points);
+Ground truth (``info["sensors"]``): ``labels``, the frame's label rows with the record's columns and types
+(pipeline.core.record.LABEL_COLUMNS: boxes 3D and 2D, visibility, occlusion, truncation, distance, LiDAR points)
+as a pyarrow Table (``.to_pandas()``; a Table, not a DataFrame, because Gymnasium compares infos with ``==``);
 per camera ``camera_instance_id`` (H, W) int32, ``camera_semantic`` (H, W) uint8, ``camera_depth_m`` (H, W) float32
 (0 where no hit); per LiDAR row ``lidar_instance_id`` (N,) int32 and ``lidar_semantic`` (N,) uint8 (0 where no
 return).
@@ -23,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 from gymnasium import spaces
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
@@ -99,7 +101,7 @@ class LiveSensors:
         out = render_frame(self.world, self.static, self.cameras, self.lidars, self.condition, self.meshes, self.seed,
                            frame, ego, others)
         labels = pd.DataFrame({k: np.concatenate([part[k] for part in out.labels]) for k in LABEL_COLUMNS})
-        truth: dict[str, object] = {"labels": labels.astype(LABEL_COLUMNS)}
+        truth: dict[str, object] = {"labels": pa.Table.from_pandas(labels.astype(LABEL_COLUMNS), preserve_index=False)}
         obs: dict[str, np.ndarray] = {}
         if out.cameras:
             cam = out.cameras[0]

@@ -40,33 +40,48 @@ class SimulationError(RuntimeError):
 
 
 class SumoBusyError(RuntimeError):
-    """A second libsumo simulation was asked for while one is open in this process."""
+    """A second libsumo simulation was asked for while one is open in this process, or a simulation that was taken
+    over (see :func:`start_sumo`) was used by its former owner."""
 
 
 # libsumo holds one simulation per process, and a second start() silently replaces the first (its clock
 # jumps back, no error): every start goes through start_sumo, which knows who holds the open one.
 _active_owner: str | None = None
+_yielding = False  # whether the open simulation may be taken over by another owner
 
 
-def start_sumo(args: list[str], owner: str):
+def start_sumo(args: list[str], owner: str, *, yielding: bool = False):
     """Start libsumo with ``args`` (after the binary) for ``owner``; returns the libsumo module.
 
-    ``owner`` names who holds the simulation (shown in the error). The same owner may restart (its open
-    simulation is closed first); a different owner gets :class:`SumoBusyError` until :func:`close_sumo`.
+    ``owner`` names who holds the simulation (shown in errors). The same owner may restart (its open simulation
+    is closed first). A different owner gets :class:`SumoBusyError` until :func:`close_sumo`, unless the open
+    simulation was started ``yielding``: then it is closed and the new owner takes over, and the former owner,
+    which checks :func:`require_sumo` before each use, gets :class:`SumoBusyError` there instead of reading the
+    other simulation (the driving environment's simulations yield: Gymnasium's env checker opens a second env
+    while the first is open, and only uses the second).
     """
-    global _active_owner
+    global _active_owner, _yielding
     import libsumo
 
-    if _active_owner is not None and _active_owner != owner:
+    if _active_owner is not None and _active_owner != owner and not _yielding:
         raise SumoBusyError(f"libsumo already runs a simulation in this process (held by {_active_owner}); "
-                            f"{owner} cannot start another: close the first (env.close()), or use one process "
-                            "per simulation (e.g. gymnasium.vector.AsyncVectorEnv)")
-    if _active_owner == owner:
+                            f"{owner} cannot start another: close the first, or use one process per simulation")
+    if _active_owner is not None:
+        if _active_owner != owner:
+            log.info("libsumo: %s takes over this process's simulation from %s", owner, _active_owner)
         libsumo.close()
         _active_owner = None
     libsumo.start([binary("sumo"), *args])
-    _active_owner = owner
+    _active_owner, _yielding = owner, yielding
     return libsumo
+
+
+def require_sumo(owner: str) -> None:
+    """Raise :class:`SumoBusyError` unless ``owner`` holds this process's simulation."""
+    if _active_owner != owner:
+        now = f"taken over by {_active_owner}" if _active_owner is not None else "closed"
+        raise SumoBusyError(f"{owner}'s SUMO simulation was {now} (libsumo runs one simulation per process); "
+                            "reset() to start it again, or use one process per env (gymnasium.vector.AsyncVectorEnv)")
 
 
 def close_sumo(owner: str) -> None:
