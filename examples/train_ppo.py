@@ -5,7 +5,7 @@
 
 The agent chooses a MetaAction (keep, faster, slower, lane left, lane right) every 0.5 s (each decision held for 5
 steps of 0.1 s, their rewards summed) from the env's feature observation, normalised by VecNormalize. Training
-episodes cycle over run seeds 0-7 (one demand each, built once); the evaluation uses the unseen seeds 100-104 for
+episodes cycle over run seeds 0-7 (one demand each, built once); the evaluation uses the unseen seeds 100-109 for
 the trained agent, a random meta-action agent, an agent that always keeps its lane and speed (KEEP), and a random
 continuous-action agent (examples/random_agent.py), and prints the mean return of each. The learning curve
 (training episode returns against env steps, with the baselines' mean returns) is saved as a PNG.
@@ -25,7 +25,7 @@ from pipeline.envs import MetaActions
 
 ENV_KWARGS = {"vehicles": 100, "warmup_s": 30.0, "time_limit_s": 30.0}
 TRAIN_SEEDS = tuple(range(8))
-EVAL_SEEDS = tuple(range(100, 105))
+EVAL_SEEDS = tuple(range(100, 110))
 REPEAT = 5  # env steps per decision
 
 
@@ -156,7 +156,8 @@ def _plot(curve, results, path: Path, train_s: float) -> None:
         ax.plot(steps[window - 1:] * REPEAT, np.convolve(returns, np.ones(window) / window, "valid"),
                 color="tab:blue", label="PPO, mean of 10 episodes")
     for (name, values), colour in zip(results.items(), ("tab:green", "tab:orange", "tab:red", "tab:gray"), strict=True):
-        ax.axhline(np.mean(values), color=colour, ls="--", label=f"{name}: {np.mean(values):.1f} (seeds 100-104)")
+        seeds = f"seeds {EVAL_SEEDS[0]}-{EVAL_SEEDS[-1]}"
+        ax.axhline(np.mean(values), color=colour, ls="--", label=f"{name}: {np.mean(values):.1f} ({seeds})")
     ax.set_xlabel("env steps (0.1 s each)")
     ax.set_ylabel("episode return")
     ax.set_title(f"roadsynth/Highway-v0, 100 vehicles, 30 s episodes; {train_s / 60:.1f} min of training")

@@ -35,10 +35,7 @@ from pipeline.core.config import ScenarioConfig, SimulationConfig
 from pipeline.core.config.resolve import resolve_scenario
 from pipeline.envs import features
 from pipeline.envs.options import EnvOptions, RewardWeights
-from pipeline.envs.recording import episode_dir, write_episode
 from pipeline.envs.reward import reward_terms
-from pipeline.envs.sensors import LiveSensors, check_sensors
-from pipeline.envs.topview import TopView
 from pipeline.traffic import networks
 from pipeline.traffic.demand import Demand, build_demand
 from pipeline.traffic.parking import place_parked, with_parked
@@ -87,12 +84,22 @@ class RoadsynthEnv(gym.Env):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.options = _options(options, option_kwargs)
-        self.sensors = LiveSensors(check_sensors(sensors), rig, condition) if sensors else None
+        # The renderer (open3d, numba kernels) and OpenCV are imported only when asked for: a feature-only env
+        # starts without them.
+        self.sensors = None
+        if sensors:
+            from pipeline.envs.sensors import LiveSensors, check_sensors
+
+            self.sensors = LiveSensors(check_sensors(sensors), rig, condition)
         self.record_dir = Path(record) if record is not None else None
         self._episodes_recorded = 0
         self._recorder: RunRecorder | None = None
         self._tables_seed: int | None = None
-        self._topview = TopView() if render_mode == "rgb_array" and "camera" not in (sensors or ()) else None
+        self._topview = None
+        if render_mode == "rgb_array" and "camera" not in (sensors or ()):
+            from pipeline.envs.topview import TopView
+
+            self._topview = TopView()
         config, _ = resolve_scenario(scenario, vehicles=vehicles, warmup_s=warmup_s,
                                      duration_s=self.options.time_limit_s)
         self.config: ScenarioConfig = config
@@ -414,6 +421,8 @@ class RoadsynthEnv(gym.Env):
         """Write the episode recorded so far (``record=``), once; its folder, or None when there is none."""
         if self.record_dir is None or self._recorder is None or not self._recorder.vehicles.frame:
             return None
+        from pipeline.envs.recording import episode_dir, write_episode
+
         recorder, self._recorder = self._recorder, None
         out = episode_dir(self.record_dir, self._episodes_recorded)
         _, _, demand = self._demands[self._run_seed]
