@@ -29,7 +29,7 @@ from gymnasium import spaces
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.record import LABEL_COLUMNS
-from pipeline.sensors.conditions import condition_from_config
+from pipeline.sensors.conditions import Condition
 from pipeline.stages.render_frames import SignalState, Trajectories, render_frame, rig_actor_meshes
 from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import StaticScene
@@ -59,7 +59,7 @@ class LiveSensors:
         self.rig = rig_config.model_copy(update={"cameras": rig_config.cameras[:1] if "camera" in sensors else [],
                                                  "lidars": rig_config.lidars[:1] if "lidar" in sensors else []})
         condition_config, _ = load_config(ConditionConfig, condition, "conditions")
-        self.condition = condition_from_config(condition_config)
+        self.condition = Condition(condition_config)
         self.cameras, self.lidars = build_sensors(self.rig)
         self.meshes = rig_actor_meshes(self.rig)
         self._world_key: tuple[str, int] | None = None
@@ -71,7 +71,7 @@ class LiveSensors:
             out["camera"] = spaces.Box(0, 255, (cfg.height_px, cfg.width_px, 3), np.uint8)
         if self.lidars:
             n = self.beams
-            reach = np.float32(self.lidars[0].config.range_max_m * 1.5)  # range noise never gets near this
+            reach = np.float32(self.lidars[0].config.range_m * 1.5)  # range noise never gets near this
             low = np.array([-reach, -reach, -reach, 0.0], np.float32)
             out["lidar"] = spaces.Box(np.tile(low, (n, 1)), np.tile(np.array([reach, reach, reach, 1.0], np.float32),
                                                                    (n, 1)), dtype=np.float32)
@@ -80,8 +80,8 @@ class LiveSensors:
 
     @property
     def beams(self) -> int:
-        cfg = self.lidars[0].config
-        return cfg.channels * cfg.columns
+        lidar = self.lidars[0]
+        return lidar.config.channels * lidar.columns
 
     def start(self, roads_dir: Path, seed: int) -> None:
         """Build the static world of the run (``roads_dir``: its road geometry tables; ``seed``: the run seed)."""
@@ -113,7 +113,7 @@ class LiveSensors:
         return obs, truth
 
     def _beam_rows(self, sweep) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        n, columns = self.beams, self.lidars[0].config.columns
+        n, columns = self.beams, self.lidars[0].columns
         row = sweep.ring.astype(np.int64) * columns + sweep.column.astype(np.int64)
         points = np.zeros((n, 4), np.float32)
         points[row, :3] = sweep.points_m
