@@ -162,7 +162,7 @@ class RoadsynthEnv(gym.Env):
         self._start_time_s = sumo.simulation.getTime()
         self._frame = 0
         self._truth: dict[str, object] | None = None
-        self._recorder, self._episode_end = recorder, None
+        self._recorder = recorder
         if recorder is not None:
             recorder.subscribe_all()
         if self.sensors is not None:
