@@ -9,6 +9,10 @@ The ego is taken from SUMO (speed mode 0, lane-change mode 0) and moved each ste
 by a kinematic point model in the lane frame: longitudinal speed >= 0 (no reversing), lateral speed limited and
 never above the longitudinal one; SUMO maps the moved ego to the nearest lane, so lane changes emerge from
 lateral motion, and SUMO's own collision detection reports collisions.
+
+On request the env also renders the rig's camera and LiDAR each step (``sensors=``, pipeline.envs.sensors) and
+writes each episode as a simulated run (``record=DIR``, pipeline.envs.recording); both read every actor through
+the simulate stage's recorder (pipeline.traffic.simulation.RunRecorder), which the feature-only env does without.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
+import pandas as pd
 from gymnasium import spaces
 
 from pipeline.core.config import ScenarioConfig, SimulationConfig
@@ -32,8 +37,18 @@ from pipeline.envs import features
 from pipeline.envs.options import EnvOptions, RewardWeights
 from pipeline.envs.reward import reward_terms
 from pipeline.traffic import networks
-from pipeline.traffic.demand import build_demand
-from pipeline.traffic.simulation import choose_ego, close_sumo, start_sumo, write_sumocfg
+from pipeline.traffic.demand import Demand, build_demand
+from pipeline.traffic.parking import place_parked, with_parked
+from pipeline.traffic.roadgeometry import write_road_geometry
+from pipeline.traffic.simulation import (
+    RunRecorder,
+    choose_ego,
+    close_sumo,
+    require_sumo,
+    start_sumo,
+    to_trajectories,
+    write_sumocfg,
+)
 
 log = logging.getLogger(__name__)
 
@@ -51,17 +66,40 @@ class RoadsynthEnv(gym.Env):
         dt: seconds per step (SUMO's step length); None keeps the scenario's.
         options: EnvOptions; any of its fields may also be given as a keyword (``reward`` as RewardWeights or
             a dict of its fields).
+        sensors: any of "camera", "lidar": rendered each step into the observation, ground truth in
+            ``info["sensors"]`` (pipeline.envs.sensors); ``rig`` and ``condition`` as for ``roadsynth render``.
+        record: a folder; each episode is written to ``record/episode-NNNN`` as a simulated run
+            (pipeline.envs.recording) when it ends (or at ``reset``/``close``, if it did not).
+        render_mode: None or "rgb_array": ``render()`` gives the camera image with the "camera" sensor, else a top
+            view around the ego (pipeline.envs.topview).
     """
 
-    metadata: ClassVar[dict] = {"render_modes": []}
+    metadata: ClassVar[dict] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, scenario: str | Path = "highway", *, vehicles: int | None = None, warmup_s: float | None = None,
                  dt: float | None = None, options: EnvOptions | None = None, render_mode: str | None = None,
-                 **option_kwargs) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode {render_mode!r} is not supported yet (none is)")
+                 sensors: list[str] | tuple[str, ...] | None = None, rig: str | Path = "default",
+                 condition: str | Path = "noon", record: str | Path | None = None, **option_kwargs) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.render_mode = render_mode
         self.options = _options(options, option_kwargs)
+        # The renderer (open3d, numba kernels) and OpenCV are imported only when asked for: a feature-only env
+        # starts without them.
+        self.sensors = None
+        if sensors:
+            from pipeline.envs.sensors import LiveSensors, check_sensors
+
+            self.sensors = LiveSensors(check_sensors(sensors), rig, condition)
+        self.record_dir = Path(record) if record is not None else None
+        self._episodes_recorded = 0
+        self._recorder: RunRecorder | None = None
+        self._tables_seed: int | None = None
+        self._topview = None
+        if render_mode == "rgb_array" and "camera" not in (sensors or ()):
+            from pipeline.envs.topview import TopView
+
+            self._topview = TopView()
         config, _ = resolve_scenario(scenario, vehicles=vehicles, warmup_s=warmup_s,
                                      duration_s=self.options.time_limit_s)
         self.config: ScenarioConfig = config
@@ -71,6 +109,9 @@ class RoadsynthEnv(gym.Env):
         o = self.options
         self.observation_space = features.observation_space(o.max_speed_mps, o.accel_min_mps2, o.accel_max_mps2,
                                                             o.neighbour_range_m, o.nearby_k)
+        if self.sensors is not None:
+            self.observation_space = spaces.Dict({**self.observation_space.spaces, **self.sensors.spaces()})
+        self.metadata = {**self.metadata, "render_fps": 1.0 / step}
         if o.normalize_actions:
             self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         else:
@@ -79,7 +120,7 @@ class RoadsynthEnv(gym.Env):
         self._owner = f"RoadsynthEnv({config.name}, #{next(_owners)})"
         self._work: Path | None = None
         self._net_file: Path | None = None
-        self._demands: dict[int, tuple[Path, list[str]]] = {}
+        self._demands: dict[int, tuple[Path, list[str], Demand]] = {}
         self._classes: dict[int, dict[str, int]] = {}  # run seed -> vehicle id -> features.CLASS_ORDER index + 1
         self._sumo = None
         self.ego_id = ""
@@ -91,13 +132,21 @@ class RoadsynthEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        self._write_record(None)  # an episode left unfinished is written as far as it went
         run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
-        sumocfg, candidates = self.sumo_inputs(run_seed)
+        sumocfg, candidates, _ = self.sumo_inputs(run_seed)
         sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true", "--no-step-log", "true",
-                           "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner)
+                           "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner,
+                          yielding=True)
         self._sumo = sumo
-        for _ in range(round(self.sim.warmup_s / self.sim.step_length_s) + 1):
+        self._run_seed = run_seed
+        dt = self.sim.step_length_s
+        self._warm_steps = round(self.sim.warmup_s / dt)
+        recorder = RunRecorder(sumo) if self.record_dir is not None or self.sensors is not None else None
+        for step in range(self._warm_steps + 1):
             sumo.simulationStep()
+            if recorder is not None:
+                recorder.count(round(step * dt, 6))
         # The same draw as simulate's ego choice (pipeline.traffic.simulation.run).
         self.ego_id = ego = choose_ego(sumo, candidates, self.config.ego, self.sim,
                                        np.random.default_rng([run_seed, 0xE90]))
@@ -110,8 +159,16 @@ class RoadsynthEnv(gym.Env):
             # when "nearby" asks for it (the slots then read their vehicles from it too).
             sumo.vehicle.subscribeContext(ego, features.CMD_GET_VEHICLE_VARIABLE, self.options.neighbour_range_m,
                                           features.CONTEXT_VARS)
-        self._run_seed = run_seed
         self._start_time_s = sumo.simulation.getTime()
+        self._frame = 0
+        self._truth: dict[str, object] | None = None
+        self._recorder = recorder
+        if recorder is not None:
+            recorder.subscribe_all()
+        if self.sensors is not None:
+            self.sensors.start(self._work / "roads", run_seed)
+        if self._topview is not None:
+            self._topview.start(sumo)
         self._speed = sumo.vehicle.getSpeed(ego)
         self._lat_speed = 0.0
         self._accel = 0.0
@@ -119,11 +176,13 @@ class RoadsynthEnv(gym.Env):
         self._last_edge_length = sumo.lane.getLength(f"{self._last_edge}_0")
         self._route_left = self._route_left_m()
         self._obs = self._observe()
+        self._sense()
         return self._obs, self._info()
 
     def step(self, action):
         if self._sumo is None:
             raise RuntimeError("step() before reset()")
+        require_sumo(self._owner)
         sumo, ego, o, dt = self._sumo, self.ego_id, self.options, self.sim.step_length_s
         a_lon, a_lat = self._accelerations(np.asarray(action, dtype=np.float64))
         speed = min(max(self._speed + a_lon * dt, 0.0), o.max_speed_mps)
@@ -142,6 +201,10 @@ class RoadsynthEnv(gym.Env):
         sumo.vehicle.moveToXY(ego, "", -1, x, y, angle=90.0 - math.degrees(heading), keepRoute=2,
                               matchThreshold=self._match_m)
         sumo.simulationStep()
+        self._frame += 1
+        if self._recorder is not None:
+            self._recorder.count(self._frame_time_s())
+            self._recorder.subscribe_departed()
         self._speed, self._accel, self._lat_speed = speed, accel, lat_speed
 
         collided = any(ego in (col.collider, col.victim) for col in sumo.simulation.getCollisions())
@@ -166,6 +229,7 @@ class RoadsynthEnv(gym.Env):
             if off_road and reason is None:
                 reason = "off_road"
             self._obs = self._observe()
+            self._sense()
         target = o.reward.target_speed_mps or (sumo.vehicle.getAllowedSpeed(ego) if not gone else 1.0)
         terms = reward_terms(o.reward, progress_m=progress, target_speed_mps=max(target, 1.0), dt_s=dt, jerk_mps3=jerk,
                              lateral_offset_m=float(self._obs["ego"][3]), half_lane_width_m=half_width,
@@ -182,9 +246,26 @@ class RoadsynthEnv(gym.Env):
         info["reward_terms"] = terms
         if reason is not None:
             info["reason"] = reason
+        if (terminated or truncated) and self._recorder is not None:
+            written = self._write_record(reason)
+            if written is not None:
+                info["record_dir"] = str(written)
         return self._obs, float(sum(terms.values())), terminated, truncated, info
 
+    def render(self) -> np.ndarray | None:
+        """The camera image (with the "camera" sensor) or a top view around the ego, for render_mode "rgb_array"."""
+        if self.render_mode is None:
+            return None
+        if self._sumo is None:
+            raise RuntimeError("render() before reset()")
+        require_sumo(self._owner)
+        if self._topview is None:
+            return self._obs["camera"]
+        return self._topview.draw(self._sumo, self.ego_id)
+
     def close(self) -> None:
+        if self._sumo is not None:
+            self._write_record(None)
         close_sumo(self._owner)
         self._sumo = None
         if self._work is not None:
@@ -193,10 +274,12 @@ class RoadsynthEnv(gym.Env):
 
     def ego_length_m(self) -> float:
         """The ego's length (its leader's gap is ds minus half of both lengths)."""
+        require_sumo(self._owner)
         return self._sumo.vehicle.getLength(self.ego_id)
 
     def lane_width_m(self) -> float:
         """Width of the ego's lane."""
+        require_sumo(self._owner)
         return self._sumo.lane.getWidth(self._sumo.vehicle.getLaneID(self.ego_id))
 
     def action_from_mps2(self, lon_mps2: float, lat_mps2: float) -> np.ndarray:
@@ -211,11 +294,13 @@ class RoadsynthEnv(gym.Env):
 
     # ---- helpers ----
 
-    def sumo_inputs(self, run_seed: int) -> tuple[Path, list[str]]:
-        """The run's .sumocfg and ego candidates: network built once per env, demand once per run seed."""
+    def sumo_inputs(self, run_seed: int) -> tuple[Path, list[str], Demand]:
+        """The run's .sumocfg, ego candidates and demand: network built once per env, demand once per run seed."""
         if self._work is None:
             self._work = Path(tempfile.mkdtemp(prefix="roadsynth-env-"))
             self._net_file = networks.build_network(self.config.network, self._work / "net")
+            if self.sensors is not None:
+                write_road_geometry(self._net_file, self._work / "roads")
         if run_seed not in self._demands:
             out = self._work / f"seed{run_seed}"
             out.mkdir()
@@ -224,7 +309,7 @@ class RoadsynthEnv(gym.Env):
             sumocfg = write_sumocfg(out, str(self._net_file), demand.routes_file.name, self.sim, run_seed)
             vehicles = demand.vehicles
             candidates = vehicles.loc[vehicles["cls"] == self.config.ego.cls.value, "vehicle_id"].tolist()
-            self._demands[run_seed] = (sumocfg, candidates)
+            self._demands[run_seed] = (sumocfg, candidates, demand)
             index = {c.value: i + 1 for i, c in enumerate(features.CLASS_ORDER)}
             self._classes[run_seed] = dict(zip(vehicles["vehicle_id"], vehicles["cls"].map(index), strict=True))
         return self._demands[run_seed]
@@ -265,6 +350,7 @@ class RoadsynthEnv(gym.Env):
 
     def lane_drivable(self, index: int) -> bool:
         """Whether lane ``index`` of the ego's current edge exists and admits the ego's vehicle class."""
+        require_sumo(self._owner)
         sumo = self._sumo
         road = sumo.vehicle.getRoadID(self.ego_id)
         return 0 <= index < sumo.edge.getLaneNumber(road) and self._drivable(f"{road}_{index}")
@@ -294,8 +380,57 @@ class RoadsynthEnv(gym.Env):
         return obs
 
     def _info(self) -> dict[str, object]:
-        return {"ego_id": self.ego_id, "run_seed": self._run_seed,
+        info = {"ego_id": self.ego_id, "run_seed": self._run_seed,
                 "time_s": round(self._sumo.simulation.getTime() - self._start_time_s, 6)}
+        if self._truth is not None:
+            info["sensors"] = self._truth
+        return info
+
+    def _frame_time_s(self) -> float:
+        """The current frame's time as simulate labels it (frame 0 at the end of the warm-up)."""
+        return round((self._warm_steps + self._frame) * self.sim.step_length_s, 6)
+
+    def _sense(self) -> None:
+        """Record the current frame (``record=``) and render its sensors into the observation (``sensors=``)."""
+        if self._recorder is None:
+            return
+        frame, time_s = self._frame, self._frame_time_s()
+        if self.record_dir is not None:
+            self._recorder.record(frame, time_s, self.ego_id)
+        if self.sensors is None:
+            return
+        snapshot = self._recorder.snapshot(frame, time_s, self.ego_id)
+        if snapshot is None:
+            return  # the ego left: the last frame's sensor observation stays
+        vehicles, persons, tls_rows = snapshot
+        actors, parked = self._actor_tables()
+        table = with_parked(to_trajectories(vehicles, persons, actors, self.ego_id), parked,
+                            int(actors["track_id"].max()) + 1)
+        obs, self._truth = self.sensors.render(table, frame, {tls: state for _, _, tls, state in tls_rows})
+        self._obs.update(obs)
+
+    def _actor_tables(self) -> tuple[pd.DataFrame, pd.DataFrame]:
+        """The run's actor table (Demand.actor_table) and parked vehicles, as simulate builds them (once per seed)."""
+        if self._tables_seed != self._run_seed:
+            _, _, demand = self._demands[self._run_seed]
+            self._tables = demand.actor_table(), place_parked(self.config.demand, self._net_file, self._run_seed)
+            self._tables_seed = self._run_seed
+        return self._tables
+
+    def _write_record(self, end: str | None) -> Path | None:
+        """Write the episode recorded so far (``record=``), once; its folder, or None when there is none."""
+        if self.record_dir is None or self._recorder is None or not self._recorder.vehicles.frame:
+            return None
+        from pipeline.envs.recording import episode_dir, write_episode
+
+        recorder, self._recorder = self._recorder, None
+        out = episode_dir(self.record_dir, self._episodes_recorded)
+        _, _, demand = self._demands[self._run_seed]
+        write_episode(out, config=self.config, sim=self.sim, options=self.options, seed=self._run_seed,
+                      net_file=self._net_file, demand=demand, recorder=recorder, ego_id=self.ego_id, end=end)
+        self._episodes_recorded += 1
+        log.info("recorded the episode (%s) in %s", end or "stopped", out)
+        return out
 
 
 def scenario_env(scenario: str | Path | None = None, **kwargs) -> RoadsynthEnv:

@@ -57,7 +57,7 @@ def frame_rng(seed: int, condition: str, frame: int, sensor: int) -> np.random.G
     return np.random.default_rng([seed, zlib.crc32(condition.encode()), frame, sensor])
 
 
-class _SignalState:
+class SignalState:
     """Per-frame signal-lamp materials from the recorded traffic-light states."""
 
     def __init__(self, world: StaticWorld, scene: StaticScene, tls: pd.DataFrame) -> None:
@@ -71,10 +71,17 @@ class _SignalState:
         self.scene, self.off = scene, material_index("signal_off")
 
     def apply(self, frame: int) -> None:
+        """Light the lamps as recorded at ``frame``."""
         if not len(self.lamps):
             return
         rows = self.tls[self.tls["frame"] == frame]
-        lit = self.lamps.lit(dict(zip(rows["tls_id"], rows["state"], strict=True)))
+        self.apply_states(dict(zip(rows["tls_id"], rows["state"], strict=True)))
+
+    def apply_states(self, states: dict[str, str]) -> None:
+        """Light the lamps for the traffic lights' ``states`` (tls id -> SUMO state string)."""
+        if not len(self.lamps):
+            return
+        lit = self.lamps.lit(states)
         material = np.where(lit, self.lit_material, self.off)[self.lamp_of_triangle]
         self.scene.set_triangle_materials(self.mesh_index, self.triangles, material)
 
@@ -83,7 +90,7 @@ ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", 
                  "color_g", "color_b", "braking")
 
 
-class _Trajectories:
+class Trajectories:
     """The simulated run's trajectories as numpy columns, and each frame's row positions (in table order)."""
 
     def __init__(self, table: pd.DataFrame) -> None:
@@ -99,11 +106,11 @@ class _Trajectories:
         return {c: v[ego] for c, v in self.columns.items()}, {c: self.columns[c][others] for c in ACTOR_COLUMNS}
 
 
-def _body_sized(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
+def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
     """The trajectories with every actor's box length as its body is proportioned
     (:meth:`ActorMeshes.body_lengths`: pedestrians); the camera, the LiDAR, the label rows and so the exports all
     see that box."""
-    tracks, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
     cols = {c: table[c].to_numpy()[first] for c in ACTOR_COLUMNS}  # an actor's class and size hold for its track
     length = meshes.body_lengths(_actors(cols, seed))[inverse.reshape(-1)]
     if np.array_equal(length, table["length_m"].to_numpy()):
@@ -160,8 +167,8 @@ class _WorkerState:
     cameras: list
     lidars: list
     condition: object
-    trajectories: _Trajectories
-    signals: _SignalState
+    trajectories: Trajectories
+    signals: SignalState
     meshes: ActorMeshes
 
 
@@ -201,9 +208,9 @@ def _worker_state(job: ShardJob) -> _WorkerState:
     static = StaticScene(world.meshes)
     cameras, lidars = build_sensors(job.rig)
     return _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
-                        _Trajectories(_body_sized(read_parquet(job.sim_dir / "trajectories.parquet"),
-                                                  rig_actor_meshes(job.rig), job.seed)),
-                        _SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
+                        Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"),
+                                                 rig_actor_meshes(job.rig), job.seed)),
+                        SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
                         rig_actor_meshes(job.rig))
 
 
@@ -222,26 +229,14 @@ def render_shard(job: ShardJob) -> int:
     frame_rows, label_parts = [], []
     for frame in job.frames:
         ego, others = state.trajectories.frame(frame)
-        ego_pose = Transform.from_xyz_rpy((ego["x_m"], ego["y_m"], ego["z_m"]), (0.0, 0.0, ego["yaw_rad"]))
         signals.apply(frame)
-        actors = _actors(others, job.seed)
-        ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
-        active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
-                                 street_lights_m=world.street_lights, ego_size_m=ego_size_m)
-        scene = FrameScene(static, actors, state.meshes, threads=job.threads, active=active)
-        lidar_points = np.zeros(len(scene.actors), np.int64)
-        for k, lidar in enumerate(lidars):
-            sweep = render_lidar(scene, lidar, ego_pose, frame_rng(job.seed, condition.name, frame, 1000 + k),
-                                 condition=condition)
+        out = render_frame(world, static, cameras, lidars, condition, state.meshes, job.seed, frame, ego, others,
+                           threads=job.threads)
+        for lidar, sweep in zip(lidars, out.sweeps, strict=True):
             write_lidar_sweep(lidar_path(job.record_dir, lidar.name, frame), sweep)
-            label_parts.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
-            lidar_points += sweep.points_per_actor
-        for k, camera in enumerate(cameras):
-            cam = render_camera(scene, camera, ego_pose, condition, frame_rng(job.seed, condition.name, frame, k),
-                                street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
-                                ego_size_m=ego_size_m)
+        for camera, cam in zip(cameras, out.cameras, strict=True):
             write_camera_frame(job.record_dir, camera.name, frame, cam)
-            label_parts.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
+        label_parts.extend(out.labels)
         frame_rows.append((frame, float(ego["time_s"]), int(ego["track_id"]), ego["x_m"], ego["y_m"], ego["z_m"],
                            ego["yaw_rad"], ego["speed_mps"]))
     frames = _shard_table({c: [row[i] for row in frame_rows] for i, c in enumerate(FRAME_COLUMNS)}, SHARD_FRAMES)
@@ -250,3 +245,52 @@ def render_shard(job: ShardJob) -> int:
     write_ipc(_label_table(label_parts), job.shard_dir / f"labels-{job.index:05d}.arrow")
     (job.shard_dir / f"done-{job.index:05d}").write_text(" ".join(map(str, job.frames)) + "\n")
     return len(job.frames)
+
+
+@dataclass(frozen=True)
+class FrameSensors:
+    """One frame of a rig's sensors, as :func:`render_frame` rendered it.
+
+    Attributes:
+        cameras: one :class:`pipeline.sensors.render.CameraFrame` per camera, in rig order.
+        sweeps: one :class:`pipeline.sensors.lidar.LidarSweep` per LiDAR, in rig order.
+        labels: the frame's label columns (those of LABEL_COLUMNS, one array each), one dict per sensor: the
+            LiDARs' then the cameras'.
+    """
+
+    cameras: list
+    sweeps: list
+    labels: list[dict[str, np.ndarray]]
+
+
+def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars: list, condition, meshes: ActorMeshes,
+                 seed: int, frame: int, ego: dict[str, object], others: dict[str, np.ndarray], *,
+                 threads: int = 0) -> FrameSensors:
+    """Render every sensor of the rig at one frame: the render stage's per-frame work, without writing anything.
+
+    ``ego`` is the ego's trajectory row and ``others`` the other actors' columns (:meth:`Trajectories.frame`);
+    the traffic lights must already be set (:class:`SignalState`). ``cameras`` and ``lidars`` are the rig's
+    (:func:`pipeline.stages.rig.build_sensors`), ``condition`` a :class:`pipeline.sensors.conditions.Condition`.
+    Random draws come from :func:`frame_rng` (seed, condition, frame, sensor), so the frame is the same however
+    it is reached (a render shard, or the driving environment)."""
+    ego_pose = Transform.from_xyz_rpy((ego["x_m"], ego["y_m"], ego["z_m"]), (0.0, 0.0, ego["yaw_rad"]))
+    actors = _actors(others, seed)
+    ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
+    active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
+                             street_lights_m=world.street_lights, ego_size_m=ego_size_m)
+    scene = FrameScene(static, actors, meshes, threads=threads, active=active)
+    lidar_points = np.zeros(len(scene.actors), np.int64)
+    sweeps, frames, labels = [], [], []
+    for k, lidar in enumerate(lidars):
+        sweep = render_lidar(scene, lidar, ego_pose, frame_rng(seed, condition.name, frame, 1000 + k),
+                             condition=condition)
+        sweeps.append(sweep)
+        labels.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
+        lidar_points += sweep.points_per_actor
+    for k, camera in enumerate(cameras):
+        cam = render_camera(scene, camera, ego_pose, condition, frame_rng(seed, condition.name, frame, k),
+                            street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
+                            ego_size_m=ego_size_m)
+        frames.append(cam)
+        labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
+    return FrameSensors(frames, sweeps, labels)

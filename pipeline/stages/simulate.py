@@ -24,10 +24,10 @@ from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.core.tables import write_parquet
 from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
 from pipeline.traffic import networks
-from pipeline.traffic.demand import build_demand
+from pipeline.traffic.demand import Demand, build_demand
 from pipeline.traffic.parking import PARKED_FILE, place_parked, with_parked
 from pipeline.traffic.roadgeometry import write_road_geometry
-from pipeline.traffic.simulation import run, to_trajectories, write_sumocfg
+from pipeline.traffic.simulation import ActorColumns, run, to_trajectories, write_sumocfg
 
 log = logging.getLogger(__name__)
 
@@ -68,19 +68,29 @@ def simulate(config: ScenarioConfig, seed: int, out: Path, *, progress: bool = T
         candidates = demand.vehicles.loc[demand.vehicles["cls"] == config.ego.cls.value, "vehicle_id"].tolist()
         vehicles, persons, tls_rows, counters, ego_id = run(sumocfg, config.simulation, config.ego, candidates, seed,
                                                              progress=progress)
-        actors = demand.actor_table()
-        parked = place_parked(config.demand, net_file, seed)
-        trajectories = with_parked(to_trajectories(vehicles, persons, actors, ego_id), parked,
-                                   int(actors["track_id"].max()) + 1)
-        write_parquet(trajectories, tmp / "trajectories.parquet")
-        write_parquet(parked, tmp / PARKED_FILE)
-        tls = pd.DataFrame(tls_rows, columns=["frame", "time_s", "tls_id", "state"]).astype({"frame": np.int32})
-        write_parquet(tls, tmp / "tls_states.parquet")
-        write_parquet(demand.vehicles, tmp / "vehicles.parquet")
-        write_road_geometry(net_file, tmp / "roads")
-        stats = _stats(trajectories, counters, config, ego_id, networks.network_summary(net_file))
-        write_json(tmp / "stats.json", stats)
+        stats = write_run(tmp, config, seed, net_file, demand, vehicles, persons, tls_rows, counters, ego_id)
         write_meta(tmp, stage="simulate", config=config.model_dump(mode="json"), seed=seed)
+    return stats
+
+
+def write_run(out: Path, config: ScenarioConfig, seed: int, net_file: Path, demand: Demand, vehicles: ActorColumns,
+              persons: ActorColumns, tls_rows: list[tuple], counters: dict[str, object],
+              ego_id: str) -> dict[str, object]:
+    """Write a recorded run's tables, road geometry and stats.json into ``out`` (a folder being built that already
+    holds the network, the demand and run.sumocfg); returns the stats. The recording comes from
+    :class:`pipeline.traffic.simulation.RunRecorder` (``run`` here, or the driving environment's ``record=``)."""
+    actors = demand.actor_table()
+    parked = place_parked(config.demand, net_file, seed)
+    trajectories = with_parked(to_trajectories(vehicles, persons, actors, ego_id), parked,
+                               int(actors["track_id"].max()) + 1)
+    write_parquet(trajectories, out / "trajectories.parquet")
+    write_parquet(parked, out / PARKED_FILE)
+    tls = pd.DataFrame(tls_rows, columns=["frame", "time_s", "tls_id", "state"]).astype({"frame": np.int32})
+    write_parquet(tls, out / "tls_states.parquet")
+    write_parquet(demand.vehicles, out / "vehicles.parquet")
+    write_road_geometry(net_file, out / "roads")
+    stats = _stats(trajectories, counters, config, ego_id, networks.network_summary(net_file))
+    write_json(out / "stats.json", stats)
     return stats
 
 

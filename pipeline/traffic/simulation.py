@@ -40,33 +40,48 @@ class SimulationError(RuntimeError):
 
 
 class SumoBusyError(RuntimeError):
-    """A second libsumo simulation was asked for while one is open in this process."""
+    """A second libsumo simulation was asked for while one is open in this process, or a simulation that was taken
+    over (see :func:`start_sumo`) was used by its former owner."""
 
 
 # libsumo holds one simulation per process, and a second start() silently replaces the first (its clock
 # jumps back, no error): every start goes through start_sumo, which knows who holds the open one.
 _active_owner: str | None = None
+_yielding = False  # whether the open simulation may be taken over by another owner
 
 
-def start_sumo(args: list[str], owner: str):
+def start_sumo(args: list[str], owner: str, *, yielding: bool = False):
     """Start libsumo with ``args`` (after the binary) for ``owner``; returns the libsumo module.
 
-    ``owner`` names who holds the simulation (shown in the error). The same owner may restart (its open
-    simulation is closed first); a different owner gets :class:`SumoBusyError` until :func:`close_sumo`.
+    ``owner`` names who holds the simulation (shown in errors). The same owner may restart (its open simulation
+    is closed first). A different owner gets :class:`SumoBusyError` until :func:`close_sumo`, unless the open
+    simulation was started ``yielding``: then it is closed and the new owner takes over, and the former owner,
+    which checks :func:`require_sumo` before each use, gets :class:`SumoBusyError` there instead of reading the
+    other simulation (the driving environment's simulations yield: Gymnasium's env checker opens a second env
+    while the first is open, and only uses the second).
     """
-    global _active_owner
+    global _active_owner, _yielding
     import libsumo
 
-    if _active_owner is not None and _active_owner != owner:
+    if _active_owner is not None and _active_owner != owner and not _yielding:
         raise SumoBusyError(f"libsumo already runs a simulation in this process (held by {_active_owner}); "
-                            f"{owner} cannot start another: close the first (env.close()), or use one process "
-                            "per simulation (e.g. gymnasium.vector.AsyncVectorEnv)")
-    if _active_owner == owner:
+                            f"{owner} cannot start another: close the first, or use one process per simulation")
+    if _active_owner is not None:
+        if _active_owner != owner:
+            log.info("libsumo: %s takes over this process's simulation from %s", owner, _active_owner)
         libsumo.close()
         _active_owner = None
     libsumo.start([binary("sumo"), *args])
-    _active_owner = owner
+    _active_owner, _yielding = owner, yielding
     return libsumo
+
+
+def require_sumo(owner: str) -> None:
+    """Raise :class:`SumoBusyError` unless ``owner`` holds this process's simulation."""
+    if _active_owner != owner:
+        now = f"taken over by {_active_owner}" if _active_owner is not None else "closed"
+        raise SumoBusyError(f"{owner}'s SUMO simulation was {now} (libsumo runs one simulation per process); "
+                            "reset() to start it again, or use one process per env (gymnasium.vector.AsyncVectorEnv)")
 
 
 def close_sumo(owner: str) -> None:
@@ -110,7 +125,7 @@ def write_sumocfg(out_dir: Path, net_file: str, routes_file: str, sim: Simulatio
 
 
 @dataclass
-class _Columns:
+class ActorColumns:
     """Growing per-record columns (one entry per actor per recorded frame)."""
 
     frame: list[np.ndarray] = field(default_factory=list)
@@ -134,6 +149,11 @@ class _Columns:
         self.values.append(np.array(rows, dtype=np.float64))
         self.frame.append(np.full(len(rows), frame, dtype=np.int32))
         self.time_s.append(np.full(len(rows), time_s))
+
+    def extend(self, other: ActorColumns) -> None:
+        """Append ``other``'s rows."""
+        for name in ("frame", "time_s", "actor_id", "values", "lane_id"):
+            getattr(self, name).extend(getattr(other, name))
 
 
 @dataclass(frozen=True)
@@ -200,7 +220,7 @@ def neighbours_ahead(xy: np.ndarray, yaw_rad: np.ndarray, others_xy: np.ndarray,
 
 
 def run(sumocfg: Path, sim: SimulationConfig, ego: EgoConfig, ego_candidates: list[str], seed: int, *,
-        progress: bool = True) -> tuple[_Columns, _Columns, list[tuple], dict[str, object], str]:
+        progress: bool = True) -> tuple[ActorColumns, ActorColumns, list[tuple], dict[str, object], str]:
     """Step the simulation; return vehicle and person columns, TLS rows, counters and the ego id."""
     owner = f"simulate({sumocfg})"
     sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true"], owner)
@@ -215,56 +235,107 @@ def _loop(sumo, sim, ego, ego_candidates, rng, progress):
     # labelled t, while libsumo's clock already reads t + step_length. Frame 0 is the state at warmup_s.
     warm_steps = round(sim.warmup_s / sim.step_length_s)
     last_step = warm_steps + (sim.num_frames - 1) * sim.record_every_steps
-    vehicles, persons, tls_rows = _Columns(), _Columns(), []
-    counters: dict[str, int] = defaultdict(int)
-    collisions: list[dict[str, object]] = []
+    recorder = RunRecorder(sumo)
     ego_id = ""
     bar = tqdm(total=round(sim.warmup_s + sim.duration_s, 3), unit="s", desc="simulate", disable=not progress,
                bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim-s [{elapsed}<{remaining}]")
     for step in range(last_step + 1):
         sumo.simulationStep()
         time_s = round(step * sim.step_length_s, 6)
-        counters["departed"] += sumo.simulation.getDepartedNumber()
-        counters["arrived"] += sumo.simulation.getArrivedNumber()
-        counters["teleports"] += sumo.simulation.getStartingTeleportNumber()
-        counters["persons_departed"] += sumo.simulation.getDepartedPersonNumber()
-        for col in sumo.simulation.getCollisions():
-            collisions.append({"time_s": time_s, "collider": col.collider, "victim": col.victim, "type": col.type,
-                               "lane": col.lane})
+        recorder.count(time_s)
         since = step - warm_steps
         if since == 0:
             ego_id = choose_ego(sumo, ego_candidates, ego, sim, rng)
-            for vid in sumo.vehicle.getIDList():
-                sumo.vehicle.subscribe(vid, VEHICLE_VARS)
-            for pid in sumo.person.getIDList():
-                sumo.person.subscribe(pid, PERSON_VARS)
-            for tls in sumo.trafficlight.getIDList():
-                sumo.trafficlight.subscribe(tls, (TL_STATE,))
+            recorder.subscribe_all()
         elif since > 0:
-            for vid in sumo.simulation.getDepartedIDList():
-                sumo.vehicle.subscribe(vid, VEHICLE_VARS)
-            for pid in sumo.simulation.getDepartedPersonIDList():
-                sumo.person.subscribe(pid, PERSON_VARS)
-        if since >= 0 and since % sim.record_every_steps == 0:
-            frame = since // sim.record_every_steps
-            veh_results = sumo.vehicle.getAllSubscriptionResults()
-            if ego_id not in veh_results:
-                log.warning("ego %s left the network at %.1f s; recording stops", ego_id, time_s)
-                counters["ego_left_early"] = 1
-                break
-            vehicles.add(frame, time_s, veh_results, person=False)
-            persons.add(frame, time_s, sumo.person.getAllSubscriptionResults(), person=True)
-            for tls, res in sorted(sumo.trafficlight.getAllSubscriptionResults().items()):
-                tls_rows.append((frame, time_s, tls, res[TL_STATE]))
+            recorder.subscribe_departed()
+        recording = since >= 0 and since % sim.record_every_steps == 0
+        if recording and not recorder.record(since // sim.record_every_steps, time_s, ego_id):
+            log.warning("ego %s left the network at %.1f s; recording stops", ego_id, time_s)
+            break
         if (step + 1) % round(1.0 / sim.step_length_s) == 0:
             bar.update(1.0)
     bar.close()
-    counters["collisions"] = len(collisions)
-    stats = {**counters, "collision_events": collisions}
-    return vehicles, persons, tls_rows, stats, ego_id
+    return recorder.vehicles, recorder.persons, recorder.tls_rows, recorder.stats(), ego_id
 
 
-def to_trajectories(vehicles: _Columns, persons: _Columns, actors: pd.DataFrame, ego_id: str) -> pd.DataFrame:
+class RunRecorder:
+    """Records a running libsumo simulation the way ``simulate`` does: counters of every step (departures,
+    arrivals, teleports, collisions) and, once :meth:`subscribe_all` was called, every actor and traffic light at
+    the frames passed to :meth:`record` (through subscriptions). Used by the simulate loop and by the driving
+    environment's ``record=``; :func:`to_trajectories` turns ``vehicles`` and ``persons`` into the table."""
+
+    def __init__(self, sumo) -> None:
+        self.sumo = sumo
+        self.vehicles, self.persons = ActorColumns(), ActorColumns()
+        self.tls_rows: list[tuple] = []
+        self.counters: dict[str, int] = defaultdict(int)
+        self.collisions: list[dict[str, object]] = []
+
+    def count(self, time_s: float) -> None:
+        """Add the step just simulated (labelled ``time_s``) to the counters; call after every simulationStep."""
+        sim, counters = self.sumo.simulation, self.counters
+        counters["departed"] += sim.getDepartedNumber()
+        counters["arrived"] += sim.getArrivedNumber()
+        counters["teleports"] += sim.getStartingTeleportNumber()
+        counters["persons_departed"] += sim.getDepartedPersonNumber()
+        for col in sim.getCollisions():
+            self.collisions.append({"time_s": time_s, "collider": col.collider, "victim": col.victim,
+                                    "type": col.type, "lane": col.lane})
+
+    def subscribe_all(self) -> None:
+        """Subscribe every vehicle, person and traffic light now in the simulation (once, at frame 0)."""
+        sumo = self.sumo
+        for vid in sumo.vehicle.getIDList():
+            sumo.vehicle.subscribe(vid, VEHICLE_VARS)
+        for pid in sumo.person.getIDList():
+            sumo.person.subscribe(pid, PERSON_VARS)
+        for tls in sumo.trafficlight.getIDList():
+            sumo.trafficlight.subscribe(tls, (TL_STATE,))
+
+    def subscribe_departed(self) -> None:
+        """Subscribe the vehicles and persons that departed in the last step (every step after frame 0)."""
+        sumo = self.sumo
+        for vid in sumo.simulation.getDepartedIDList():
+            sumo.vehicle.subscribe(vid, VEHICLE_VARS)
+        for pid in sumo.simulation.getDepartedPersonIDList():
+            sumo.person.subscribe(pid, PERSON_VARS)
+
+    def record(self, frame: int, time_s: float, ego_id: str) -> bool:
+        """Record every actor and traffic light as ``frame`` at ``time_s``; False (nothing recorded) when the ego
+        is no longer in the simulation."""
+        snapshot = self.snapshot(frame, time_s, ego_id)
+        if snapshot is None:
+            self.counters["ego_left_early"] = 1
+            return False
+        vehicles, persons, tls_rows = snapshot
+        self.vehicles.extend(vehicles)
+        self.persons.extend(persons)
+        self.tls_rows.extend(tls_rows)
+        return True
+
+    def snapshot(self, frame: int, time_s: float,
+                 ego_id: str) -> tuple[ActorColumns, ActorColumns, list[tuple]] | None:
+        """The subscribed vehicles, persons and traffic-light rows now, as ``frame`` at ``time_s`` (not recorded);
+        None when the ego is no longer in the simulation."""
+        sumo = self.sumo
+        veh_results = sumo.vehicle.getAllSubscriptionResults()
+        if ego_id not in veh_results:
+            return None
+        vehicles, persons = ActorColumns(), ActorColumns()
+        vehicles.add(frame, time_s, veh_results, person=False)
+        persons.add(frame, time_s, sumo.person.getAllSubscriptionResults(), person=True)
+        tls_rows = [(frame, time_s, tls, res[TL_STATE])
+                    for tls, res in sorted(sumo.trafficlight.getAllSubscriptionResults().items())]
+        return vehicles, persons, tls_rows
+
+    def stats(self) -> dict[str, object]:
+        """The counters, ``collisions`` (their number) and ``collision_events`` (each one)."""
+        return {**self.counters, "collisions": len(self.collisions), "collision_events": self.collisions}
+
+
+def to_trajectories(vehicles: ActorColumns, persons: ActorColumns, actors: pd.DataFrame,
+                    ego_id: str) -> pd.DataFrame:
     """Assemble the trajectories table from recorded columns and the static actor table.
 
     ``actors`` has one row per actor id: track_id, cls, length_m, width_m, height_m, color_r/g/b.

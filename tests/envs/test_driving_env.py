@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -11,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 
 import pipeline.envs  # noqa: F401  (registers the envs)
 from pipeline.envs.features import NEIGHBOUR_SLOTS
-from pipeline.traffic.simulation import SumoBusyError, active_sumo_owner
+from pipeline.traffic.simulation import SumoBusyError, active_sumo_owner, close_sumo, start_sumo
 
 pytestmark = pytest.mark.slow
 
@@ -135,19 +136,42 @@ def test_lateral_motion_changes_lane_and_leaving_the_road_terminates():
     assert terminated and info["reason"] in ("off_road", "collision")
 
 
-def test_a_second_env_in_the_same_process_is_refused_until_the_first_closes():
+def test_a_second_env_takes_the_simulation_over_and_the_first_then_refuses_to_run():
     first, second = make(), make()
     try:
         first.reset(seed=1)
-        with pytest.raises(SumoBusyError, match="already runs a simulation"):
-            second.reset(seed=1)
-        _, _, _, _, info = first.step(np.zeros(2, dtype=np.float32))
-        assert info["time_s"] == pytest.approx(0.1)  # the first simulation's clock was not touched
-        first.close()
+        first.step(np.zeros(2, dtype=np.float32))
         second.reset(seed=1)
+        assert active_sumo_owner() == second.unwrapped._owner
+        # libsumo would have let the first env read the second's simulation (its clock jumped back): refused.
+        with pytest.raises(SumoBusyError, match="was taken over by"):
+            first.step(np.zeros(2, dtype=np.float32))
+        with pytest.raises(SumoBusyError, match="was taken over by"):
+            first.unwrapped.lane_width_m()
+        _, _, _, _, info = second.step(np.zeros(2, dtype=np.float32))
+        assert info["time_s"] == pytest.approx(0.1)
+        first.reset(seed=1)  # takes it back
+        with pytest.raises(SumoBusyError, match="was taken over by"):
+            second.step(np.zeros(2, dtype=np.float32))
+        second.close()  # does not close the simulation it no longer holds
+        _, _, _, _, info = first.step(np.zeros(2, dtype=np.float32))
+        assert info["time_s"] == pytest.approx(0.1)
     finally:
         first.close()
         second.close()
+    assert active_sumo_owner() is None
+
+
+def test_an_env_cannot_take_over_a_simulation_that_does_not_yield():
+    env = make()
+    start_sumo(["-n", str(Path(env.unwrapped.sumo_inputs(1)[0]).parent.parent / "net" / "network.net.xml")],
+               "a simulate run")
+    try:
+        with pytest.raises(SumoBusyError, match=r"held by a simulate run\); RoadsynthEnv"):
+            env.reset(seed=1)
+    finally:
+        close_sumo("a simulate run")
+        env.close()
     assert active_sumo_owner() is None
 
 
