@@ -21,7 +21,7 @@ from pipeline.core.config.scenario import (
     ScenarioConfig,
     SimulationConfig,
 )
-from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
+from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RadarConfig, RigConfig
 
 __all__ = [
     "ActorMeshConfig",
@@ -40,6 +40,7 @@ __all__ = [
     "ExperimentConfig",
     "InferConfig",
     "LidarConfig",
+    "RadarConfig",
     "LogNormal",
     "NetworkConfig",
     "NetworkKind",
