@@ -54,7 +54,8 @@ REFERENCE_RANGE_M = 100.0
 
 # Per material: (diffuse gamma, glint s), RCS per square metre of patch seen across the ray. Car bodies (paint,
 # plates, rims) and street furniture (metal) are metal sheet; barriers are (weathered) concrete; people are weak,
-# diffuse scatterers; smooth road surfaces backscatter little at grazing incidence. Materials not listed are diffuse at DEFAULT_RADAR_MATERIAL.
+# diffuse scatterers; smooth road surfaces backscatter little at grazing incidence. Materials not listed are diffuse
+# at DEFAULT_RADAR_MATERIAL.
 DEFAULT_RADAR_MATERIAL = (0.05, 0.0)
 RADAR_MATERIALS: dict[str, tuple[float, float]] = {
     "asphalt": (0.004, 0.0), "lane_paint": (0.004, 0.0), "concrete": (0.02, 0.0), "kerb": (0.05, 0.3),
