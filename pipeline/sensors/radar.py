@@ -46,7 +46,7 @@ from pipeline.core.config.sensors import ConditionConfig, RadarConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.actors import Actors
 from pipeline.world.materials import MATERIAL_NAMES, material_index
-from pipeline.world.scene import FrameScene, make_rays
+from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 SPECULAR_EXPONENT = 8.0  # glint lobe: cos^8 falls to a half at 23 degrees off the normal
 NOISE_CLIP_SIGMA = 3.0
@@ -159,6 +159,39 @@ def actors_in_radar_reach(actors: Actors, ego_pose: Transform, radars: list[Rada
     return reach
 
 
+def actor_ray_mask(scene: FrameScene, config: RadarConfig, radar_to_world: Transform) -> np.ndarray:
+    """(N,) bool superset of the rays (:func:`ray_pattern` order) that can reach an actor of ``scene``: per placed
+    actor, the window of elevation rows x azimuth columns its bounding sphere's cone covers (azimuth also shifted by
+    +-2 pi against wrapping), widened by a ray each side against rounding."""
+    az_rays, el_rays = config.azimuth_rad, config.elevation_rad
+    height, width = len(el_rays), len(az_rays)
+    placed = np.flatnonzero(scene.active)
+    if not len(placed):
+        return np.zeros(height * width, bool)
+    boxes = scene.actors.boxes
+    c = radar_to_world.inverse().apply(boxes.center[placed])
+    radius = 0.5 * np.linalg.norm(boxes.size[placed], axis=1) * 1.001 + 1e-3
+    dist = np.linalg.norm(c, axis=1)
+    near = dist - radius <= config.range_max_m
+    c, radius, dist = c[near], radius[near], dist[near]
+    if not len(c):
+        return np.zeros(height * width, bool)
+    step = np.radians(config.ray_step_deg)
+    alpha = np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0))
+    el_c = np.arcsin(np.clip(c[:, 2] / np.maximum(dist, 1e-9), -1.0, 1.0))
+    everywhere = (dist <= radius) | (np.abs(el_c) + alpha >= 0.5 * np.pi)
+    half = np.arcsin(np.clip(np.sin(alpha) / np.cos(np.where(everywhere, 0.0, el_c)), 0.0, 1.0))
+    az_c = np.arctan2(c[:, 1], c[:, 0])
+    rows = [np.floor((el_rays[0] - (el_c + alpha)) / step) - 1, np.ceil((el_rays[0] - (el_c - alpha)) / step) + 2]
+    lo, hi = [], []
+    for shift in (-2 * np.pi, 0.0, 2 * np.pi):  # columns run from az_rays[0] (left) rightwards
+        col_lo = np.floor((az_rays[0] - (az_c + shift + half)) / step) - 1
+        col_hi = np.ceil((az_rays[0] - (az_c + shift - half)) / step) + 2
+        lo.append(np.column_stack([np.where(everywhere, 0, rows[0]), np.where(everywhere, 0, col_lo)]))
+        hi.append(np.column_stack([np.where(everywhere, height, rows[1]), np.where(everywhere, width, col_hi)]))
+    return rectangles_mask(height, width, np.concatenate(lo), np.concatenate(hi)).reshape(-1)
+
+
 def render_radar(
     scene: FrameScene, config: RadarConfig, ego_pose: Transform, rng: np.random.Generator, *,
     ego_velocity_mps: np.ndarray | None = None, actor_velocity_mps: np.ndarray | None = None,
@@ -178,7 +211,7 @@ def render_radar(
     to_world = ego_pose @ mount(config)
     dirs, solid = ray_pattern(config)
     rays = make_rays(to_world.translation, dirs, to_world.rotation)
-    hits = scene.cast_rays(rays)
+    hits = scene.cast_rays(rays, actor_rays=actor_ray_mask(scene, config, to_world))
     idx = np.flatnonzero(hits.hit & (hits.t_m >= config.range_min_m) & (hits.t_m <= config.range_max_m))
     r = hits.t_m[idx].astype(np.float64)
     u_world = rays[idx, 3:].astype(np.float64)
@@ -211,45 +244,39 @@ class _Cells:
 
 
 def _cells(config: RadarConfig, r, idx, vr, sigma, dirs, instance, semantic, vr_comp) -> _Cells:
-    width = len(config.azimuth_rad)
-    az = config.azimuth_rad[idx % width]
-    key = np.column_stack([
-        np.floor(r / config.range_resolution_m),
-        np.floor((az + np.radians(0.5 * config.azimuth_fov_deg)) / np.radians(config.azimuth_resolution_deg)),
-        np.floor(vr / config.velocity_resolution_mps),
-    ]).astype(np.int64)
-    if not len(key):
+    if not len(r):
         empty = np.zeros(0)
         return _Cells(empty, np.zeros((0, 3)), empty, empty, np.zeros(0, np.int32), np.zeros(0, np.uint8),
                       np.zeros(0, np.int64))
-    _, cell = np.unique(key, axis=0, return_inverse=True)
-    cell = cell.reshape(-1)
+    az = config.azimuth_rad[idx % len(config.azimuth_rad)]
+    range_bin = np.floor(r / config.range_resolution_m).astype(np.int64)
+    azimuth_bin = np.floor((az + np.radians(0.5 * config.azimuth_fov_deg))
+                           / np.radians(config.azimuth_resolution_deg)).astype(np.int64)
+    velocity_bin = np.floor(vr / config.velocity_resolution_mps).astype(np.int64)
+    velocity_bin -= velocity_bin.min()
+    # One int64 key per cell, ordered by range, then azimuth, then velocity (bins are small: no overflow).
+    key = (range_bin * (azimuth_bin.max() + 1) + azimuth_bin) * (velocity_bin.max() + 1) + velocity_bin
+    _, cell = np.unique(key, return_inverse=True)
     count = int(cell.max()) + 1
     power = sigma / r ** 4
     total = np.bincount(cell, power, count)
     points = dirs[idx].astype(np.float64) * r[:, None]
     position = np.column_stack([np.bincount(cell, power * points[:, c], count) for c in range(3)]) / total[:, None]
     # The dominant (instance, class) of each cell: the pair returning most power.
-    pair_key = np.column_stack([cell, instance, semantic]).astype(np.int64)
-    pairs, pair = np.unique(pair_key, axis=0, return_inverse=True)
-    pair = pair.reshape(-1)
+    _, who = np.unique(instance.astype(np.int64) << 8 | semantic, return_inverse=True)
+    pairs, first_return, pair = np.unique(cell * (who.max() + 1) + who, return_index=True, return_inverse=True)
+    pair_cell = pairs // (who.max() + 1)
     pair_power = np.bincount(pair, power, len(pairs))
-    order = np.lexsort((-pair_power, pairs[:, 0]))  # by cell, the strongest pair first
-    first = order[np.r_[True, pairs[order[1:], 0] != pairs[order[:-1], 0]]]
+    order = np.lexsort((-pair_power, pair_cell))  # by cell, the strongest pair first
+    strongest = order[np.r_[True, pair_cell[order[1:]] != pair_cell[order[:-1]]]]
+    dominant = first_return[strongest]  # a return of that pair
     return _Cells(
         sigma_m2=np.bincount(cell, sigma, count), position_m=position,
         vr_mps=np.bincount(cell, power * vr, count) / total,
         vr_comp_mps=np.bincount(cell, power * vr_comp, count) / total,
-        instance_id=pairs[first, 1].astype(np.int32), semantic=pairs[first, 2].astype(np.uint8),
-        dominant=_first_return(pair, first),
+        instance_id=instance[dominant].astype(np.int32), semantic=semantic[dominant].astype(np.uint8),
+        dominant=dominant,
     )
-
-
-def _first_return(pair: np.ndarray, chosen_pairs: np.ndarray) -> np.ndarray:
-    """(C,) int64 the first return (index into the scan's returns) of each chosen pair."""
-    first = np.full(int(pair.max()) + 1, -1, np.int64)
-    first[pair[::-1]] = np.arange(len(pair))[::-1]
-    return first[chosen_pairs]
 
 
 def _detect(config: RadarConfig, cells: _Cells, rng: np.random.Generator, actor: np.ndarray, n_actors: int,

@@ -11,6 +11,7 @@ from pipeline.core.config import ConditionConfig, RadarConfig, RigConfig
 from pipeline.core.geometry import Transform
 from pipeline.sensors.radar import (
     NOISE_CLIP_SIGMA,
+    actor_ray_mask,
     mount,
     ray_pattern,
     render_radar,
@@ -46,6 +47,26 @@ def test_ray_pattern_is_symmetric_and_covers_the_field_of_view():
     step = np.radians(0.5)
     expected = (np.radians(120.0) + step) * 2 * np.sin(0.5 * (np.radians(8.0) + step))
     assert solid.sum() == pytest.approx(expected, rel=1e-3)
+
+
+def test_actor_ray_mask_is_a_superset(actors_factory, box_meshes):
+    rng = np.random.default_rng(1)
+    n = 15
+    centers = np.column_stack([rng.uniform(-60, 60, n), rng.uniform(-60, 60, n), rng.uniform(-1, 3, n)])
+    centers[:3] = [[9.0, 0.3, 0.5], [-20.0, 0.0, 0.5], [2.0, 30.0, 0.5]]  # ahead, behind, beside
+    sizes = np.column_stack([rng.uniform(0.5, 12, n), rng.uniform(0.5, 3, n), rng.uniform(1, 4, n)])
+    actors = actors_factory(centers, sizes, yaws=rng.uniform(-np.pi, np.pi, n))
+    scene = FrameScene(StaticScene([]), actors, box_meshes)
+    config = radar(ray_step_deg=0.5, azimuth_fov_deg=170.0, elevation_fov_deg=20.0)
+    to_world = EGO @ mount(config)
+    dirs, _ = ray_pattern(config)
+    mask = actor_ray_mask(scene, config, to_world)
+    hits = scene.cast(np.broadcast_to(to_world.translation, dirs.shape), to_world.apply_vectors(dirs))
+    reach = hits.hit & (hits.t_m <= config.range_max_m)
+    assert reach.sum() > 100 and mask[reach].all()
+    assert mask.mean() < 0.9  # and it does leave rays out
+    around = FrameScene(StaticScene([]), actors_factory([[2.0, 0.0, 0.5]], [[4.5, 1.8, 1.5]]), box_meshes)
+    assert actor_ray_mask(around, config, to_world).all()  # an actor around the radar: every ray
 
 
 def test_config_errors_name_the_field():
