@@ -73,3 +73,74 @@ def test_the_radar_changes_nothing_else_and_a_rig_without_it_leaves_no_trace(run
     assert "radar_detections" not in a.columns
     b = b[b["sensor_type"] != "radar"][list(a.columns)].reset_index(drop=True)
     assert a.equals(b)
+
+
+def test_exports_carry_the_radar(small_record, radar_name, tmp_path):
+    """MCAP (mcap + protobuf decoder) and rosbag2 (rosbags reader, mcap-ros2 decoder): the radar's detections with
+    every field at its offset, its transform, and the Foxglove layout drawing them by radial velocity."""
+    from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+    from rosbags.rosbag2 import Reader
+
+    from exporters.base import ExportOptions, get_exporter
+
+    record = DatasetRecord(small_record)
+    frame = int(record.frames["frame"].iloc[0])
+    scan = record.radar_detections(radar_name, frame)
+    t0 = round(float(record.frames["time_s"].iloc[0]) * 1e9)
+    out = tmp_path / "run.mcap"
+    get_exporter("mcap").export([small_record], out, ExportOptions(progress=False))
+    with out.open("rb") as f:
+        messages = [(c.topic, m.log_time, d) for _, c, m, d in
+                    make_reader(f, decoder_factories=[ProtobufDecoderFactory()]).iter_decoded_messages()]
+    clouds = [(t, d) for topic, t, d in messages if topic == f"/radar/{radar_name}/detections"]
+    assert len(clouds) == len(record.frames)
+    cloud = next(d for t, d in clouds if t == t0)
+    assert cloud.frame_id == radar_name and len(cloud.data) == cloud.point_stride * len(scan)
+    raw = np.frombuffer(cloud.data, np.uint8).reshape(-1, cloud.point_stride)
+    types = {PackedElementField.UINT8: "u1", PackedElementField.FLOAT32: "<f4", PackedElementField.INT32: "<i4"}
+    column = {"x": "x_m", "range": "range_m", "azimuth": "azimuth_rad", "radial_velocity": "radial_velocity_mps",
+              "radial_velocity_comp": "radial_velocity_comp_mps", "rcs": "rcs_dbsm", "snr": "snr_db",
+              "instance": "instance_id", "class": "semantic"}
+    fields = {f.name: f for f in cloud.fields}
+    for name, col in column.items():
+        f = fields[name]
+        size = np.dtype(types[f.type]).itemsize
+        values = raw[:, f.offset:f.offset + size].copy().view(types[f.type])[:, 0]
+        np.testing.assert_array_equal(values, scan[col].to_numpy())
+    tf = next(d for topic, t, d in messages if topic == "/tf" and t == t0)
+    (mount,) = [x for x in tf.transforms if x.child_frame_id == radar_name]
+    assert mount.translation.x == pytest.approx(record.info.radars[0].T_array[0, 3])
+    layout = json.loads((tmp_path / "run.layout.json").read_text())
+    (scene,) = [c for k, c in layout["configById"].items() if k.startswith("3D")]
+    radar_topic = scene["topics"][f"/radar/{radar_name}/detections"]
+    assert radar_topic["visible"] and radar_topic["colorField"] == "radial_velocity"
+
+    bag = tmp_path / "bag"
+    get_exporter("rosbag2").export([small_record], bag, ExportOptions(progress=False))
+    with Reader(bag) as reader:
+        types_by_topic = {c.topic: c.msgtype for c in reader.connections}
+    assert types_by_topic[f"/radar/{radar_name}/points"] == "sensor_msgs/msg/PointCloud2"
+    assert types_by_topic[f"/radar/{radar_name}/scan"] == "radar_msgs/msg/RadarScan"
+    decoded = {}
+    with next(bag.glob("*.mcap")).open("rb") as f:
+        reader = make_reader(f, decoder_factories=[Ros2DecoderFactory()])
+        for _, channel, message, msg in reader.iter_decoded_messages():
+            if message.log_time == t0:
+                decoded[channel.topic] = msg
+    ros_scan = decoded[f"/radar/{radar_name}/scan"]
+    assert len(ros_scan.returns) == len(scan) and ros_scan.header.frame_id == radar_name
+    np.testing.assert_array_equal([r.doppler_velocity for r in ros_scan.returns],
+                                  scan["radial_velocity_mps"].to_numpy())
+    np.testing.assert_array_equal([r.azimuth for r in ros_scan.returns], scan["azimuth_rad"].to_numpy())
+    cloud2 = decoded[f"/radar/{radar_name}/points"]
+    assert cloud2.point_step == 48 and cloud2.width == len(scan)
+    data = np.frombuffer(bytes(cloud2.data), np.uint8).reshape(-1, cloud2.point_step)
+    ros_types = {2: "u1", 5: "<i4", 7: "<f4"}  # sensor_msgs/PointField UINT8, INT32, FLOAT32
+    for f in cloud2.fields:
+        if f.name in column:
+            size = np.dtype(ros_types[f.datatype]).itemsize
+            values = data[:, f.offset:f.offset + size].copy().view(ros_types[f.datatype])[:, 0]
+            np.testing.assert_array_equal(values, scan[column[f.name]].to_numpy())
