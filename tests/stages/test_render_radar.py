@@ -144,3 +144,18 @@ def test_exports_carry_the_radar(small_record, radar_name, tmp_path):
             size = np.dtype(ros_types[f.datatype]).itemsize
             values = data[:, f.offset:f.offset + size].copy().view(ros_types[f.datatype])[:, 0]
             np.testing.assert_array_equal(values, scan[column[f.name]].to_numpy())
+
+
+def test_preview_colours_radial_velocity_red_approaching_blue_receding():
+    import cv2
+
+    from pipeline.stages.preview import RADAR_VELOCITY_RANGE_MPS, radial_velocity_colours
+
+    low, high = RADAR_VELOCITY_RANGE_MPS
+    colours = radial_velocity_colours(np.array([low - 5.0, low, high, high + 5.0]))
+    turbo = cv2.applyColorMap(np.array([[255], [0]], np.uint8), cv2.COLORMAP_TURBO)[:, 0]
+    np.testing.assert_array_equal(colours, [turbo[0], turbo[0], turbo[1], turbo[1]])  # clipped at the ends
+    b, g, r = colours[0].astype(int)
+    assert r > b  # approaching: red end
+    b, g, r = colours[2].astype(int)
+    assert b > r  # receding: blue end
