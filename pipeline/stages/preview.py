@@ -147,9 +147,9 @@ def _draw_radar(img: np.ndarray, record: DatasetRecord, radar: RadarInfo, lidar:
 
 
 def _bev_panel(record: DatasetRecord, lidar_info: LidarInfo, frame: int, labels, height: int,
-               camera: CameraInfo | None = None) -> np.ndarray:
+               camera: CameraInfo | None = None, radar: RadarInfo | None = None) -> np.ndarray:
     """The bird's-eye view of the LiDAR's sweep at ``frame``, ``height`` pixels square; with ``camera``, its
-    field of view; the first radar's detections, if the record has radars."""
+    field of view; with ``radar``, its detections."""
     lidar = lidar_info.name
     img = np.full((BEV_PX, BEV_PX, 3), 18, np.uint8)
     if camera is not None:
@@ -168,8 +168,7 @@ def _bev_panel(record: DatasetRecord, lidar_info: LidarInfo, frame: int, labels,
     cv2.circle(img, (BEV_PX // 2, BEV_PX // 2), 3, (255, 255, 255), -1)
     cv2.putText(img, f"{lidar}: {len(pts)} points, {BEV_RANGE_M:.0f} m", (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                 (220, 220, 220), 1, cv2.LINE_AA)
-    if record.info.radars:
-        radar = record.info.radars[0]
+    if radar is not None:
         count = _draw_radar(img, record, radar, lidar_info, frame)
         low, high = RADAR_VELOCITY_RANGE_MPS
         cv2.putText(img, f"{radar.name}: {count} detections, radial velocity {low:g} (red) .. {high:g} m/s (blue)",
@@ -194,7 +193,8 @@ def contact_sheet(record: DatasetRecord, frames: int = 4, min_visible_px: int = 
         height = panels[0].shape[0] if panels else BEV_PX
         if info.lidars:
             camera = info.cameras[0] if info.cameras else None
-            panels.append(_bev_panel(record, info.lidars[0], int(frame), labels, height, camera))
+            radar = info.radars[0] if info.radars else None
+            panels.append(_bev_panel(record, info.lidars[0], int(frame), labels, height, camera, radar))
         row = np.concatenate(panels, axis=1)
         title = f"{info.scenario} seed {info.seed} | {info.condition} | frame {frame}"
         cv2.putText(row, title, (8, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 3, cv2.LINE_AA)

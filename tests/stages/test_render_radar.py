@@ -155,7 +155,30 @@ def test_preview_colours_radial_velocity_red_approaching_blue_receding():
     colours = radial_velocity_colours(np.array([low - 5.0, low, high, high + 5.0]))
     turbo = cv2.applyColorMap(np.array([[255], [0]], np.uint8), cv2.COLORMAP_TURBO)[:, 0]
     np.testing.assert_array_equal(colours, [turbo[0], turbo[0], turbo[1], turbo[1]])  # clipped at the ends
-    b, g, r = colours[0].astype(int)
+    b, _, r = colours[0].astype(int)
     assert r > b  # approaching: red end
-    b, g, r = colours[2].astype(int)
+    b, _, r = colours[2].astype(int)
     assert b > r  # receding: blue end
+
+
+def test_preview_draws_the_radar_detections_where_they_are(small_record):
+    from pipeline.stages.preview import BEV_PX, _bev_panel, _to_bev, radial_velocity_colours
+
+    record = DatasetRecord(small_record)
+    lidar, radar = record.info.lidars[0], record.info.radars[0]
+    frame = int(record.frames["frame"].iloc[0])
+    none = record.labels.iloc[:0]
+    plain = _bev_panel(record, lidar, frame, none, BEV_PX)
+    drawn = _bev_panel(record, lidar, frame, none, BEV_PX, radar=radar)
+    scan = record.radar_detections(radar.name, frame)
+    lidar_from_radar = np.linalg.inv(lidar.T_array) @ radar.T_array
+    xy = (scan[["x_m", "y_m", "z_m"]].to_numpy(np.float64) @ lidar_from_radar[:3, :3].T + lidar_from_radar[:3, 3])
+    uv = np.round(_to_bev(xy[:, :2])).astype(int)
+    inside = ((uv >= 0) & (uv < BEV_PX)).all(axis=1)
+    assert inside.sum() > 10
+    # The last disc drawn keeps its colour at its centre (unless the caption covers it).
+    u, v = uv[inside][-1]
+    assert (drawn[v, u] == radial_velocity_colours(scan["radial_velocity_mps"].to_numpy()[inside][-1:])[0]).all()
+    changed = np.argwhere((drawn != plain).any(axis=2))
+    near = np.min(np.abs(changed[:, None, ::-1] - uv[inside][None]).max(axis=2), axis=1) <= 6  # within a ringed disc
+    assert near[changed[:, 0] > 45].all()  # below the captions, every changed pixel belongs to a detection's disc
