@@ -194,3 +194,13 @@ def test_weather_attenuates_the_snr_two_ways(wall):
 
 def _no_actors() -> Actors:
     return Actors.empty()
+
+
+def test_a_bad_rig_file_names_the_file_and_the_field(tmp_path):
+    from pipeline.core.config import ConfigError, load_config
+
+    path = tmp_path / "rig.yaml"
+    path.write_text("name: r\nradars:\n  - name: front\n    range_max_m: -5\n    mount: {xyz_m: [2, 0, 0.5]}\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(RigConfig, path, "rigs")
+    assert str(path) in str(err.value) and "radars[0].range_max_m" in str(err.value)
