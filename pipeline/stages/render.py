@@ -49,7 +49,6 @@ from pipeline.stages.common import (
     write_json,
     write_meta,
 )
-from pipeline.stages.radar_frames import radar_info
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
