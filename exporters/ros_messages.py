@@ -104,7 +104,7 @@ class RosMessages:
             is_dense=True)
 
     def radar_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
-        """PointCloud2 of one radar scan packed by :func:`exporters.scene.pack_radar` (offsets from the same
+        """PointCloud2 of one radar scan packed by :func:`exporters.log_common.pack_radar` (offsets from the same
         table that packs it)."""
         fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
                   for n, o, d in RADAR_FIELDS]
