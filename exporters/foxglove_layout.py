@@ -30,18 +30,23 @@ def layout_path(mcap_path: Path) -> Path:
 @dataclass(frozen=True)
 class RecordView:
     """What one tab shows: ``title``; ``topic``/``frame`` prefixes ("" for a single record, else the
-    record's stem); the camera shown in the image panel; the LiDARs drawn in the 3D panel."""
+    record's stem); the camera shown in the image panel; the LiDARs and radars drawn in the 3D panel (radar
+    detections as large points coloured by radial velocity, RADAR_VELOCITY_RANGE_MPS)."""
 
     title: str
     prefix: str
     camera: str | None
     lidars: tuple[str, ...]
+    radars: tuple[str, ...] = ()
 
     def topic(self, name: str) -> str:
         return prefixed_topic(self.prefix, name)
 
     def frame(self, name: str) -> str:
         return prefixed_frame(self.prefix, name)
+
+
+RADAR_VELOCITY_RANGE_MPS = (-30.0, 10.0)  # the colour map's ends: fast approach .. moving away
 
 
 def _camera_cfg(view: RecordView) -> dict[str, Any]:
@@ -64,6 +69,11 @@ def _scene_cfg(view: RecordView, grid_id: str) -> dict[str, Any]:
         view.topic(f"/lidar/{name}/points"): {"visible": True, "pointSize": 2, "colorField": "intensity",
                                              "colorMode": "colormap", "colorMap": "turbo", "decayTime": 0}
         for name in view.lidars}
+    for name in view.radars:
+        low, high = RADAR_VELOCITY_RANGE_MPS
+        topics[view.topic(f"/radar/{name}/detections")] = {
+            "visible": True, "pointSize": 8, "pointShape": "circle", "colorField": "radial_velocity",
+            "colorMode": "colormap", "colorMap": "rainbow", "minValue": low, "maxValue": high, "decayTime": 0}
     topics[view.topic("/scene/objects")] = {"visible": True}
     if view.camera is not None:
         topics[view.topic(f"/camera/{view.camera}/image")] = {"visible": False}

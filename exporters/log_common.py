@@ -1,8 +1,9 @@
 """What the log formats (MCAP, rosbag2) share: time stamps, frame names, topics, quaternions, point layout.
 
 Frames (tf tree, one per record): ``world`` (SUMO coordinates) -> ``ego`` (ego box centre, x forward,
-y left, z up) -> each sensor by name (cameras: OpenCV optical frame; LiDARs: x forward, y left, z up).
-Topics are ``/camera/<name>/...``, ``/lidar/<name>/...``, ``/tf``, ``/scene/objects``, ``/ego/pose``.
+y left, z up) -> each sensor by name (cameras: OpenCV optical frame; LiDARs and radars: x forward, y left, z up).
+Topics are ``/camera/<name>/...``, ``/lidar/<name>/...``, ``/radar/<name>/...``, ``/tf``, ``/scene/objects``,
+``/ego/pose``.
 When one log holds several records (e.g. morning and night of one run, whose times coincide), every
 topic is prefixed with ``/<scenario>_s<seed>_<condition>`` and every frame id with ``<that>/`` so the
 records stay apart; a single record uses the plain names.
@@ -13,7 +14,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -35,6 +36,16 @@ POINT_FIELDS: tuple[tuple[str, int, str], ...] = (
     ("class", 18, "u1"), ("instance", 20, "<i4"),
 )
 POINT_STRIDE = 24
+# Packed radar detection layout (little endian, 48 bytes; every field at its natural alignment, the 3 bytes after
+# ``class`` zero): name, byte offset, numpy dtype. Units as the record's columns: m, rad, m/s, dBsm, dB.
+RADAR_FIELDS: tuple[tuple[str, int, str], ...] = (
+    ("x", 0, "<f4"), ("y", 4, "<f4"), ("z", 8, "<f4"), ("range", 12, "<f4"), ("azimuth", 16, "<f4"),
+    ("elevation", 20, "<f4"), ("radial_velocity", 24, "<f4"), ("radial_velocity_comp", 28, "<f4"),
+    ("rcs", 32, "<f4"), ("snr", 36, "<f4"), ("instance", 40, "<i4"), ("class", 44, "u1"),
+)
+RADAR_STRIDE = 48
+_RADAR_FLOATS = ("x_m", "y_m", "z_m", "range_m", "azimuth_rad", "elevation_rad", "radial_velocity_mps",
+                 "radial_velocity_comp_mps", "rcs_dbsm", "snr_db")
 PREFETCH = 2  # frames loaded ahead of the one being written
 # The label columns that the log exporters read, in the row dicts of :class:`FrameRows`.
 ROW_COLUMNS = ("frame", "sensor", "track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad",
@@ -57,6 +68,25 @@ def pack_points(points: Mapping[str, np.ndarray] | pd.DataFrame) -> memoryview:
     words[:, 4] |= np.asarray(points["ring"], dtype="<u2")
     words[:, 5] = np.asarray(points["instance_id"], dtype="<i4").view("<u4")
     return memoryview(words.reshape(-1).view(np.uint8))
+
+
+def pack_radar(detections: Mapping[str, np.ndarray] | pd.DataFrame) -> memoryview:
+    """The (N * 48) bytes of one radar scan (record columns, ``DatasetRecord.radar_detections``) in
+    :data:`RADAR_FIELDS` layout, padding zeroed so output is deterministic."""
+    n = len(detections["x_m"])
+    words = np.zeros((n, RADAR_STRIDE // 4), dtype="<u4")
+    for j, column in enumerate(_RADAR_FLOATS):
+        words[:, j] = np.asarray(detections[column], dtype="<f4").view("<u4")
+    words[:, 10] = np.asarray(detections["instance_id"], dtype="<i4").view("<u4")
+    words[:, 11] = np.asarray(detections["semantic"], dtype="u1")
+    return memoryview(words.reshape(-1).view(np.uint8))
+
+
+def unpack_radar(packed: memoryview) -> np.ndarray:
+    """(N,) structured array of :data:`RADAR_FIELDS` from :func:`pack_radar`'s bytes."""
+    dtype = np.dtype({"names": [n for n, _, _ in RADAR_FIELDS], "formats": [d for _, _, d in RADAR_FIELDS],
+                      "offsets": [o for _, o, _ in RADAR_FIELDS], "itemsize": RADAR_STRIDE})
+    return np.frombuffer(packed, dtype=dtype)
 
 
 def nanoseconds(time_s: float) -> int:
@@ -84,10 +114,12 @@ def quat_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
 @dataclass(frozen=True)
 class FrameData:
     """The record files of one frame that a log carries: RGB PNG bytes by camera; by LiDAR, the sweep packed
-    in :data:`POINT_FIELDS` layout (:func:`pack_points`, bytes-like; ``len // POINT_STRIDE`` points)."""
+    in :data:`POINT_FIELDS` layout (:func:`pack_points`, bytes-like; ``len // POINT_STRIDE`` points); by radar,
+    the scan packed in :data:`RADAR_FIELDS` layout (:func:`pack_radar`)."""
 
     images: dict[str, bytes]
     points: dict[str, memoryview]
+    radars: dict[str, memoryview] = field(default_factory=dict)
 
 
 def load_frame(item: FrameItem) -> FrameData:
@@ -95,7 +127,9 @@ def load_frame(item: FrameItem) -> FrameData:
     record, info = item.source.record, item.source.info
     return FrameData(images={c.name: record.image_path(c.name, "rgb", item.frame).read_bytes() for c in info.cameras},
                      points={lidar.name: pack_points(record.point_columns(lidar.name, item.frame))
-                             for lidar in info.lidars})
+                             for lidar in info.lidars},
+                     radars={radar.name: pack_radar(record.radar_detections(radar.name, item.frame))
+                             for radar in info.radars})
 
 
 def frames_with_data(source: ExportSource, ahead: int = PREFETCH) -> Iterator[tuple[FrameItem, FrameData]]:

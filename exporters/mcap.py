@@ -15,6 +15,10 @@ topic                              schema                      content
 ``/camera/<name>/calibration``     foxglove.CameraCalibration  K, P = [K|0], plumb_bob distortion
 ``/camera/<name>/annotations``     foxglove.ImageAnnotations   2D boxes (line loops) with class/track text
 ``/lidar/<name>/points``           foxglove.PointCloud         x, y, z, intensity, ring, class, instance
+``/radar/<name>/detections``       foxglove.PointCloud         x, y, z, range, azimuth, elevation,
+                                                               radial_velocity(_comp), rcs, snr, instance,
+                                                               class (record units; negative velocity =
+                                                               approaching)
 ``/scene/objects``                 foxglove.SceneUpdate        a cube per object coloured by class
 =================================  ==========================  ==========================================
 
@@ -22,7 +26,8 @@ Metadata records: ``roadsynth.export`` (options, records, split assignment, coun
 ``roadsynth.record.<stem>`` per record (its ``record.json`` and ``meta.json`` verbatim) and, when the
 stage passes one, ``roadsynth.meta``. Image boxes follow ``--box`` and the object filter (ignore
 regions are drawn translucent). Beside ``FILE.mcap`` goes ``FILE.layout.json``, the Foxglove layout of this
-file (:mod:`exporters.foxglove_layout`): the camera with its boxes, a 3D view with points and cubes.
+file (:mod:`exporters.foxglove_layout`): the camera with its boxes, a 3D view with points, radar detections
+(coloured by radial velocity) and cubes.
 """
 
 from __future__ import annotations
@@ -58,6 +63,8 @@ from exporters.log_common import (
     DEFAULT_COLOR,
     POINT_FIELDS,
     POINT_STRIDE,
+    RADAR_FIELDS,
+    RADAR_STRIDE,
     FrameData,
     FrameRows,
     Naming,
@@ -78,6 +85,7 @@ COMPRESS_WORKERS = 2  # threads compressing chunks while the next fill (each chu
 _NUMERIC = {"<f4": PackedElementField.FLOAT32, "<u2": PackedElementField.UINT16, "u1": PackedElementField.UINT8,
             "<i4": PackedElementField.INT32}
 _FIELDS = [PackedElementField(name=n, offset=o, type=_NUMERIC[t]) for n, o, t in POINT_FIELDS]
+_RADAR_FIELDS = [PackedElementField(name=n, offset=o, type=_NUMERIC[t]) for n, o, t in RADAR_FIELDS]
 
 
 def _stamp(time_ns: int) -> Timestamp:
@@ -186,7 +194,8 @@ class McapExporter(Exporter):
         for src in source.records:
             names, info = Naming(src, source), src.info
             views.append(RecordView(src.stem, names.prefix, info.cameras[0].name if info.cameras else None,
-                                    tuple(lidar.name for lidar in info.lidars)))
+                                    tuple(lidar.name for lidar in info.lidars),
+                                    tuple(radar.name for radar in info.radars)))
         return {layout_path(out): dumps_json(layout(views))}
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
@@ -229,7 +238,7 @@ class _RecordMessages:
         self.source, self.rows = source, rows
         self.world, self.ego = names.frame("world"), names.frame("ego")
         self.topics = {key: names.topic(key) for key in ("/tf", "/ego/pose", "/scene/objects")}
-        self.mounts = [(names.frame(s.name), _pose(s.T_array)) for s in [*info.cameras, *info.lidars]]
+        self.mounts = [(names.frame(s.name), _pose(s.T_array)) for s in [*info.cameras, *info.lidars, *info.radars]]
         self.cameras = []
         for cam in info.cameras:
             k = cam.K_array
@@ -243,6 +252,9 @@ class _RecordMessages:
         self.lidars = [(lidar.name, names.topic(f"/lidar/{lidar.name}/points"),
                         PointCloud(frame_id=names.frame(lidar.name), pose=_yaw_pose(0, 0, 0, 0),
                                    point_stride=POINT_STRIDE, fields=_FIELDS)) for lidar in info.lidars]
+        self.radars = [(radar.name, names.topic(f"/radar/{radar.name}/detections"),
+                        PointCloud(frame_id=names.frame(radar.name), pose=_yaw_pose(0, 0, 0, 0),
+                                   point_stride=RADAR_STRIDE, fields=_RADAR_FIELDS)) for radar in info.radars]
 
     def frame(self, out: _Log, item: FrameItem, data: FrameData) -> None:
         t = nanoseconds(item.time_s)
@@ -266,6 +278,9 @@ class _RecordMessages:
         for name, topic, cloud in self.lidars:
             cloud.timestamp.CopyFrom(stamp)
             out.write(topic, cloud, t, big_bytes=("data", data.points[name]))
+        for name, topic, cloud in self.radars:
+            cloud.timestamp.CopyFrom(stamp)
+            out.write(topic, cloud, t, big_bytes=("data", data.radars[name]))
         out.write(self.topics["/scene/objects"], _scene(self.rows.objects(item.frame), stamp, self.world,
                                                         self.source.hold_ns(item.frame)), t)
 

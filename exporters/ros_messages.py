@@ -16,10 +16,13 @@ from exporters.log_common import (
     DEFAULT_COLOR,
     POINT_FIELDS,
     POINT_STRIDE,
+    RADAR_FIELDS,
+    RADAR_STRIDE,
     Naming,
     quat_from_matrix,
     quat_from_yaw,
     split_ns,
+    unpack_radar,
 )
 from exporters.ros_types import typestore
 from exporters.source import FrameItem, RecordSource
@@ -60,7 +63,7 @@ class RosMessages:
     # -- messages --------------------------------------------------------------------------------------
     def tf_static(self, src: RecordSource, names: Naming):
         t0 = round(float(src.frames["time_s"].iloc[0]) * 1e9)
-        sensors = [*src.info.cameras, *src.info.lidars]
+        sensors = [*src.info.cameras, *src.info.lidars, *src.info.radars]
         return self.t["tf2_msgs/msg/TFMessage"](transforms=[
             self.transform(names.frame("ego"), names.frame(s.name), s.T_array[:3, 3],
                            quat_from_matrix(s.T_array[:3, :3]), t0) for s in sensors])
@@ -99,6 +102,27 @@ class RosMessages:
             header=self.header(frame_id, time_ns), height=1, width=width, fields=fields, is_bigendian=False,
             point_step=POINT_STRIDE, row_step=POINT_STRIDE * width, data=np.frombuffer(packed, dtype=np.uint8),
             is_dense=True)
+
+    def radar_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
+        """PointCloud2 of one radar scan packed by :func:`exporters.log_common.pack_radar` (offsets from the same
+        table that packs it)."""
+        fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
+                  for n, o, d in RADAR_FIELDS]
+        width = len(packed) // RADAR_STRIDE
+        return self.t["sensor_msgs/msg/PointCloud2"](
+            header=self.header(frame_id, time_ns), height=1, width=width, fields=fields, is_bigendian=False,
+            point_step=RADAR_STRIDE, row_step=RADAR_STRIDE * width, data=np.frombuffer(packed, dtype=np.uint8),
+            is_dense=True)
+
+    def radar_scan(self, packed: memoryview, frame_id: str, time_ns: int):
+        """radar_msgs/RadarScan of one scan: range, azimuth, elevation; doppler_velocity = the radial velocity
+        relative to the radar (negative = approaching); amplitude = the SNR in dB."""
+        d = unpack_radar(packed)
+        ret = self.t["radar_msgs/msg/RadarReturn"]
+        return self.t["radar_msgs/msg/RadarScan"](header=self.header(frame_id, time_ns), returns=[
+            ret(range=float(r), azimuth=float(a), elevation=float(e), doppler_velocity=float(v), amplitude=float(s))
+            for r, a, e, v, s in zip(d["range"], d["azimuth"], d["elevation"], d["radial_velocity"], d["snr"],
+                                     strict=True)])
 
     def _hypothesis(self, cls: str, pose=None):
         pose = pose or self.pose((0, 0, 0), (0.0, 0.0, 0.0, 1.0))

@@ -16,13 +16,19 @@ topic                                   type                                    
 ``/lidar/<name>/points``                sensor_msgs/msg/PointCloud2             x, y, z, intensity, ring,
                                                                                 class, instance (24-byte points)
 ``/lidar/<name>/detections``            vision_msgs/msg/Detection3DArray        3D boxes in the LiDAR frame
+``/radar/<name>/points``                sensor_msgs/msg/PointCloud2             the scan's detections, every
+                                                                                record column (48-byte points)
+``/radar/<name>/scan``                  radar_msgs/msg/RadarScan                range, azimuth, elevation,
+                                                                                doppler_velocity (radial,
+                                                                                negative = approaching),
+                                                                                amplitude (= SNR, dB)
 ``/scene/markers``                      visualization_msgs/msg/MarkerArray      a cube per object (``world``)
 ======================================  ======================================  =================================
 
 Chunk compression zstd (level 1) by default, or none (rosbags' MCAP storage has no lz4); chunks are
 compressed and written on a worker thread while the next messages are built, in order, so the bag's
 bytes do not depend on timing. ``custom_data`` in metadata.yaml holds the export description.
-vision_msgs come from :mod:`exporters.ros_types`.
+vision_msgs and radar_msgs come from :mod:`exporters.ros_types`.
 """
 
 from __future__ import annotations
@@ -144,6 +150,11 @@ class Rosbag2Exporter(Exporter):
                    msgs.point_cloud(data.points[lidar.name], names.frame(lidar.name), t))
             yield (names.topic(f"/lidar/{lidar.name}/detections"), "vision_msgs/msg/Detection3DArray",
                    msgs.detections_3d(rows.sensor(item.frame, lidar.name), names.frame(lidar.name), t))
+        for radar in info.radars:
+            yield (names.topic(f"/radar/{radar.name}/points"), "sensor_msgs/msg/PointCloud2",
+                   msgs.radar_cloud(data.radars[radar.name], names.frame(radar.name), t))
+            yield (names.topic(f"/radar/{radar.name}/scan"), "radar_msgs/msg/RadarScan",
+                   msgs.radar_scan(data.radars[radar.name], names.frame(radar.name), t))
         yield (names.topic("/scene/markers"), "visualization_msgs/msg/MarkerArray",
                msgs.markers(rows.objects(item.frame), names.frame("world"), t, item.source.hold_ns(item.frame)))
 

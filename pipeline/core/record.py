@@ -11,11 +11,12 @@ field-by-field description in docs/dataset.md)::
     cameras/<cam>/semantic/NNNNNN.png  uint8 SemanticClass per pixel
     cameras/<cam>/depth/NNNNNN.png   uint16, z-depth in metres x 256 (KITTI depth convention), 0 = no hit
     lidars/<lidar>/NNNNNN.parquet    one row per point, LiDAR frame
+    radars/<radar>/NNNNNN.parquet    one row per detection, radar frame (only where the rig has radars)
     meta.json                        versions, resolved config, its hash, seed, command line
 
 Frames are numbered as in the simulation's ``trajectories.parquet``. Extrinsics are stored as
 ``T_ego_sensor``: the 4x4 transform taking points from the sensor frame (cameras: OpenCV optical frame;
-LiDARs: x fwd, y left, z up) to the ego frame (x fwd, y left, z up, origin at the ego box centre).
+LiDARs and radars: x fwd, y left, z up) to the ego frame (x fwd, y left, z up, origin at the ego box centre).
 """
 
 from __future__ import annotations
@@ -60,6 +61,16 @@ LABEL_COLUMNS = {
     # LiDAR points carrying this object's id (cameras: summed over the rig's LiDARs)
     "lidar_points": "int32",
 }
+# Added to LABEL_COLUMNS where the rig has radars (a record without radars keeps the columns above, byte for byte).
+RADAR_LABEL_COLUMNS = {
+    # radar detections carrying this object's id (cameras and LiDARs: summed over the rig's radars)
+    "radar_detections": "int32",
+}
+RADAR_COLUMNS = {
+    "x_m": "float32", "y_m": "float32", "z_m": "float32", "range_m": "float32", "azimuth_rad": "float32",
+    "elevation_rad": "float32", "radial_velocity_mps": "float32", "radial_velocity_comp_mps": "float32",
+    "rcs_dbsm": "float32", "snr_db": "float32", "instance_id": "int32", "semantic": "uint8",
+}
 POINT_COLUMNS = {
     "x_m": "float32", "y_m": "float32", "z_m": "float32", "intensity": "float32", "ring": "uint16",
     "instance_id": "int32", "semantic": "uint8",
@@ -102,6 +113,31 @@ class LidarInfo:
 
 
 @dataclass(frozen=True)
+class RadarInfo:
+    name: str
+    range_min_m: float
+    range_max_m: float
+    azimuth_fov_deg: float  # full field of view, symmetric about the radar's x axis
+    elevation_fov_deg: float
+    range_resolution_m: float
+    azimuth_resolution_deg: float
+    velocity_resolution_mps: float
+    max_detections: int
+    cycle_hz: float
+    T_ego_sensor: list[list[float]]  # 4x4, radar frame -> ego frame
+
+    @property
+    def T_array(self) -> np.ndarray:
+        return np.asarray(self.T_ego_sensor, dtype=np.float64)
+
+
+def label_columns(radars: bool) -> dict[str, str]:
+    """The columns of labels.parquet: :data:`LABEL_COLUMNS`, and :data:`RADAR_LABEL_COLUMNS` when the rig has
+    radars."""
+    return {**LABEL_COLUMNS, **RADAR_LABEL_COLUMNS} if radars else dict(LABEL_COLUMNS)
+
+
+@dataclass(frozen=True)
 class RecordInfo:
     scenario: str
     seed: int
@@ -110,18 +146,23 @@ class RecordInfo:
     frame_rate_hz: float
     cameras: list[CameraInfo] = field(default_factory=list)
     lidars: list[LidarInfo] = field(default_factory=list)
+    radars: list[RadarInfo] = field(default_factory=list)
     schema_version: int = SCHEMA_VERSION
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True, indent=2, allow_nan=False) + "\n"
+        data = asdict(self)
+        if not self.radars:  # a record without radars reads as it did before radars existed
+            del data["radars"]
+        return json.dumps(data, sort_keys=True, indent=2, allow_nan=False) + "\n"
 
     @classmethod
     def from_dict(cls, data: dict, source: str) -> RecordInfo:
         try:
             cams = [CameraInfo(**c) for c in data.get("cameras", [])]
             lidars = [LidarInfo(**lidar) for lidar in data.get("lidars", [])]
-            rest = {k: v for k, v in data.items() if k not in ("cameras", "lidars")}
-            return cls(cameras=cams, lidars=lidars, **rest)
+            radars = [RadarInfo(**radar) for radar in data.get("radars", [])]
+            rest = {k: v for k, v in data.items() if k not in ("cameras", "lidars", "radars")}
+            return cls(cameras=cams, lidars=lidars, radars=radars, **rest)
         except TypeError as exc:
             raise RecordError(f"{source}: malformed record description ({exc})") from None
 
@@ -145,6 +186,10 @@ def camera_path(root: Path, camera: str, channel: str, frame: int) -> Path:
 
 def lidar_path(root: Path, lidar: str, frame: int) -> Path:
     return root / "lidars" / lidar / f"{frame_stem(frame)}.parquet"
+
+
+def radar_path(root: Path, radar: str, frame: int) -> Path:
+    return root / "radars" / radar / f"{frame_stem(frame)}.parquet"
 
 
 def require_columns(present, columns: dict[str, str], what: str) -> None:
@@ -191,7 +236,9 @@ class DatasetRecord:
 
     @property
     def labels(self) -> pd.DataFrame:
-        return conform(read_parquet(self.root / "labels.parquet"), LABEL_COLUMNS, str(self.root / "labels.parquet"))
+        """One row per (frame, sensor, object); with ``radar_detections`` where the record has radars."""
+        return conform(read_parquet(self.root / "labels.parquet"), label_columns(bool(self.info.radars)),
+                       str(self.root / "labels.parquet"))
 
     def image_path(self, camera: str, channel: str, frame: int) -> Path:
         """The path of an image, checked whole (every PNG chunk's CRC) and of the camera's size: exporters link or
@@ -240,6 +287,17 @@ class DatasetRecord:
 
         raw = self._decoded(camera, "depth", frame, cv2.IMREAD_UNCHANGED)
         return raw.astype(np.float32) / DEPTH_SCALE, (raw > 0) & (raw < np.iinfo(np.uint16).max)
+
+    def radar_detections(self, radar: str, frame: int) -> pd.DataFrame:
+        """One radar scan: :data:`RADAR_COLUMNS` (radar frame), one row per detection."""
+        if radar not in [r.name for r in self.info.radars]:
+            raise KeyError(f"no radar {radar!r}; radars: {', '.join(r.name for r in self.info.radars) or '(none)'}")
+        path = radar_path(self.root, radar, frame)
+        if not path.is_file():
+            raise RecordError(f"{path}: missing from the record")
+        table = conform(read_parquet(path), RADAR_COLUMNS, str(path))
+        require_finite(table, f"{path} (frame {frame}, radar {radar})", keys=())
+        return table
 
     def points(self, lidar: str, frame: int) -> pd.DataFrame:
         """One LiDAR sweep: x_m, y_m, z_m (LiDAR frame), intensity, ring, instance_id, semantic."""

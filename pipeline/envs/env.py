@@ -66,7 +66,7 @@ class RoadsynthEnv(gym.Env):
         dt: seconds per step (SUMO's step length); None keeps the scenario's.
         options: EnvOptions; any of its fields may also be given as a keyword (``reward`` as RewardWeights or
             a dict of its fields).
-        sensors: any of "camera", "lidar": rendered each step into the observation, ground truth in
+        sensors: any of "camera", "lidar", "radar": rendered each step into the observation, ground truth in
             ``info["sensors"]`` (pipeline.envs.sensors); ``rig`` and ``condition`` as for ``roadsynth render``.
         record: a folder; each episode is written to ``record/episode-NNNN`` as a simulated run
             (pipeline.envs.recording) when it ends (or at ``reset``/``close``, if it did not).

@@ -4,7 +4,9 @@ Each row shows one frame: the first camera's image with tight 2D boxes (solid, c
 boxes clipped to the image (thin grey), labelled with class, track id and occlusion; and a bird's-eye
 view of the first LiDAR's sweep (static points grey by intensity, object points in their class colour, the
 same as the 2D boxes') with the 3D boxes of the LiDAR's labels and the first camera's horizontal field of
-view (two cyan lines from the camera along the left and right image edges).
+view (two cyan lines from the camera along the left and right image edges); where the record has radars, the
+first radar's detections as discs coloured by radial velocity (RADAR_VELOCITY_RANGE_MPS: red approaching fast,
+through green, to blue moving away; objects' detections ringed white).
 """
 
 from __future__ import annotations
@@ -20,18 +22,19 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.files import atomic_file
 from pipeline.core.geometry import Boxes3D
 from pipeline.core.outputs import OutputSpec, png_file
-from pipeline.core.record import CameraInfo, DatasetRecord, LidarInfo
+from pipeline.core.record import CameraInfo, DatasetRecord, LidarInfo, RadarInfo
 from pipeline.stages.common import int_at_least
 
 log = logging.getLogger(__name__)
 
 INPUT_ARGS = ("dataset",)
-HELP = "draw a contact sheet of a dataset record: boxes on images and a bird's-eye LiDAR view"
+HELP = "draw a contact sheet of a dataset record: boxes on images and a bird's-eye LiDAR (and radar) view"
 CLASS_BGR = {"car": (60, 200, 60), "van": (200, 200, 60), "truck": (40, 140, 255), "bus": (255, 120, 40),
              "motorcycle": (200, 60, 200), "bicycle": (255, 60, 160), "pedestrian": (60, 60, 255)}
 OTHER_BGR = (255, 255, 255)  # a class without a colour
 FOV_BGR = (255, 255, 0)
 BEV_RANGE_M, BEV_PX = 60.0, 600
+RADAR_VELOCITY_RANGE_MPS = (-30.0, 10.0)  # the colour map's ends (red .. blue)
 # Object points by their semantic class (the point clouds' ``semantic`` column), in the colours of CLASS_BGR.
 _SEMANTIC_BGR = np.tile(np.array(OTHER_BGR, np.uint8), (256, 1))
 for _cls in ObjectClass:
@@ -120,10 +123,33 @@ def _draw_fov(img: np.ndarray, camera: CameraInfo, lidar: LidarInfo) -> None:
         cv2.line(img, start, tuple(int(v) for v in np.round(end)), FOV_BGR, 1, cv2.LINE_AA)
 
 
+def radial_velocity_colours(velocity_mps: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 BGR: OpenCV's turbo colour map over RADAR_VELOCITY_RANGE_MPS, reversed so that an approaching
+    target (negative) is red and one moving away blue."""
+    low, high = RADAR_VELOCITY_RANGE_MPS
+    level = np.clip((high - np.asarray(velocity_mps, np.float64)) / (high - low), 0.0, 1.0)
+    return cv2.applyColorMap(np.round(255 * level).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_TURBO)[:, 0]
+
+
+def _draw_radar(img: np.ndarray, record: DatasetRecord, radar: RadarInfo, lidar: LidarInfo, frame: int) -> int:
+    """Draw the radar's detections of ``frame`` into the LiDAR's bird's-eye view; returns how many."""
+    scan = record.radar_detections(radar.name, frame)
+    xyz = scan[["x_m", "y_m", "z_m"]].to_numpy(np.float64)
+    lidar_from_radar = np.linalg.inv(lidar.T_array) @ radar.T_array
+    uv = np.round(_to_bev(xyz @ lidar_from_radar[:3, :3].T + lidar_from_radar[:3, 3])).astype(np.int32)
+    colours = radial_velocity_colours(scan["radial_velocity_mps"].to_numpy())
+    on_object = scan["instance_id"].to_numpy() > 0
+    for (u, v), colour, ringed in zip(uv, colours, on_object, strict=True):
+        if ringed:
+            cv2.circle(img, (int(u), int(v)), 5, (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.circle(img, (int(u), int(v)), 3, tuple(int(c) for c in colour), -1, cv2.LINE_AA)
+    return len(scan)
+
+
 def _bev_panel(record: DatasetRecord, lidar_info: LidarInfo, frame: int, labels, height: int,
-               camera: CameraInfo | None = None) -> np.ndarray:
+               camera: CameraInfo | None = None, radar: RadarInfo | None = None) -> np.ndarray:
     """The bird's-eye view of the LiDAR's sweep at ``frame``, ``height`` pixels square; with ``camera``, its
-    field of view."""
+    field of view; with ``radar``, its detections."""
     lidar = lidar_info.name
     img = np.full((BEV_PX, BEV_PX, 3), 18, np.uint8)
     if camera is not None:
@@ -142,6 +168,11 @@ def _bev_panel(record: DatasetRecord, lidar_info: LidarInfo, frame: int, labels,
     cv2.circle(img, (BEV_PX // 2, BEV_PX // 2), 3, (255, 255, 255), -1)
     cv2.putText(img, f"{lidar}: {len(pts)} points, {BEV_RANGE_M:.0f} m", (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                 (220, 220, 220), 1, cv2.LINE_AA)
+    if radar is not None:
+        count = _draw_radar(img, record, radar, lidar_info, frame)
+        low, high = RADAR_VELOCITY_RANGE_MPS
+        cv2.putText(img, f"{radar.name}: {count} detections, radial velocity {low:g} (red) .. {high:g} m/s (blue)",
+                    (8, 36), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (220, 220, 220), 1, cv2.LINE_AA)
     return cv2.resize(img, (height, height), interpolation=cv2.INTER_NEAREST)
 
 
@@ -162,7 +193,8 @@ def contact_sheet(record: DatasetRecord, frames: int = 4, min_visible_px: int = 
         height = panels[0].shape[0] if panels else BEV_PX
         if info.lidars:
             camera = info.cameras[0] if info.cameras else None
-            panels.append(_bev_panel(record, info.lidars[0], int(frame), labels, height, camera))
+            radar = info.radars[0] if info.radars else None
+            panels.append(_bev_panel(record, info.lidars[0], int(frame), labels, height, camera, radar))
         row = np.concatenate(panels, axis=1)
         title = f"{info.scenario} seed {info.seed} | {info.condition} | frame {frame}"
         cv2.putText(row, title, (8, height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 3, cv2.LINE_AA)

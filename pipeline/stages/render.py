@@ -36,9 +36,10 @@ from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.files import replace_path
 from pipeline.core.outputs import output_lock
 from pipeline.core.processes import RENDER_THRESHOLDS, frozen_heap, keep_freed_memory, pool_context, run_in_pool
-from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo
+from pipeline.core.record import FRAME_COLUMNS, RECORD_FILE, SCHEMA_VERSION, RecordInfo, label_columns
 from pipeline.core.record_writers.camera import camera_info
 from pipeline.core.record_writers.lidar import lidar_info
+from pipeline.core.record_writers.radar import radar_info
 from pipeline.core.scene_content import near_duplicate_rate
 from pipeline.core.tables import read_ipc, read_ipc_files, read_parquet, require_finite, write_parquet
 from pipeline.stages.common import (
@@ -63,7 +64,7 @@ log = logging.getLogger(__name__)
 
 INPUT_ARGS = ("sim", "condition", "rig")
 INTERRUPT_HINT = "the shards already rendered are kept; rerun the same command to resume"
-HELP = "render a simulated run's camera and LiDAR under one condition, with exact ground truth"
+HELP = "render a simulated run's cameras, LiDARs and radars under one condition, with exact ground truth"
 WORKER_MODULES = ("pipeline.stages.render_frames", "pipeline.sensors.conditions")  # what a render worker imports
 SIM_FILES = ("trajectories.parquet", "tls_states.parquet", "meta.json", "roads/lanes.parquet")
 
@@ -286,11 +287,13 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
                            "selected; delete the folder and render again")
     labels = labels.sort_values(["frame", "sensor", "track_id"], kind="stable").reset_index(drop=True)
     write_parquet(frames, record / "frames.parquet")
-    write_parquet(labels[list(LABEL_COLUMNS)].astype(LABEL_COLUMNS), record / "labels.parquet")
+    columns = label_columns(radars=bool(rig.radars))
+    write_parquet(labels[list(columns)].astype(columns), record / "labels.parquet")
     cameras, lidars = build_sensors(rig)
     info = RecordInfo(scenario=sim_meta["config"]["name"], seed=seed, condition=condition.name, rig=rig.name,
                       frame_rate_hz=record_rate_hz(selection, sim_meta["config"]["simulation"]["record_hz"]),
-                      cameras=[camera_info(c) for c in cameras], lidars=[lidar_info(lidar) for lidar in lidars])
+                      cameras=[camera_info(c) for c in cameras], lidars=[lidar_info(lidar) for lidar in lidars],
+                      radars=[radar_info(radar) for radar in rig.radars])
     (record / RECORD_FILE).write_text(info.to_json())
     config = {"sim": {"config_hash": sim_meta["config_hash"], "scenario": info.scenario, "seed": seed},
               "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),

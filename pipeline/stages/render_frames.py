@@ -9,8 +9,10 @@ it is rendered alone, in another shard, or by another worker.
 from __future__ import annotations
 
 import contextlib
+import functools
 import pickle
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,10 +21,10 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from pipeline.core.config import ConditionConfig, RigConfig
+from pipeline.core.config import ConditionConfig, RadarConfig, RigConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.processes import RENDER_THRESHOLDS, ProcessCache, keep_freed_memory
-from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, lidar_path
+from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, label_columns, lidar_path
 from pipeline.core.record_writers.camera import camera_label_rows, write_camera_frame
 from pipeline.core.record_writers.lidar import lidar_label_rows, write_lidar_sweep
 from pipeline.core.record_writers.rows import actor_boxes
@@ -30,6 +32,7 @@ from pipeline.core.tables import read_parquet, write_ipc
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
+from pipeline.stages import radar_frames
 from pipeline.stages.rig import build_actor_meshes, build_sensors
 from pipeline.world.actors import ActorMeshes, Actors, actor_variants, srgb8_to_linear
 from pipeline.world.materials import material_index
@@ -87,7 +90,7 @@ class SignalState:
 
 
 ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad", "color_r",
-                 "color_g", "color_b", "braking")
+                 "color_g", "color_b", "braking", "speed_mps")
 
 
 class Trajectories:
@@ -137,6 +140,7 @@ def _shard_type(dtype: str) -> pa.DataType:
 
 SHARD_FORMAT = 2  # of the shard tables: 2, Arrow IPC files of these schemas (1: typed Parquet)
 SHARD_LABELS = pa.schema([(c, _shard_type(t)) for c, t in LABEL_COLUMNS.items()])
+SHARD_LABELS_RADAR = pa.schema([(c, _shard_type(t)) for c, t in label_columns(radars=True).items()])
 SHARD_FRAMES = pa.schema([(c, _shard_type(t)) for c, t in FRAME_COLUMNS.items()])
 
 
@@ -152,10 +156,11 @@ def _shard_table(columns: dict[str, np.ndarray | list], schema: pa.Schema) -> pa
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
-def _label_table(parts: list[dict[str, np.ndarray]]) -> pa.Table:
-    """One shard table (SHARD_LABELS) from the label columns of several sensors and frames."""
-    return _shard_table({k: np.concatenate([p[k] for p in parts]) if parts else [] for k in LABEL_COLUMNS},
-                        SHARD_LABELS)
+def _label_table(parts: list[dict[str, np.ndarray]], radars: bool = False) -> pa.Table:
+    """One shard table (SHARD_LABELS, or SHARD_LABELS_RADAR for a rig with radars) from the label columns of several
+    sensors and frames."""
+    schema = SHARD_LABELS_RADAR if radars else SHARD_LABELS
+    return _shard_table({k: np.concatenate([p[k] for p in parts]) if parts else [] for k in schema.names}, schema)
 
 
 @dataclass
@@ -226,23 +231,25 @@ def render_shard(job: ShardJob) -> int:
     world, static, cameras, lidars, condition = state.world, state.static, state.cameras, state.lidars, \
         state.condition
     signals = state.signals
+    radars = job.rig.radars
     frame_rows, label_parts = [], []
     for frame in job.frames:
         ego, others = state.trajectories.frame(frame)
         signals.apply(frame)
         out = render_frame(world, static, cameras, lidars, condition, state.meshes, job.seed, frame, ego, others,
-                           threads=job.threads)
+                           threads=job.threads, radars=radars)
         for lidar, sweep in zip(lidars, out.sweeps, strict=True):
             write_lidar_sweep(lidar_path(job.record_dir, lidar.name, frame), sweep)
         for camera, cam in zip(cameras, out.cameras, strict=True):
             write_camera_frame(job.record_dir, camera.name, frame, cam)
+        radar_frames.write_scans(job.record_dir, frame, radars, out.scans)
         label_parts.extend(out.labels)
         frame_rows.append((frame, float(ego["time_s"]), int(ego["track_id"]), ego["x_m"], ego["y_m"], ego["z_m"],
                            ego["yaw_rad"], ego["speed_mps"]))
     frames = _shard_table({c: [row[i] for row in frame_rows] for i, c in enumerate(FRAME_COLUMNS)}, SHARD_FRAMES)
     job.shard_dir.mkdir(parents=True, exist_ok=True)
     write_ipc(frames, job.shard_dir / f"frames-{job.index:05d}.arrow")
-    write_ipc(_label_table(label_parts), job.shard_dir / f"labels-{job.index:05d}.arrow")
+    write_ipc(_label_table(label_parts, bool(radars)), job.shard_dir / f"labels-{job.index:05d}.arrow")
     (job.shard_dir / f"done-{job.index:05d}").write_text(" ".join(map(str, job.frames)) + "\n")
     return len(job.frames)
 
@@ -255,17 +262,19 @@ class FrameSensors:
         cameras: one :class:`pipeline.sensors.render.CameraFrame` per camera, in rig order.
         sweeps: one :class:`pipeline.sensors.lidar.LidarSweep` per LiDAR, in rig order.
         labels: the frame's label columns (those of LABEL_COLUMNS, one array each), one dict per sensor: the
-            LiDARs' then the cameras'.
+            LiDARs', the cameras', then the radars' (with radars, every row carries its object's radar detections).
+        scans: one :class:`pipeline.sensors.radar.RadarScan` per radar, in rig order.
     """
 
     cameras: list
     sweeps: list
     labels: list[dict[str, np.ndarray]]
+    scans: list = ()
 
 
 def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars: list, condition, meshes: ActorMeshes,
                  seed: int, frame: int, ego: dict[str, object], others: dict[str, np.ndarray], *,
-                 threads: int = 0) -> FrameSensors:
+                 threads: int = 0, radars: Sequence[RadarConfig] = ()) -> FrameSensors:
     """Render every sensor of the rig at one frame: the render stage's per-frame work, without writing anything.
 
     ``ego`` is the ego's trajectory row and ``others`` the other actors' columns (:meth:`Trajectories.frame`);
@@ -278,9 +287,15 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
     ego_size_m = (ego["length_m"], ego["width_m"], ego["height_m"])
     active = actors_in_reach(actors, ego_pose, cameras, lidars, condition, floor_z_m=static.floor_z_m,
                              street_lights_m=world.street_lights, ego_size_m=ego_size_m)
+    if radars:
+        active |= radar_frames.radar_reach(list(radars), actors, ego_pose)
     scene = FrameScene(static, actors, meshes, threads=threads, active=active)
     lidar_points = np.zeros(len(scene.actors), np.int64)
     sweeps, frames, labels = [], [], []
+    scans = []
+    if radars:  # scanned first, as the record has always done (each sensor draws from its own generator anyway)
+        scans = radar_frames.render_scans(list(radars), scene, ego_pose, ego, others, condition.config,
+                                          functools.partial(frame_rng, seed, condition.name, frame))
     for k, lidar in enumerate(lidars):
         sweep = render_lidar(scene, lidar, ego_pose, frame_rng(seed, condition.name, frame, 1000 + k),
                              condition=condition)
@@ -293,4 +308,6 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
                             ego_size_m=ego_size_m)
         frames.append(cam)
         labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
-    return FrameSensors(frames, sweeps, labels)
+    if radars:
+        radar_frames.scan_rows(frame, list(radars), scans, others, ego_pose, lidar_points, labels)
+    return FrameSensors(frames, sweeps, labels, scans)

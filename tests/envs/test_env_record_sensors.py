@@ -17,8 +17,9 @@ from pycocotools.coco import COCO
 import pipeline.envs  # noqa: F401  (registers the envs)
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.config.resolve import resolve_scenario
-from pipeline.core.record import LABEL_COLUMNS, DatasetRecord
+from pipeline.core.record import DatasetRecord, label_columns
 from pipeline.envs import RoadsynthEnv
+from pipeline.envs.sensors import RADAR_FIELDS
 from pipeline.envs.topview import SIZE_PX
 from pipeline.stages.cli import main as cli_main
 from pipeline.stages.render import render
@@ -65,9 +66,10 @@ def tiny_rig(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def episode(tmp_path_factory):
-    """An agent's episode with the default rig's camera and LiDAR, recorded: (record root, observations, infos)."""
+    """An agent's episode with the default rig's camera, LiDAR and radar, recorded: (record root, observations,
+    infos)."""
     root = tmp_path_factory.mktemp("episodes")
-    env = gym.make("roadsynth/Highway-v0", **SMALL, sensors=["camera", "lidar"], record=root)
+    env = gym.make("roadsynth/Highway-v0", **SMALL, sensors=["camera", "lidar", "radar"], record=root)
     observations, infos = [], []
     try:
         obs, info = env.reset(seed=5)
@@ -137,7 +139,13 @@ def test_recorded_episode_renders_and_exports_and_matches_the_env_sensors(episod
         want = np.sort(points[["x_m", "y_m", "z_m", "intensity"]].to_numpy(np.float32), axis=0)
         np.testing.assert_array_equal(got, want)
         assert not obs["lidar"][~mask].any()
-        env_labels = truth["labels"].to_pandas().astype(LABEL_COLUMNS)
+        detections = record.radar_detections("front_radar", frame)
+        radar_mask = obs["radar_mask"].astype(bool)
+        assert radar_mask.sum() == len(detections) > 0
+        np.testing.assert_array_equal(obs["radar"][radar_mask], detections[list(RADAR_FIELDS)].to_numpy(np.float32))
+        np.testing.assert_array_equal(truth["radar_instance_id"][radar_mask], detections["instance_id"].to_numpy())
+        assert not obs["radar"][~radar_mask].any()
+        env_labels = truth["labels"].to_pandas().astype(label_columns(radars=True))
         env_labels = env_labels.sort_values(["sensor", "track_id"]).reset_index(drop=True)
         rec_labels = labels[labels["frame"] == frame].sort_values(["sensor", "track_id"]).reset_index(drop=True)
         pd.testing.assert_frame_equal(env_labels[list(rec_labels.columns)], rec_labels, check_dtype=False)
@@ -182,6 +190,13 @@ def test_default_rig_spaces():
         space = env.observation_space
         assert space["camera"].shape == (600, 800, 3) and space["camera"].dtype == np.uint8
         assert space["lidar"].shape == (64 * 1800, 4) and space["lidar_mask"].n == 64 * 1800
+        assert "radar" not in space.spaces
+    finally:
+        env.close()
+    env = gym.make("roadsynth/Highway-v0", **SMALL, sensors=["radar"])
+    try:
+        space = env.observation_space
+        assert space["radar"].shape == (250, len(RADAR_FIELDS)) and space["radar_mask"].n == 250
     finally:
         env.close()
 
@@ -214,7 +229,7 @@ def test_unfinished_episodes_are_recorded_at_reset_and_close(tmp_path):
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
-    ({"sensors": ["camera", "radar"]}, "sensors must name each of camera, lidar"),
+    ({"sensors": ["camera", "sonar"]}, "sensors must name each of camera, lidar, radar"),
     ({"sensors": ["camera", "camera"]}, "at most once"),
     ({"render_mode": "ansi"}, "render_mode must be None or 'rgb_array'"),
 ])
@@ -228,3 +243,5 @@ def test_a_rig_without_the_asked_sensor_is_refused(tmp_path):
     rig.write_text(TINY_RIG.split("lidars:")[0])
     with pytest.raises(ValueError, match=r"camera_only\.yaml: sensors asks for a lidar, but the rig has none"):
         gym.make("roadsynth/Highway-v0", **SMALL, sensors=["lidar"], rig=rig)
+    with pytest.raises(ValueError, match=r"camera_only\.yaml: sensors asks for a radar, but the rig has none"):
+        gym.make("roadsynth/Highway-v0", **SMALL, sensors=["radar"], rig=rig)

@@ -189,4 +189,4 @@ def test_a_rig_with_two_cameras_and_two_lidars(dense_highway_run, noon, tmp_path
     # The rear camera looks backwards: its optical axis is the ego's -x.
     np.testing.assert_allclose(record.info.camera("rear").T_array[:3, 2], [-1.0, 0.0, 0.0], atol=1e-9)
     labels = record.labels
-    assert set(labels["sensor"]) <= {"front", "rear", "top", "low"}
+    assert set(labels["sensor"]) <= {"front", "rear", "top", "low", *(radar.name for radar in rig.radars)}

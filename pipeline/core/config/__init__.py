@@ -21,7 +21,7 @@ from pipeline.core.config.scenario import (
     ScenarioConfig,
     SimulationConfig,
 )
-from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RigConfig
+from pipeline.core.config.sensors import CameraConfig, ConditionConfig, LidarConfig, RadarConfig, RigConfig
 
 __all__ = [
     "ActorMeshConfig",
@@ -43,6 +43,7 @@ __all__ = [
     "LogNormal",
     "NetworkConfig",
     "NetworkKind",
+    "RadarConfig",
     "RigConfig",
     "ScenarioConfig",
     "SimulationConfig",

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, model_validator
+import numpy as np
+from pydantic import Field, model_serializer, model_validator
 
 from pipeline.core.config.actor_meshes import ActorMeshConfig
 from pipeline.core.config.base import ConfigModel
@@ -76,6 +77,68 @@ class LidarConfig(_Model):
         return self
 
 
+class RadarConfig(_Model):
+    """Automotive radar (77 GHz long-range class): a ray-cast scan over a field of view, detections merged per
+    range-azimuth-Doppler resolution cell (:mod:`pipeline.sensors.radar`). Radar frame = its mount's body frame
+    (x forward, y left, z up); azimuth is atan2(y, x), elevation asin(z / range).
+
+    The scan casts a grid of rays ``ray_step_deg`` apart over the field of view: each ray stands for the patch of
+    surface it meets (solid angle step^2 cos(elevation)), so the RCS an object returns does not depend on the step
+    as long as the object spans several rays. The SNR follows the radar equation, scaled so that a 0 dBsm target
+    at 100 m has ``snr_0dbsm_100m_db``; a cell is detected with the Swerling-1 probability
+    Pd = Pfa^(1 / (1 + SNR)) of a square-law detector at ``false_alarm_probability``.
+    """
+
+    name: str = Field(pattern=r"^[A-Za-z0-9_]+$")
+    range_min_m: float = Field(0.5, ge=0.0, description="nearer returns are not reported, metres")
+    range_max_m: float = Field(200.0, gt=0.0, le=1000.0, description="farther returns are not reported, metres")
+    azimuth_fov_deg: float = Field(120.0, gt=0.0, le=180.0, description="full horizontal field of view, degrees")
+    elevation_fov_deg: float = Field(8.0, gt=0.0, le=60.0, description="full vertical field of view, degrees")
+    ray_step_deg: float = Field(0.2, ge=0.02, le=2.0, description="spacing of the cast rays, degrees")
+    range_resolution_m: float = Field(0.5, gt=0.0, le=10.0, description="size of a range cell, metres")
+    azimuth_resolution_deg: float = Field(2.0, gt=0.0, le=30.0, description="size of an azimuth cell, degrees")
+    velocity_resolution_mps: float = Field(0.25, gt=0.0, le=5.0, description="size of a Doppler cell, m/s")
+    range_accuracy_m: float = Field(0.15, ge=0.0, le=5.0, description="range noise std, metres")
+    azimuth_accuracy_deg: float = Field(0.3, ge=0.0, le=10.0, description="azimuth noise std, degrees")
+    elevation_accuracy_deg: float = Field(1.0, ge=0.0, le=10.0, description="elevation noise std, degrees")
+    velocity_accuracy_mps: float = Field(0.1, ge=0.0, le=5.0, description="radial velocity noise std, m/s")
+    snr_0dbsm_100m_db: float = Field(10.0, ge=-50.0, le=100.0, description="SNR of a 0 dBsm target at 100 m, dB")
+    false_alarm_probability: float = Field(1e-6, ge=1e-9, lt=1.0, description="per cell; sets the threshold")
+    max_detections: int = Field(250, ge=1, le=100000, description="per scan; the strongest (by SNR) are kept")
+    cycle_hz: float = Field(20.0, gt=0.0, le=1000.0, description="scan rate (recorded; the record scans per frame)")
+    mount: MountPose
+
+    @model_validator(mode="after")
+    def _check_ranges(self) -> RadarConfig:
+        if not self.range_min_m < self.range_max_m:
+            raise ValueError(f"range_min_m ({self.range_min_m}) must be below range_max_m ({self.range_max_m})")
+        if self.ray_step_deg > self.azimuth_resolution_deg:
+            raise ValueError(f"ray_step_deg ({self.ray_step_deg}) must not exceed azimuth_resolution_deg "
+                             f"({self.azimuth_resolution_deg}): every azimuth cell needs a ray")
+        return self
+
+    @property
+    def azimuth_rad(self) -> np.ndarray:
+        """(W,) float64 ray azimuths, left to right seen from above (+ fov/2 .. - fov/2), ``ray_step_deg`` apart,
+        symmetric about 0."""
+        return np.radians(_symmetric_steps(self.azimuth_fov_deg, self.ray_step_deg))[::-1].copy()
+
+    @property
+    def elevation_rad(self) -> np.ndarray:
+        """(H,) float64 ray elevations, top to bottom, ``ray_step_deg`` apart, symmetric about 0."""
+        return np.radians(_symmetric_steps(self.elevation_fov_deg, self.ray_step_deg))[::-1].copy()
+
+    @property
+    def ray_count(self) -> int:
+        return len(self.azimuth_rad) * len(self.elevation_rad)
+
+
+def _symmetric_steps(fov_deg: float, step_deg: float) -> np.ndarray:
+    """Angles ``step_deg`` apart, symmetric about 0, within [-fov/2, fov/2] (at least one: 0)."""
+    half = int(np.floor(0.5 * fov_deg / step_deg + 1e-9))
+    return np.arange(-half, half + 1) * step_deg
+
+
 class RigConfig(_Model):
     """The ego's sensors, and optionally the users' own meshes for actor classes (``actor_meshes``, see
     :mod:`pipeline.core.config.actor_meshes`; procedural bodies draw the rest)."""
@@ -83,11 +146,13 @@ class RigConfig(_Model):
     name: str
     cameras: list[CameraConfig] = Field(default_factory=list)
     lidars: list[LidarConfig] = Field(default_factory=list)
+    radars: list[RadarConfig] = Field(default_factory=list)
     actor_meshes: list[ActorMeshConfig] = Field(default_factory=list)
 
     @model_validator(mode="after")
     def _check_names(self) -> RigConfig:
-        names = [c.name for c in self.cameras] + [lidar.name for lidar in self.lidars]
+        names = ([c.name for c in self.cameras] + [lidar.name for lidar in self.lidars]
+                 + [radar.name for radar in self.radars])
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise ValueError(f"sensor names must be unique; repeated: {', '.join(duplicates)}")
@@ -99,6 +164,15 @@ class RigConfig(_Model):
                 raise ValueError(f"actor_meshes: the entries of class {entry.cls.value} disagree on replace "
                                  f"({first.path}: {first.replace}, {entry.path}: {entry.replace})")
         return self
+
+    @model_serializer(mode="wrap")
+    def _without_empty_radars(self, handler):
+        """A rig without radars dumps as before radars existed, so that its records' meta.json (the resolved
+        config and its hash) and the render's resume key stay byte-identical."""
+        data = handler(self)
+        if not self.radars and isinstance(data, dict):
+            data.pop("radars", None)
+        return data
 
 
 RGB = tuple[float, float, float]
