@@ -254,7 +254,7 @@ def _cargo_details(x_rear: float, x_front: float, half_w: float, z0: float, z1: 
     """What makes a cargo box read as one: on its rear face (at ``x_rear``, facing -x) an aluminium frame, the seam
     between two doors and four locking bars (standing further out), red clearance lamps at the top corners and
     retroreflective tape (red and white, as ECE R48/R104 require) along the bottom and up the corners; along each
-    side a rub rail at the bottom, a rail at the top and white tape segments."""
+    side a rub rail at the bottom, a rail at the top, white tape segments and amber marker lamps."""
     d, e, w = 0.015, 0.035, 0.08
     rear = [cuboid((x_rear - d, -half_w, z0), (x_rear, half_w, z0 + w), "metal"),
             cuboid((x_rear - d, -half_w, z1 - w), (x_rear, half_w, z1), "metal"),
@@ -281,7 +281,12 @@ def _cargo_details(x_rear: float, x_front: float, half_w: float, z0: float, z1: 
     tape += [part for x in xs for part in mirrored(
         lambda y0, y1, x=x: cuboid((x, y0, z0 + 0.12), (x + 0.45, y1, z0 + 0.17), "reflector_white"), half_w,
         half_w + d)]
-    return [*rear, *bars, *rails, *lamps, *tape]
+    # amber side marker lamps along each side's bottom rail, at most 3 m apart (ECE R48)
+    count = max(2, int(np.ceil((x_front - x_rear) / 3.0)) + 1)
+    markers = [part for x in np.linspace(x_rear + 0.25, x_front - 0.25, count) for part in mirrored(
+        lambda y0, y1, x=x: cuboid((x - 0.06, y0, z0 + 0.02), (x + 0.06, y1, z0 + 0.09), "marker_lamp"), half_w + d,
+        half_w + 2 * d)]
+    return [*rear, *bars, *rails, *lamps, *tape, *markers]
 
 
 def _chassis_guards(x_front: float, x_rear: float, half_w: float, rear_axle_x: float, tyre_r: float) -> list[Part]:

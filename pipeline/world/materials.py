@@ -72,6 +72,8 @@ MATERIALS: dict[str, Material] = {
     # Appended by the trucks' conspicuity markings (retroreflective tape; pipeline/world/actor_shapes.py).
     "reflector_red": Material((0.55, 0.04, 0.03), specular=0.3, reflectivity=0.95),
     "reflector_white": Material((0.85, 0.85, 0.82), specular=0.3, reflectivity=0.95),
+    # Amber side marker lamps of long vehicles (ECE R48; glow with the vehicle lights: pipeline/sensors/shading.py).
+    "marker_lamp": Material((0.6, 0.3, 0.02), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
