@@ -152,7 +152,7 @@ def matrix_scaling(work: Path, seeds: int, frames: int) -> None:
     print(f"this machine's own speed-up of 2 busy processes over 1, measured now: {ceiling:.2f} (the ceiling)")
 
 
-_BUSY = "x = 0\nfor i in range(10_000_000):\n    x += i\n"
+_BUSY = "x = 0\nfor i in range(30_000_000):\n    x += i\n"
 
 
 def _machine_speed_up() -> float:

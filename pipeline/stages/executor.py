@@ -95,10 +95,10 @@ class Task:
 class TaskFailures(RuntimeError):
     """Some tasks failed; ``failures`` maps each failed task's label to its error (the others finished)."""
 
-    def __init__(self, failures: dict[str, str], total: int, hint: str) -> None:
+    def __init__(self, failures: dict[str, str], total: int, hint: str, noun: str = "tasks") -> None:
         self.failures = failures
         lines = "\n".join(f"  {label}: {error}" for label, error in failures.items())
-        super().__init__(f"{len(failures)} of {total} tasks failed (the others finished; {hint}):\n{lines}")
+        super().__init__(f"{len(failures)} of {total} {noun} failed (the others finished; {hint}):\n{lines}")
 
 
 @contextlib.contextmanager
@@ -134,13 +134,13 @@ def _in_worker(argv: list[str], fn: Callable[..., Any], *args: Any) -> Any:
 
 def run_tasks(tasks: Sequence[Task], spec: ExecutorSpec, *, on_done: Callable[[int, Any], None] | None = None,
               on_failed: Callable[[int, str], None] | None = None,
-              hint: str = "rerun the same command to resume") -> list[Any]:
+              hint: str = "rerun the same command to resume", noun: str = "tasks") -> list[Any]:
     """Run ``tasks`` (in order here, or on Ray); returns their results in order. ``on_done(i, result)`` /
     ``on_failed(i, error)`` are called in this process as each task ends (progress, per-run status). Raises
     :class:`TaskFailures` naming every failed task once all have ended; a Ctrl-C cancels the tasks not finished
     (on Ray, their workers are killed)."""
     if not spec.distributed:
-        return _run_here(tasks, on_done, on_failed, hint)
+        return _run_here(tasks, on_done, on_failed, hint, noun)
     with ray_session(spec) as ray:
         from ray.exceptions import RayError, RayTaskError
 
@@ -180,12 +180,12 @@ def run_tasks(tasks: Sequence[Task], spec: ExecutorSpec, *, on_done: Callable[[i
                 ray.cancel(ref, force=True)
             raise
         if failures:
-            raise TaskFailures(failures, len(tasks), hint)
+            raise TaskFailures(failures, len(tasks), hint, noun)
         return results
 
 
 def _run_here(tasks: Sequence[Task], on_done: Callable[[int, Any], None] | None,
-              on_failed: Callable[[int, str], None] | None, hint: str) -> list[Any]:
+              on_failed: Callable[[int, str], None] | None, hint: str, noun: str) -> list[Any]:
     """The local executor: each task in this process, in order; an exception fails that task (and those after it),
     the others go on."""
     results: list[Any] = [None] * len(tasks)
@@ -207,7 +207,7 @@ def _run_here(tasks: Sequence[Task], on_done: Callable[[int, Any], None] | None,
         elif on_done is not None:
             on_done(i, results[i])
     if failures:
-        raise TaskFailures(failures, len(tasks), hint)
+        raise TaskFailures(failures, len(tasks), hint, noun)
     return results
 
 

@@ -40,7 +40,7 @@ def render_shards_on_ray(jobs: Sequence[ShardJob], spec: ExecutorSpec, progress:
     tasks = [Task(shard_label(job), render_shard, (dataclasses.replace(job, threads=spec.task_cpus),))
              for job in jobs]
     with progress() as bar:
-        run_tasks(tasks, spec, on_done=lambda _i, frames: bar.update(frames), hint=HINT)
+        run_tasks(tasks, spec, on_done=lambda _i, frames: bar.update(frames), hint=HINT, noun="shards")
 
 
 @contextlib.contextmanager

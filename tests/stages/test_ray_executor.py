@@ -69,7 +69,7 @@ def test_a_failing_shard_is_named_while_the_others_finish(small_highway_run, sma
         render(sim, noon_condition, small_rig, out, frames=FRAMES, workers=2, shard_size=1, progress=False,
                executor=RAY)
     assert list(failed.value.failures) == [f"run highway-7 (seed 7) condition noon shard 2 frames [{bad_frame}]"]
-    assert "1 of 4 tasks failed" in str(failed.value) and "spaceship" in str(failed.value)
+    assert "1 of 4 shards failed" in str(failed.value) and "spaceship" in str(failed.value)
     assert not out.exists()  # no record from three shards of four
     shards = tmp_path / ".bad-noon.partial" / "shards"
     assert sorted(p.name for p in shards.glob("done-*")) == ["done-00000", "done-00001", "done-00003"]
