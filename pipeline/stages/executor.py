@@ -30,6 +30,7 @@ log = logging.getLogger(__name__)
 
 EXECUTORS = ("local", "ray")
 MAX_RETRIES = 3  # Ray's default for a task whose worker died; said explicitly, it is part of our contract
+WAIT_S = 0.2  # how long the driver waits for finished tasks before it looks again (progress updates)
 
 
 @dataclass(frozen=True)
@@ -160,21 +161,24 @@ def run_tasks(tasks: Sequence[Task], spec: ExecutorSpec, *, on_done: Callable[[i
         pending = list(refs)
         try:
             while pending:
-                done, pending = ray.wait(pending, num_returns=1)
-                i = index[done[0]]
-                try:
-                    results[i] = ray.get(done[0])
-                except RayError as exc:
-                    failed_first = [tasks[j].label for j in tasks[i].after if tasks[j].label in failures]
-                    error = (f"not run: {', '.join(failed_first)} failed" if failed_first else
-                             _describe(exc, RayTaskError))
-                    failures[tasks[i].label] = error
-                    log.error("%s failed: %s", tasks[i].label, error)
-                    if on_failed is not None:
-                        on_failed(i, error)
-                    continue
-                if on_done is not None:
-                    on_done(i, results[i])
+                # All that are ready within the timeout, in submission order (a task after those it waits for):
+                # one pass over the pending list per batch, not per task, for matrices of thousands of tasks.
+                done, pending = ray.wait(pending, num_returns=len(pending), timeout=WAIT_S)
+                for ref in done:
+                    i = index[ref]
+                    try:
+                        results[i] = ray.get(ref)
+                    except RayError as exc:
+                        failed_first = [tasks[j].label for j in tasks[i].after if tasks[j].label in failures]
+                        error = (f"not run: {', '.join(failed_first)} failed" if failed_first else
+                                 _describe(exc, RayTaskError))
+                        failures[tasks[i].label] = error
+                        log.error("%s failed: %s", tasks[i].label, error)
+                        if on_failed is not None:
+                            on_failed(i, error)
+                        continue
+                    if on_done is not None:
+                        on_done(i, results[i])
         except BaseException:
             for ref in pending:
                 ray.cancel(ref, force=True)
@@ -186,8 +190,8 @@ def run_tasks(tasks: Sequence[Task], spec: ExecutorSpec, *, on_done: Callable[[i
 
 def _run_here(tasks: Sequence[Task], on_done: Callable[[int, Any], None] | None,
               on_failed: Callable[[int, str], None] | None, hint: str, noun: str) -> list[Any]:
-    """The local executor: each task in this process, in order; an exception fails that task (and those after it),
-    the others go on."""
+    """The local executor: each task in this process, in order; an exception fails that task (and those waiting for
+    it), the others go on."""
     results: list[Any] = [None] * len(tasks)
     failures: dict[str, str] = {}
     for i, task in enumerate(tasks):
