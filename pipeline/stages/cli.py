@@ -31,6 +31,7 @@ STAGE_MODULES: dict[str, str] = {
     "export": "pipeline.stages.export",
     "train": "pipeline.stages.train",
     "detect": "pipeline.stages.detect",
+    "experiment": "pipeline.stages.experiment",
 }
 
 

@@ -100,18 +100,26 @@ def _check_applicable(args: argparse.Namespace) -> None:
             raise ValueError(f"{flag} applies to --format {', '.join(formats)} only, not {args.format}")
 
 
-def main(args: argparse.Namespace) -> int:
+def export_records(fmt: str, datasets: list[Path], out: Path, options) -> dict:
+    """Export the records ``datasets`` to ``out`` in format ``fmt`` with ``options`` (an ExportOptions), with the
+    export's meta.json; returns the exporter's description (counts). Used by this stage and ``roadsynth
+    experiment``'s merge."""
     from exporters.base import get_exporter
+
+    config = {"format": fmt, "datasets": sorted(str(d) for d in datasets), **options.to_dict()}
+    meta = {"stage": "export", "versions": software_versions(), "config": config, "config_hash": config_hash(config),
+            "seed": None, "command": command_line()}
+    return get_exporter(fmt).export(datasets, out, options, meta=meta)
+
+
+def main(args: argparse.Namespace) -> int:
     from pipeline.core.processes import keep_freed_memory
 
     _check_applicable(args)
     keep_freed_memory()  # this process ends with the export: keep freed buffers mapped (pipeline.core.processes)
     args.dataset = expand_datasets(args.dataset)
     options = options_from_args(args)
-    config = {"format": args.format, "datasets": sorted(str(d) for d in args.dataset), **options.to_dict()}
-    meta = {"stage": "export", "versions": software_versions(), "config": config, "config_hash": config_hash(config),
-            "seed": None, "command": command_line()}
-    description = get_exporter(args.format).export(args.dataset, args.out, options, meta=meta)
+    description = export_records(args.format, args.dataset, args.out, options)
     objects = description["counts"].get("objects", {}).get("total", {})
     log.info("exported %d record(s) to %s (%s); objects %s", len(description["records"]), args.out, args.format,
              ", ".join(f"{k} {v}" for k, v in objects.items()))

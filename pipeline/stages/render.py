@@ -49,6 +49,8 @@ from pipeline.stages.common import (
     write_json,
     write_meta,
 )
+from pipeline.stages.executor import ExecutorSpec, add_executor_arguments, executor_from_args
+from pipeline.stages.render_cluster import connected, render_shards_on_ray, warm_up
 from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     ShardJob,
@@ -81,6 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shard-size", type=int_at_least(1), default=4,
                         help="frames per shard, the unit of resumption (the last few shards are smaller)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_executor_arguments(parser)  # shards as Ray tasks (pipeline.stages.render_cluster)
 
 
 STANDING_MIN_TRAVEL_M = 1.0  # a frame counts as new once the ego has moved this far since the last one ...
@@ -216,12 +219,17 @@ def pickle_static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | N
 
 
 def render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None = None,
-           workers: int = 1, shard_size: int = 4, progress: bool = True) -> dict[str, object]:
-    """Render the record; returns a summary (frames, labels, shards resumed)."""
+           workers: int = 1, shard_size: int = 4, progress: bool = True,
+           executor: ExecutorSpec | None = None, shard_threads: int | None = None) -> dict[str, object]:
+    """Render the record; returns a summary (frames, labels, shards resumed). ``executor`` (distributed): the
+    shards run as Ray tasks instead of in this process's pool (:mod:`pipeline.stages.render_cluster`).
+    ``shard_threads``: the threads of each shard rendered here (None: 1 in a pool, else all cores), for a render
+    that runs inside a task of a larger matrix (:mod:`pipeline.stages.matrix`)."""
     keep_freed_memory(RENDER_THRESHOLDS)  # from the start: the static world build's large temporaries too
-    with output_lock(out, "render"), frozen_heap():  # one writer of OUT and its work folder
+    # One writer of OUT and its work folder; with a distributed executor, one Ray session for the whole render.
+    with output_lock(out, "render"), frozen_heap(), connected(executor):
         return _render(sim_dir, condition, rig, out, frames=frames, workers=workers, shard_size=shard_size,
-                       progress=progress)
+                       progress=progress, executor=executor, shard_threads=shard_threads)
 
 
 def worker_context() -> multiprocessing.context.BaseContext:
@@ -233,7 +241,8 @@ def worker_context() -> multiprocessing.context.BaseContext:
 
 
 def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path, *, frames: int | None,
-            workers: int, shard_size: int, progress: bool) -> dict[str, object]:
+            workers: int, shard_size: int, progress: bool,
+            executor: ExecutorSpec | None = None, shard_threads: int | None = None) -> dict[str, object]:
     if shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {shard_size}")
     sim_meta = check_sim(sim_dir)
@@ -248,9 +257,12 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     _prepare_work(work, key)
     shards = plan_shards(selection, shard_size)
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
-                     threads=1 if workers > 1 else 0)
+                     threads=(1 if workers > 1 else 0) if shard_threads is None else shard_threads)
             for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
-    context = worker_context() if workers > 1 and len(jobs) > 1 else None  # a forkserver starts now (see there)
+    distributed = executor is not None and executor.distributed
+    # A forkserver starts now (see there).
+    context = worker_context() if workers > 1 and len(jobs) > 1 and not distributed else None
+    warm_up(executor, WORKER_MODULES, len(jobs))  # Ray workers import while the static world builds
     world = pickle_static_world(sim_dir, seed, work / "static.pkl")
     resumed = len(shards) - len(jobs)
     if resumed:
@@ -258,9 +270,12 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     initial = len(selection) - sum(len(j.frames) for j in jobs)
     progress_bar = functools.partial(tqdm, total=len(selection), initial=initial, unit="frame",
                                      desc=f"render {condition.name}", disable=not progress)
-    # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
-    with remembered_world(work / "static.pkl", world), _restored_opencv_threads():
-        run_in_pool(jobs, render_shard, workers, context, progress_bar)
+    if distributed:
+        render_shards_on_ray(jobs, executor, progress_bar)
+    else:
+        # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
+        with remembered_world(work / "static.pkl", world), _restored_opencv_threads():
+            run_in_pool(jobs, render_shard, workers, context, progress_bar)
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed
     return summary
@@ -317,7 +332,8 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ValueError(f"{rpath}: {exc}") from exc
     summary = render(args.sim, condition, rig, args.out, frames=args.frames, workers=args.workers,
-                     shard_size=args.shard_size, progress=not args.no_progress)
+                     shard_size=args.shard_size, progress=not args.no_progress,
+                     executor=executor_from_args(args, local_cpus=args.workers))
     log.info("wrote %s: %d frames, %d labels (%d visible in cameras); near-duplicate frame rate %s", args.out,
              summary["frames"], summary["labels"], summary["visible_camera_labels"], summary["near_duplicate_rate"])
     return 0

@@ -63,3 +63,17 @@ def small_record(run_21_frames, small_rig, noon_condition, tmp_path_factory) -> 
     render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=2,
            progress=False)
     return out
+
+
+RAY_FRAMES = 4  # of small_highway_run, in shards of 1: four tasks
+
+
+@pytest.fixture(scope="session")
+def four_frame_record(small_highway_run, small_rig, noon_condition, tmp_path_factory) -> Path:
+    """RAY_FRAMES frames of ``small_highway_run`` under noon, shards of 1, rendered here: the Ray tests' reference."""
+    from pipeline.stages.render import render
+
+    out = tmp_path_factory.mktemp("local") / "highway-7-noon"
+    render(small_highway_run, noon_condition, small_rig, out, frames=RAY_FRAMES, workers=1, shard_size=1,
+           progress=False)
+    return out

@@ -1,0 +1,232 @@
+"""Where a stage's independent tasks run: here (``local``, the default) or on a Ray cluster (``ray``).
+
+A task is a picklable function and its arguments, a pure function of them to files on shared storage, with a
+label that names it for people (run, condition, frames). :func:`run_tasks` runs a list of them on Ray and returns
+their small results (manifests: counts, summaries), never their data: workers write their outputs themselves,
+atomically, to the same paths the local executor writes (a shared file system, NFS, mounted at the same path on
+every node). Byte-identical outputs follow from the tasks being pure; the executor adds no randomness.
+
+Faults, Ray's way (docs/cluster.md): a task whose worker process dies (killed, out of memory, node lost) is
+retried up to :data:`MAX_RETRIES` times on a fresh process; an exception raised by a task is not retried (it would
+fail again) but recorded against its label while the other tasks go on; once all have finished,
+:class:`TaskFailures` names every failed task and its error. Ray is imported only here and only when ``ray`` is
+chosen: ``pip install 'roadsynth[ray]'``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import os
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline.stages.common import int_at_least
+
+log = logging.getLogger(__name__)
+
+EXECUTORS = ("local", "ray")
+MAX_RETRIES = 3  # Ray's default for a task whose worker died; said explicitly, it is part of our contract
+WAIT_S = 0.2  # how long the driver waits for finished tasks before it looks again (progress updates)
+
+
+@dataclass(frozen=True)
+class ExecutorSpec:
+    """How to run a stage's tasks.
+
+    Attributes:
+        kind: ``local`` (this machine's process pool) or ``ray``.
+        address: the Ray cluster (``HOST:PORT``, ``ray://HOST:PORT`` or ``auto``); None starts a local Ray
+            instance unless ``RAY_ADDRESS`` names one (Ray reads it).
+        task_cpus: CPUs Ray reserves for each task, and the threads a task may use.
+        local_cpus: CPUs of the local Ray instance started when there is no address (None: all cores).
+    """
+
+    kind: str = "local"
+    address: str | None = None
+    task_cpus: int = 1
+    local_cpus: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in EXECUTORS:
+            raise ValueError(f"--executor: expected one of {', '.join(EXECUTORS)}, got {self.kind!r}")
+        if self.task_cpus < 1:
+            raise ValueError(f"--task-cpus: expected an integer >= 1, got {self.task_cpus}")
+
+    @property
+    def distributed(self) -> bool:
+        return self.kind == "ray"
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--executor``, ``--ray-address`` and ``--task-cpus``."""
+    parser.add_argument("--executor", choices=EXECUTORS, default="local",
+                        help="where tasks run: this machine's processes (default) or a Ray cluster")
+    parser.add_argument("--ray-address", metavar="HOST:PORT", default=None,
+                        help="the Ray cluster to use with --executor ray (default: $RAY_ADDRESS, else a local "
+                        "Ray instance of --workers CPUs)")
+    parser.add_argument("--task-cpus", type=int_at_least(1), default=1, metavar="N",
+                        help="with --executor ray: CPUs reserved for each task, and its threads (default: 1)")
+
+
+def executor_from_args(args: argparse.Namespace, local_cpus: int | None = None) -> ExecutorSpec:
+    if args.executor == "local" and (args.ray_address is not None or args.task_cpus != 1):
+        raise ValueError("--ray-address and --task-cpus apply to --executor ray only")
+    return ExecutorSpec(args.executor, args.ray_address, args.task_cpus, local_cpus)
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work: ``fn(*args)`` on some worker; ``label`` names it in progress and errors.
+
+    ``after`` lists indices of earlier tasks (in the same :func:`run_tasks` call) that must finish first: their
+    results are not passed on, but a failure of one fails this task too, naming it.
+    """
+
+    label: str
+    fn: Callable[..., Any]
+    args: tuple
+    after: tuple[int, ...] = ()
+    fresh_process: bool = False  # one task per worker process (libsumo: one simulation per process)
+
+
+class TaskFailures(RuntimeError):
+    """Some tasks failed; ``failures`` maps each failed task's label to its error (the others finished)."""
+
+    def __init__(self, failures: dict[str, str], total: int, hint: str, noun: str = "tasks") -> None:
+        self.failures = failures
+        lines = "\n".join(f"  {label}: {error}" for label, error in failures.items())
+        super().__init__(f"{len(failures)} of {total} {noun} failed (the others finished; {hint}):\n{lines}")
+
+
+@contextlib.contextmanager
+def ray_session(spec: ExecutorSpec) -> Iterator[Any]:
+    """Ray connected to ``spec.address`` (or a local instance) for the block; yields the ``ray`` module.
+
+    A Ray already initialised in this process (a test's cluster, a notebook) is used as it is and left running.
+    """
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError("--executor ray needs Ray: pip install 'roadsynth[ray]'") from None
+    if ray.is_initialized():
+        yield ray
+        return
+    address = spec.address or os.environ.get("RAY_ADDRESS") or None
+    kwargs: dict[str, Any] = {"address": address, "log_to_driver": False, "configure_logging": False}
+    if address is None:  # "local": a new instance, never whatever cluster this machine runs already
+        kwargs.update(address="local", num_cpus=spec.local_cpus, include_dashboard=False)
+    log.info("connecting to Ray at %s", address or "a new local instance")
+    ray.init(**kwargs)
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def _in_worker(argv: list[str], fn: Callable[..., Any], *args: Any) -> Any:
+    """Run ``fn(*args)`` in a Ray worker as the driver's command would: its command line (meta.json records it)."""
+    sys.argv = list(argv)
+    return fn(*args)
+
+
+def run_tasks(tasks: Sequence[Task], spec: ExecutorSpec, *, on_done: Callable[[int, Any], None] | None = None,
+              on_failed: Callable[[int, str], None] | None = None,
+              hint: str = "rerun the same command to resume", noun: str = "tasks") -> list[Any]:
+    """Run ``tasks`` (in order here, or on Ray); returns their results in order. ``on_done(i, result)`` /
+    ``on_failed(i, error)`` are called in this process as each task ends (progress, per-run status). Raises
+    :class:`TaskFailures` naming every failed task once all have ended; a Ctrl-C cancels the tasks not finished
+    (on Ray, their workers are killed)."""
+    if not spec.distributed:
+        return _run_here(tasks, on_done, on_failed, hint, noun)
+    with ray_session(spec) as ray:
+        from ray.exceptions import RayError, RayTaskError
+
+        remote = {False: ray.remote(_in_worker), True: ray.remote(max_calls=1)(_in_worker)}
+        refs: list[Any] = []
+        for task in tasks:
+            deps = [refs[i] for i in task.after]
+            options = {"num_cpus": spec.task_cpus, "max_retries": MAX_RETRIES, "retry_exceptions": False,
+                       "name": task.label}
+            # Dependencies travel as extra arguments: Ray starts the task once they are done (their values, small
+            # manifests, are dropped by _after).
+            function = remote[task.fresh_process].options(**options)
+            refs.append(function.remote(sys.argv, _after, task.fn, len(deps), *deps, *task.args))
+        index = {ref: i for i, ref in enumerate(refs)}
+        results: list[Any] = [None] * len(tasks)
+        failures: dict[str, str] = {}
+        pending = list(refs)
+        try:
+            while pending:
+                # All that are ready within the timeout, in submission order (a task after those it waits for):
+                # one pass over the pending list per batch, not per task, for matrices of thousands of tasks.
+                done, pending = ray.wait(pending, num_returns=len(pending), timeout=WAIT_S)
+                for ref in done:
+                    i = index[ref]
+                    try:
+                        results[i] = ray.get(ref)
+                    except RayError as exc:
+                        failed_first = [tasks[j].label for j in tasks[i].after if tasks[j].label in failures]
+                        error = (f"not run: {', '.join(failed_first)} failed" if failed_first else
+                                 _describe(exc, RayTaskError))
+                        failures[tasks[i].label] = error
+                        log.error("%s failed: %s", tasks[i].label, error)
+                        if on_failed is not None:
+                            on_failed(i, error)
+                        continue
+                    if on_done is not None:
+                        on_done(i, results[i])
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            raise
+        if failures:
+            raise TaskFailures(failures, len(tasks), hint, noun)
+        return results
+
+
+def _run_here(tasks: Sequence[Task], on_done: Callable[[int, Any], None] | None,
+              on_failed: Callable[[int, str], None] | None, hint: str, noun: str) -> list[Any]:
+    """The local executor: each task in this process, in order; an exception fails that task (and those waiting for
+    it), the others go on."""
+    results: list[Any] = [None] * len(tasks)
+    failures: dict[str, str] = {}
+    for i, task in enumerate(tasks):
+        failed_first = [tasks[j].label for j in task.after if tasks[j].label in failures]
+        if failed_first:
+            failures[task.label] = f"not run: {', '.join(failed_first)} failed"
+        else:
+            try:
+                results[i] = task.fn(*task.args)
+            except Exception as exc:
+                log.debug("%s failed", task.label, exc_info=True)
+                failures[task.label] = f"{type(exc).__name__}: {exc}"
+        if task.label in failures:
+            log.error("%s failed: %s", task.label, failures[task.label])
+            if on_failed is not None:
+                on_failed(i, failures[task.label])
+        elif on_done is not None:
+            on_done(i, results[i])
+    if failures:
+        raise TaskFailures(failures, len(tasks), hint, noun)
+    return results
+
+
+def _after(fn: Callable[..., Any], num_deps: int, *args: Any) -> Any:
+    """``fn`` of the arguments after the first ``num_deps`` (results of the tasks this one waited for)."""
+    return fn(*args[num_deps:])
+
+
+def _describe(exc: Exception, task_error: type) -> str:
+    """One line: the task's own exception (type and message), or what happened to its worker."""
+    if isinstance(exc, task_error):
+        cause = exc.cause
+        if isinstance(cause, task_error):  # a dependency failed: Ray re-raises its error here
+            return f"not run: a task it waits for failed ({_describe(cause, task_error)})"
+        if cause is not None:
+            return f"{type(cause).__name__}: {cause}"
+    first = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {first[0] if first else ''}"
