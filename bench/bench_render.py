@@ -63,7 +63,7 @@ def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: Co
     caster = BareCasts(world.meshes)
     (camera,), (lidar,) = build_sensors(rig)
     condition = conditions.Condition(condition_cfg)
-    lidar = type(lidar)(condition.lidar(lidar.config))
+    lidar = type(lidar)(condition.lidar(lidar))
     scenes = dict(zip(range(max(frames) + 1), sim_frames(sim, max(frames) + 1), strict=False))
     total = 0.0
     for f in frames:

@@ -95,24 +95,21 @@ class RosMessages:
 
     def point_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
         """PointCloud2 of one sweep packed by :func:`exporters.log_common.pack_points`."""
-        fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
-                  for n, o, d in POINT_FIELDS]
-        width = len(packed) // POINT_STRIDE
-        return self.t["sensor_msgs/msg/PointCloud2"](
-            header=self.header(frame_id, time_ns), height=1, width=width, fields=fields, is_bigendian=False,
-            point_step=POINT_STRIDE, row_step=POINT_STRIDE * width, data=np.frombuffer(packed, dtype=np.uint8),
-            is_dense=True)
+        return self._cloud(packed, frame_id, time_ns, POINT_FIELDS, POINT_STRIDE)
 
     def radar_cloud(self, packed: memoryview, frame_id: str, time_ns: int):
         """PointCloud2 of one radar scan packed by :func:`exporters.log_common.pack_radar` (offsets from the same
         table that packs it)."""
+        return self._cloud(packed, frame_id, time_ns, RADAR_FIELDS, RADAR_STRIDE)
+
+    def _cloud(self, packed: memoryview, frame_id: str, time_ns: int, table, stride: int):
+        """PointCloud2 of ``packed`` rows of ``stride`` bytes laid out as ``table`` ((name, offset, dtype) rows)."""
         fields = [self.t["sensor_msgs/msg/PointField"](name=n, offset=o, datatype=_POINT_DATATYPE[d], count=1)
-                  for n, o, d in RADAR_FIELDS]
-        width = len(packed) // RADAR_STRIDE
+                  for n, o, d in table]
+        width = len(packed) // stride
         return self.t["sensor_msgs/msg/PointCloud2"](
             header=self.header(frame_id, time_ns), height=1, width=width, fields=fields, is_bigendian=False,
-            point_step=RADAR_STRIDE, row_step=RADAR_STRIDE * width, data=np.frombuffer(packed, dtype=np.uint8),
-            is_dense=True)
+            point_step=stride, row_step=stride * width, data=np.frombuffer(packed, dtype=np.uint8), is_dense=True)
 
     def radar_scan(self, packed: memoryview, frame_id: str, time_ns: int):
         """radar_msgs/RadarScan of one scan: range, azimuth, elevation; doppler_velocity = the radial velocity
