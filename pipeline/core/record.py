@@ -81,8 +81,18 @@ class RecordError(ValueError):
     """A record is missing, incomplete or of another schema version; names the path and the problem."""
 
 
+class _SensorInfo:
+    """What every sensor's record.json entry has: ``T_ego_sensor``, the 4x4 sensor frame -> ego frame."""
+
+    T_ego_sensor: list[list[float]]
+
+    @property
+    def T_array(self) -> np.ndarray:
+        return np.asarray(self.T_ego_sensor, dtype=np.float64)
+
+
 @dataclass(frozen=True)
-class CameraInfo:
+class CameraInfo(_SensorInfo):
     name: str
     width_px: int
     height_px: int
@@ -94,26 +104,18 @@ class CameraInfo:
     def K_array(self) -> np.ndarray:
         return np.asarray(self.K, dtype=np.float64)
 
-    @property
-    def T_array(self) -> np.ndarray:
-        return np.asarray(self.T_ego_sensor, dtype=np.float64)
-
 
 @dataclass(frozen=True)
-class LidarInfo:
+class LidarInfo(_SensorInfo):
     name: str
     channels: int
     range_m: float
     rotation_hz: float
     T_ego_sensor: list[list[float]]  # 4x4, LiDAR frame -> ego frame
 
-    @property
-    def T_array(self) -> np.ndarray:
-        return np.asarray(self.T_ego_sensor, dtype=np.float64)
-
 
 @dataclass(frozen=True)
-class RadarInfo:
+class RadarInfo(_SensorInfo):
     name: str
     range_min_m: float
     range_max_m: float
@@ -125,10 +127,6 @@ class RadarInfo:
     max_detections: int
     cycle_hz: float
     T_ego_sensor: list[list[float]]  # 4x4, radar frame -> ego frame
-
-    @property
-    def T_array(self) -> np.ndarray:
-        return np.asarray(self.T_ego_sensor, dtype=np.float64)
 
 
 def label_columns(radars: bool) -> dict[str, str]:
