@@ -279,7 +279,8 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
 
     ``ego`` is the ego's trajectory row and ``others`` the other actors' columns (:meth:`Trajectories.frame`);
     the traffic lights must already be set (:class:`SignalState`). ``cameras`` and ``lidars`` are the rig's
-    (:func:`pipeline.stages.rig.build_sensors`), ``condition`` a :class:`pipeline.sensors.conditions.Condition`.
+    (:func:`pipeline.stages.rig.build_sensors`), ``radars`` its radar configs (:mod:`pipeline.stages.radar_frames`),
+    ``condition`` a :class:`pipeline.sensors.conditions.Condition`.
     Random draws come from :func:`frame_rng` (seed, condition, frame, sensor), so the frame is the same however
     it is reached (a render shard, or the driving environment)."""
     ego_pose = Transform.from_xyz_rpy((ego["x_m"], ego["y_m"], ego["z_m"]), (0.0, 0.0, ego["yaw_rad"]))
@@ -293,7 +294,7 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
     lidar_points = np.zeros(len(scene.actors), np.int64)
     sweeps, frames, labels = [], [], []
     scans = []
-    if radars:  # scanned first, as the record has always done (each sensor draws from its own generator anyway)
+    if radars:  # scanned before the others; each sensor draws from its own generator, so the order changes nothing
         scans = radar_frames.render_scans(list(radars), scene, ego_pose, ego, others, condition.config,
                                           functools.partial(frame_rng, seed, condition.name, frame))
     for k, lidar in enumerate(lidars):
