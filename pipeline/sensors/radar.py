@@ -61,9 +61,11 @@ RADAR_MATERIALS: dict[str, tuple[float, float]] = {
     "asphalt": (0.004, 0.0), "lane_paint": (0.004, 0.0), "concrete": (0.02, 0.0), "kerb": (0.05, 0.3),
     "grass": (0.03, 0.0), "foliage": (0.03, 0.0), "bark": (0.05, 0.0),
     "building": (0.05, 0.5), "building_glass": (0.05, 2.0), "building_light": (0.05, 0.5), "building_dark": (0.05, 0.5),
-    "metal": (0.3, 8.0), "barrier": (0.03, 2.0), "paint": (0.3, 8.0), "plate": (0.3, 8.0), "rim": (0.3, 8.0),
+    "metal": (0.3, 8.0), "barrier": (0.03, 2.0), "paint": (0.3, 8.0), "plate": (0.3, 8.0), "plate_rear": (0.3, 8.0),
+    "rim": (0.3, 8.0),
     "cargo": (0.3, 8.0), "lamp": (0.3, 4.0), "glass": (0.1, 1.0), "rubber": (0.05, 0.0), "trim": (0.1, 0.5),
     "headlight": (0.1, 1.0), "taillight": (0.1, 1.0), "reflector_red": (0.1, 1.0), "reflector_white": (0.1, 1.0),
+    "marker_lamp": (0.1, 1.0),
     "skin": (0.15, 0.1), "cloth": (0.15, 0.1),
 }
 

@@ -34,6 +34,7 @@ TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
 HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
 STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
 MARKER_LAMP_RGB = np.array([1.6, 0.7, 0.05], np.float32)  # amber side markers of long vehicles
+PLATE_LAMP_IRRADIANCE = 0.6  # a rear plate's lamp, times the plate's albedo (white light on the plate)
 WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
 WET_SHININESS = 80.0
 WATER_F0 = 0.02
@@ -105,6 +106,8 @@ def shade(
         out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB * np.float32(condition.lamp_glow)
         out[glowing[(mat[glowing] == material_index("marker_lamp")) & on_actor]] += MARKER_LAMP_RGB * np.float32(
             condition.tail_glow)
+        plates = glowing[(mat[glowing] == material_index("plate_rear")) & on_actor]
+        out[plates] += hits.color[plates] * np.float32(PLATE_LAMP_IRRADIANCE * condition.tail_glow)
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
     if wet is not None and len(wet):
@@ -150,7 +153,7 @@ def _wet_sheen(rays: np.ndarray, normal: np.ndarray, condition: Condition) -> np
 
 def _materials() -> dict[str, np.ndarray]:
     mats = material_arrays()
-    lights = [material_index(n) for n in ("taillight", "headlight", "lamp", "marker_lamp")]
+    lights = [material_index(n) for n in ("taillight", "headlight", "lamp", "marker_lamp", "plate_rear")]
     mats["glows"] = (mats["emissive"].max(axis=1) > 0) | np.isin(np.arange(len(mats["specular"])), lights)
     return mats
 

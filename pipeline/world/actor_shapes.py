@@ -121,7 +121,7 @@ def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
     put(0.0, ends.head_z - 0.01, (grille_w, ends.grille[1]), "trim", "front")
     put(0.0, ends.plate_front_z, (0.52, 0.12), "plate", "front")
     if ends.rear:
-        put(0.0, ends.plate_rear_z, (0.52, 0.12), "plate", "rear")
+        put(0.0, ends.plate_rear_z, (0.52, 0.12), "plate_rear", "rear")
     if ends.bumper_z is not None and ends.rear:
         put(0.0, ends.bumper_z, (1.5 * half_w, 0.1), "trim", "rear")
     return parts
@@ -232,7 +232,7 @@ def _truck_rear(x: float, z_lamp: float, half_w: float) -> list[Part]:
     return [cuboid((x - 0.1, -half_w + 0.05, z_lamp - 0.16), (x, half_w - 0.05, z_lamp - 0.04), "trim"),
             *[cuboid((x - 0.04, y0, z_lamp - 0.04), (x + 0.02, y1, z_lamp + 0.1), "taillight")
               for y0, y1 in ((half_w - 0.45, half_w - 0.1), (-half_w + 0.1, -half_w + 0.45))],
-            cuboid((x - 0.14, -0.26, z_lamp - 0.15), (x - 0.1, 0.26, z_lamp - 0.04), "plate")]
+            cuboid((x - 0.14, -0.26, z_lamp - 0.15), (x - 0.1, 0.26, z_lamp - 0.04), "plate_rear")]
 
 
 def _cab(length_m: float, width_m: float, height_m: float, x_front: float) -> list[Part]:

@@ -74,6 +74,8 @@ MATERIALS: dict[str, Material] = {
     "reflector_white": Material((0.85, 0.85, 0.82), specular=0.3, reflectivity=0.95),
     # Amber side marker lamps of long vehicles (ECE R48; glow with the vehicle lights: pipeline/sensors/shading.py).
     "marker_lamp": Material((0.6, 0.3, 0.02), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
+    # A vehicle's rear number plate: the plate, lit by its plate lamp with the vehicle lights (shading.py).
+    "plate_rear": Material((0.80, 0.80, 0.75), reflectivity=0.90),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
