@@ -35,6 +35,14 @@ HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
 STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
 MARKER_LAMP_RGB = np.array([1.6, 0.7, 0.05], np.float32)  # amber side markers of long vehicles
 PLATE_LAMP_IRRADIANCE = 0.6  # a rear plate's lamp, times the plate's albedo (white light on the plate)
+# What glows with the vehicle lights (dusk, night): material -> (radiance added, the condition's glow scale, on actors
+# only). A rear plate is lit, not glowing: its lamp's PLATE_LAMP_IRRADIANCE times its albedo.
+NIGHT_GLOWS = {
+    "taillight": (TAIL_LIGHT_RGB, "tail_glow", True),
+    "headlight": (HEAD_LIGHT_RGB, "head_glow", True),
+    "lamp": (STREET_LAMP_RGB, "lamp_glow", False),
+    "marker_lamp": (MARKER_LAMP_RGB, "tail_glow", True),
+}
 WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
 WET_SHININESS = 80.0
 WATER_F0 = 0.02
@@ -100,12 +108,9 @@ def shade(
     tail = glowing[(mat[glowing] == material_index("taillight")) & on_actor]
     out[tail[scene.actors.brake[hits.actor_index[tail]]]] += BRAKE_LIGHT_RGB
     if condition.lights_on:
-        out[tail] += TAIL_LIGHT_RGB * np.float32(condition.tail_glow)
-        out[glowing[(mat[glowing] == material_index("headlight")) & on_actor]] += HEAD_LIGHT_RGB * np.float32(
-            condition.head_glow)
-        out[glowing[mat[glowing] == material_index("lamp")]] += STREET_LAMP_RGB * np.float32(condition.lamp_glow)
-        out[glowing[(mat[glowing] == material_index("marker_lamp")) & on_actor]] += MARKER_LAMP_RGB * np.float32(
-            condition.tail_glow)
+        for name, (rgb, scale, actors_only) in NIGHT_GLOWS.items():
+            which = mat[glowing] == material_index(name)
+            out[glowing[which & on_actor if actors_only else which]] += rgb * np.float32(getattr(condition, scale))
         plates = glowing[(mat[glowing] == material_index("plate_rear")) & on_actor]
         out[plates] += hits.color[plates] * np.float32(PLATE_LAMP_IRRADIANCE * condition.tail_glow)
     if lights is not None and len(lights):
@@ -153,7 +158,7 @@ def _wet_sheen(rays: np.ndarray, normal: np.ndarray, condition: Condition) -> np
 
 def _materials() -> dict[str, np.ndarray]:
     mats = material_arrays()
-    lights = [material_index(n) for n in ("taillight", "headlight", "lamp", "marker_lamp", "plate_rear")]
+    lights = [material_index(n) for n in (*NIGHT_GLOWS, "plate_rear")]
     mats["glows"] = (mats["emissive"].max(axis=1) > 0) | np.isin(np.arange(len(mats["specular"])), lights)
     return mats
 
