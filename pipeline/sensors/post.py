@@ -1,7 +1,8 @@
 """Image post effects on linear radiance (after exposure, before tone mapping), with OpenCV, seeded.
 
 Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
-lens), lens effects (bloom, flare ghosts, vignetting), then the sensor's noise. Images are (H, W, 3) float32
+lens), lens effects (bloom, flare ghosts, vignetting), the camera's wide-dynamic-range processing, then the sensor's
+noise. Images are (H, W, 3) float32
 linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized Gaussian fields
 from a counter-based generator keyed by one draw of it: :func:`standard_normal`), so the same generator state
 gives the same image. Effects that need randomness are skipped when no generator is given.
@@ -12,6 +13,10 @@ gives the same image. Effects that need randomness are skipped when no generator
   plus grain: luminance noise blurred by a Gaussian of ``grain_size_px`` and rescaled to std g * grain_std.
 - Motion blur: per-pixel image motion of the static world during the shutter time (from depth and the ego's
   velocity), averaged over samples along it with ``cv2.remap``.
+- Wide dynamic range (``wdr_gamma`` < 1): automotive cameras are HDR sensors whose processing compresses a scene's
+  range (at night, from unlit verges to lamps) into the output: luminance L becomes p (L / p)^gamma about the pivot
+  p = WDR_PIVOT, every channel scaled alike (hue kept): what is darker than the pivot is lifted, what is brighter
+  held back.
 - Bloom: light above a threshold, blurred (at quarter resolution) and added back. Lens flare: ghosts of the
   brightest sources mirrored through the image centre.
 """
@@ -31,6 +36,9 @@ MOTION_BLUR_SAMPLES = 16
 FLARE_SOURCES = 4
 FLARE_GHOSTS = ((0.55, 0.05, (0.6, 0.8, 1.0)), (1.3, 0.03, (1.0, 0.7, 0.4)), (1.8, 0.08, (0.5, 1.0, 0.6)),
                 (2.3, 0.04, (0.9, 0.6, 1.0)))  # (position along source -> mirror, radius / image diagonal, tint)
+
+
+WDR_PIVOT = 0.5  # linear luminance that wide-dynamic-range processing leaves as it is
 
 
 @functools.lru_cache(maxsize=8)
@@ -58,6 +66,17 @@ def vignette(image: np.ndarray, strength: float) -> np.ndarray:
     if strength == 0:
         return image
     return image * vignette_gain(image.shape[0], image.shape[1], float(strength))
+
+
+def wide_dynamic_range(image: np.ndarray, gamma: float) -> np.ndarray:
+    """Compress the (H, W, 3) float32 linear ``image``'s range: each pixel scaled by (L / WDR_PIVOT)^(gamma - 1),
+    L its Rec. 709 luminance (floored at 1e-6); gamma 1 returns the image unchanged."""
+    if gamma == 1.0:
+        return image
+    luminance = image[..., 0] * np.float32(0.2126) + image[..., 1] * np.float32(0.7152) + image[..., 2] * np.float32(
+        0.0722)
+    scale = np.power(np.maximum(luminance, np.float32(1e-6)) / np.float32(WDR_PIVOT), np.float32(gamma - 1.0))
+    return image * per_channel(scale.astype(np.float32))
 
 
 # Normal draws by table: the 2^16 equiprobable quantiles of the standard normal, Phi^-1((j + 0.5) / 2^16), so
@@ -306,6 +325,7 @@ def apply_post(
     if rain is not None and rng is not None:
         out = rain_drops(out, rain.drops, rng)
     out = vignette(out, lens.vignetting)
+    out = wide_dynamic_range(out, lens.wdr_gamma)
     if rng is not None:
         out = sensor_noise(out, noise, lens.exposure, rng)
     return out

@@ -28,10 +28,15 @@ def ground(half_m: float = 300.0, material: str = MATTE) -> Mesh:
     return Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]), material_index(material), SemanticClass.ROAD)
 
 
-def night_without_others():
+def night_without_others(wdr: bool = True):
+    """Night with the ego's headlights only; ``wdr=False`` also turns the camera's range compression off (the
+    scene's light as it is)."""
     night = get_condition("night")
     headlights = night.headlights.model_copy(update={"others": False})
-    return Condition(night.config.model_copy(update={"headlights": headlights}))
+    update = {"headlights": headlights}
+    if not wdr:
+        update["lens"] = night.config.lens.model_copy(update={"wdr_gamma": 1.0})
+    return Condition(night.config.model_copy(update=update))
 
 
 def down_ray(point: np.ndarray) -> np.ndarray:
@@ -44,8 +49,16 @@ def test_night_is_darker_than_morning(actors_factory, wall):
     scene = FrameScene(StaticScene([wall(60.0), ground()]), actors)
     cam = Camera(camera_config(width_px=160, height_px=120))
     morning = render_camera(scene, cam, EGO, get_condition("morning")).rgb.mean()
-    night = render_camera(scene, cam, EGO, get_condition("night")).rgb.mean()
-    assert night < 0.5 * morning
+    night = get_condition("night")
+    assert night.lens.wdr_gamma < 1.0
+    lens = night.config.lens.model_copy(update={"wdr_gamma": 1.0})
+    flat = Condition(night.config.model_copy(update={"lens": lens}))
+    # The scene's light: with the camera's range compression off, night is less than half as bright as morning.
+    unlifted = render_camera(scene, cam, EGO, flat).rgb.mean()
+    assert unlifted < 0.5 * morning
+    # The night camera's wide-dynamic-range processing lifts the dark parts; the frame stays darker than morning's.
+    lifted = render_camera(scene, cam, EGO, night).rgb.mean()
+    assert unlifted < lifted < morning
 
 
 def test_headlight_on_axis_irradiance_is_closed_form():
@@ -76,16 +89,20 @@ def test_headlight_on_axis_irradiance_is_closed_form():
 
 
 def test_road_in_the_ego_headlight_cone_is_brighter_than_outside():
-    night = night_without_others()
     cam = Camera(camera_config(width_px=320, height_px=240, hfov_deg=120.0,
                               mount={"xyz_m": (0.6, 0.0, 0.65)}))
     scene = FrameScene(StaticScene([ground(material="asphalt")]), Actors.empty())
-    frame = render_camera(scene, cam, EGO, night)
     world_to_cam = cam.camera_to_world(EGO).inverse()
     uv, _ = cam.project(world_to_cam.apply(np.array([[12.0, 0.0, 0.0], [8.0, 9.0, 0.0], [8.0, -9.0, 0.0]])))
-    grey = frame.rgb.astype(float).mean(axis=2)
-    inside, left, right = (grey[int(v), int(u)] for u, v in uv)
-    assert inside > 3.0 * max(left, right)
+    ratios = []
+    for night in (night_without_others(wdr=False), night_without_others()):
+        grey = render_camera(scene, cam, EGO, night).rgb.astype(float).mean(axis=2)
+        inside, left, right = (grey[int(v), int(u)] for u, v in uv)
+        ratios.append(inside / max(left, right))
+    # The scene's light: the cone more than triples the road's brightness; the HDR camera compresses that contrast
+    # but keeps the cone clearly brighter.
+    assert ratios[0] > 3.0
+    assert ratios[0] > ratios[1] > 1.5
 
 
 def test_street_lamp_pool_and_its_shadow(actors_factory):

@@ -159,3 +159,27 @@ def test_post_scales_by_the_gain_and_keeps_the_conditions_noise():
     plain = apply_post(image, lens, noise, None, np.random.default_rng(3))
     bright = apply_post(image, lens, noise, None, np.random.default_rng(3), gain=3.0)
     np.testing.assert_allclose(bright - 0.15, plain - 0.05, atol=1e-6)  # same noise draws, scaled image
+
+
+def test_wide_dynamic_range_is_a_power_law_about_the_pivot_that_keeps_hue():
+    from pipeline.sensors.post import WDR_PIVOT, wide_dynamic_range
+
+    colour = np.array([0.5, 1.0, 2.0], np.float32)  # one hue at three brightnesses
+    luma = float(colour @ np.array([0.2126, 0.7152, 0.0722], np.float32))
+    levels = np.array([WDR_PIVOT / 64, WDR_PIVOT / 4, WDR_PIVOT, 8 * WDR_PIVOT], np.float32)
+    image = (levels[:, None] / luma * colour[None, :]).reshape(1, 4, 3).astype(np.float32)
+    out = wide_dynamic_range(image, 0.5)[0]
+    out_luma = out @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    # L -> p (L / p)^0.5: 1/64 of the pivot becomes 1/8 of it, 8x the pivot becomes 2.83x; the pivot stays
+    np.testing.assert_allclose(out_luma, WDR_PIVOT * (levels / WDR_PIVOT) ** 0.5, rtol=1e-5)
+    np.testing.assert_allclose(out / out[:, 1:2], image[0] / image[0][:, 1:2], rtol=1e-5)  # channel ratios kept
+    assert wide_dynamic_range(image, 1.0) is image  # off: untouched
+
+
+def test_post_applies_the_lens_wdr_before_the_noise():
+    lens, noise = LensConfig(vignetting=0.0, bloom_strength=0.0, wdr_gamma=0.5), SensorNoiseConfig(shot=0.0,
+                                                                                                  read_std=0.01)
+    image = np.full((40, 50, 3), 0.5 / 16, np.float32)  # grey at 1/16 of the pivot: lifted 4x to 1/4 of it
+    plain = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), noise, None, np.random.default_rng(3))
+    lifted = apply_post(image, lens, noise, None, np.random.default_rng(3))
+    np.testing.assert_allclose(lifted - 0.125, plain - 0.5 / 16, atol=1e-6)  # lifted, then the same noise

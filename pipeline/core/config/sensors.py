@@ -300,6 +300,9 @@ class LensConfig(_Model):
     bloom_sigma_px: float = Field(6.0, gt=0.0, description="bloom blur sigma, pixels")
     lens_flare: float = Field(0.0, ge=0.0, description="strength of ghosts from bright sources (0 = off)")
     motion_blur_exposure_s: float = Field(0.0, ge=0.0, le=0.2, description="shutter time for motion blur (0 = off)")
+    wdr_gamma: float = Field(1.0, gt=0.0, le=1.0, description="wide-dynamic-range processing: luminance L becomes "
+                             "p (L / p)^gamma about the pivot p = 0.5, lifting shadows and holding back highlights "
+                             "(1 = off)")
 
 
 class LidarConditionConfig(_Model):
