@@ -32,9 +32,13 @@ class Material:
     fresnel_f0: float = 0.0
 
 
+# Road surfaces by day: weathered asphalt reflects 0.10-0.20 of sunlight (fresh 0.05; US EPA, "Reducing Urban Heat
+# Islands: Compendium of Strategies", Cool Pavements, 2012), white road paint about pi x its luminance coefficient Qd,
+# 0.4-0.6 (EN 1436 asks Qd >= 0.13 cd/m^2/lx of dry white markings). An asphalt of 0.09 with 0.85 paint made streets
+# near black with zebra stripes the detector read as cars (docs/realism.md).
 MATERIALS: dict[str, Material] = {
-    "asphalt": Material((0.09, 0.09, 0.10), specular=0.05, reflectivity=0.12),
-    "lane_paint": Material((0.85, 0.85, 0.82), specular=0.05, reflectivity=0.75),
+    "asphalt": Material((0.17, 0.17, 0.17), specular=0.05, reflectivity=0.12),
+    "lane_paint": Material((0.6, 0.6, 0.57), specular=0.05, reflectivity=0.75),
     "concrete": Material((0.45, 0.44, 0.42), reflectivity=0.35),
     "kerb": Material((0.55, 0.55, 0.53), reflectivity=0.40),
     "grass": Material((0.10, 0.22, 0.06), reflectivity=0.45),
