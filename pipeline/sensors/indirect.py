@@ -12,7 +12,10 @@ street, strongly at grazing angles. Both are ray traced here in the same scene a
   their contact shadows; the world's occlusion of itself is left out everywhere), found by
   :meth:`FrameScene.near_actors` (a conservative grid test).
   The directions are a fixed spiral set rotated about the normal by an angle hashed from the ray's index, so a frame
-  is the same on every run and the pattern shows as fine noise, not bands.
+  is the same on every run and the pattern shows as fine noise, not bands. On a camera's pixel-centre rays that
+  noise is then filtered away (:func:`smooth_visibility`): each traced pixel takes the mean occlusion of the traced
+  pixels within AO_FILTER_RADIUS_PX that lie on the same surface (same instance, normals within about 18 degrees,
+  depth within 3 %), 8 rays each, so paint shows its sky occlusion as a smooth shade rather than grain.
 - **Reflections.** Materials with a Fresnel ``F0`` (:class:`pipeline.world.materials.Material.fresnel_f0`: clear-coat
   paint, glass, lamps, rims, glazed façades) reflect one bounce: the mirror ray is cast into the scene and what it
   meets is lit by the sky and the sun without shadows (or is the sky, also beyond MIRROR_RANGE_M: a documented
@@ -31,6 +34,9 @@ from pipeline.world.scene import FrameScene, Hits
 AO_SAMPLES = 8
 AO_RADIUS_M = 1.5
 AO_STRENGTH = 0.85
+AO_FILTER_RADIUS_PX = 2  # the occlusion is averaged over a (2r + 1)^2 pixel window of the same surface
+AO_FILTER_NORMAL_COS = 0.95
+AO_FILTER_DEPTH = 0.03  # relative depth difference within which two pixels lie on one surface
 INDIRECT_RANGE_M = 60.0  # hits farther from the camera get neither (a car there is a few pixels tall)
 MIRROR_RANGE_M = 60.0  # a mirror ray that meets nothing nearer sees the sky
 # Every ray of this module meets nothing farther than this from the camera (actors beyond cannot change a pixel:
@@ -89,8 +95,41 @@ def occlusion_rays(rays, t_m, normal, rows, pattern):
     return out
 
 
-def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits) -> np.ndarray:
-    """(N,) float32 in [1 - AO_STRENGTH, 1]: how much of the sky fill reaches each hit (1 where not traced)."""
+@kernel("float32[::1](float32[::1], boolean[::1], int32[::1], float32[:, ::1], float32[::1], int64, int64, int64, "
+        "float32, float32)")
+def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, radius, normal_cos, depth):
+    """(H * W,) float32: for each ``traced`` pixel of a row-major H x W grid, the mean of ``blocked`` over the traced
+    pixels within ``radius`` (a square window) of the same ``instance`` whose normal's cosine with its own exceeds
+    ``normal_cos`` and whose depth ``t_m`` is within ``depth`` of its own, relatively (itself included); 0 elsewhere."""
+    out = np.zeros(height * width, np.float32)
+    for y in range(height):
+        for x in range(width):
+            i = y * width + x
+            if not traced[i]:
+                continue
+            total = np.float32(0)
+            count = 0
+            for yy in range(max(0, y - radius), min(height, y + radius + 1)):
+                for xx in range(max(0, x - radius), min(width, x + radius + 1)):
+                    j = yy * width + xx
+                    if not traced[j] or instance[j] != instance[i]:
+                        continue
+                    if abs(t_m[j] - t_m[i]) > depth * t_m[i]:
+                        continue
+                    if (normal[i, 0] * normal[j, 0] + normal[i, 1] * normal[j, 1]
+                            + normal[i, 2] * normal[j, 2]) < normal_cos:
+                        continue
+                    total += blocked[j]
+                    count += 1
+            out[i] = total / np.float32(count)
+    return out
+
+
+def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
+                   image_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """(N,) float32 in [1 - AO_STRENGTH, 1]: how much of the sky fill reaches each hit (1 where not traced).
+    With ``image_shape`` (H, W), the rays are a camera's pixel centres in row-major order (N = H * W) and the
+    occlusion is smoothed over each surface (:func:`smooth_visibility`)."""
     n = len(rays)
     visibility = np.ones(n, np.float32)
     if not len(scene.actors) or not n:
@@ -113,7 +152,17 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits) -> np.ndarra
     # tracing it near actors only would draw the edges of that region.
     static_rays = np.repeat(on_actor[rows], AO_SAMPLES)
     blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M, static_rays=static_rays).reshape(len(rows), AO_SAMPLES)
-    visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * blocked.mean(axis=1, dtype=np.float32)
+    share = blocked.mean(axis=1, dtype=np.float32)
+    if image_shape is not None:
+        h, w = image_shape
+        if h * w != n:
+            raise ValueError(f"image_shape {image_shape} does not hold the {n} rays")
+        per_pixel, traced = np.zeros(n, np.float32), np.zeros(n, bool)
+        per_pixel[rows], traced[rows] = share, True
+        share = smooth_visibility(per_pixel, traced, as_input(hits.instance_id, np.int32),
+                                  as_input(hits.normal, np.float32), t, h, w, AO_FILTER_RADIUS_PX,
+                                  np.float32(AO_FILTER_NORMAL_COS), np.float32(AO_FILTER_DEPTH))[rows]
+    visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * share
     return visibility
 
 

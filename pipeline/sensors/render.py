@@ -93,15 +93,15 @@ def render_camera(
     indirect = camera.config.quality == "realistic"
     texture_rad = 1.0 / camera.fx if indirect else 0.0  # the realistic camera textures the static world
     if len(samples) == 1:
-        radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad), hits.t_m,
-                                 hits.hit)
+        radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
+                                 hits.t_m, hits.hit)
     else:
         # Every pixel gets its centre sample; pixels on an edge (edge_pixels) get the stratified samples instead.
         if camera.config.samples_everywhere:
             radiance, where = np.zeros((h * w, 3), np.float32), np.arange(h * w)
         else:
-            radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad), hits.t_m,
-                                     hits.hit)
+            radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
+                                     hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)

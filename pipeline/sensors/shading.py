@@ -64,14 +64,15 @@ def _sky_channels(up_z: np.ndarray, condition: Condition) -> list[np.ndarray]:
 
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
-    indirect: bool = False, pixel_angle_rad: float = 0.0,
+    indirect: bool = False, pixel_angle_rad: float = 0.0, image_shape: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
     radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
     sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
-    (:mod:`pipeline.sensors.indirect`). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the
+    (:mod:`pipeline.sensors.indirect`; ``image_shape`` (H, W): the rays are a camera's pixel centres, row-major,
+    and the sky occlusion is smoothed over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the
     static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over
     the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the wet sheen add theirs with
     numpy.
@@ -98,7 +99,7 @@ def shade(
                       mats["shininess"], sun, *rgb)
     if indirect:
         # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
-        visibility = sky_visibility(scene, rays, hits)
+        visibility = sky_visibility(scene, rays, hits, image_shape)
         dim = np.flatnonzero(visibility < 1.0)
         out[dim] -= hits.color[dim] * rgb[1] * (1.0 - visibility[dim])[:, None]
         reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"])

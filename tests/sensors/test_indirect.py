@@ -16,6 +16,7 @@ from pipeline.sensors.indirect import (
     mirror_rays,
     occlusion_rays,
     sky_visibility,
+    smooth_visibility,
 )
 from pipeline.sensors.shading import FILMIC_GAIN, shade, sky, to_srgb8
 from pipeline.world.actors import Actors
@@ -85,6 +86,54 @@ def test_sky_visibility_darkens_the_ground_beside_an_actor_only(box_meshes, acto
     assert v[2] == 1.0 and v[3] == 1.0
     empty = FrameScene(StaticScene([plane()]), Actors.empty())
     np.testing.assert_array_equal(sky_visibility(empty, rays, empty.cast_rays(rays)), 1.0)
+
+
+def test_smooth_visibility_averages_over_one_surface_only():
+    """A 6 x 6 grid: a checkerboard of blocked shares on instance 1 (left half, facing up) smooths to the mean of each
+    pixel's same-surface neighbours; instance 2 (right half), a pixel facing another way, one at another depth and the
+    untraced pixels never mix in."""
+    h, w = 6, 6
+    yy, xx = np.mgrid[0:h, 0:w]
+    blocked = ((yy + xx) % 2).astype(np.float32).ravel()
+    instance = np.where(xx < 3, 1, 2).astype(np.int32).ravel()
+    normal = np.tile(np.array([0.0, 0.0, 1.0], np.float32), (h * w, 1))
+    t_m = np.full(h * w, 10.0, np.float32)
+    traced = np.ones(h * w, bool)
+    traced[5 * w + 0] = False  # (5, 0) untraced
+    normal[0] = (1.0, 0.0, 0.0)  # (0, 0) faces another way
+    t_m[1] = 11.0  # (0, 1) lies 10 % farther
+    out = smooth_visibility(blocked, traced, instance, normal, t_m, h, w, 2, np.float32(0.95), np.float32(0.03))
+
+    def expected(y, x):
+        if not traced[y * w + x]:
+            return 0.0
+        own = y * w + x
+        same = [j for j in range(h * w)
+                if abs(j // w - y) <= 2 and abs(j % w - x) <= 2 and traced[j] and instance[j] == instance[own]
+                and abs(t_m[j] - t_m[own]) <= 0.03 * t_m[own] and normal[j] @ normal[own] >= 0.95]
+        return float(np.mean(blocked[same]))
+
+    np.testing.assert_allclose(out, [expected(y, x) for y in range(h) for x in range(w)], rtol=1e-6)
+    assert out[0] == blocked[0] and out[1] == blocked[1]  # alone on their surfaces
+    assert out[5 * w] == 0.0
+    assert 0.3 < out[3 * w + 1] < 0.7  # inside the checkerboard: near the mean, not 0 or 1
+
+
+def test_camera_grid_smoothing_keeps_a_uniform_surface_uniform(box_meshes, actors_factory):
+    """A 5 x 4 grid of rays onto the ground beside a box (all traced): smoothing over the grid keeps the mean
+    occlusion and narrows its spread; an image shape that does not hold the rays is an error."""
+    actors = actors_factory([[0.0, 0.0, 1.5]], [[4.0, 2.0, 3.0]])
+    scene = FrameScene(StaticScene([plane()]), actors, box_meshes)
+    gx, gy = np.meshgrid(np.linspace(2.1, 2.6, 4), np.linspace(-0.6, 0.6, 5))
+    rays = down_rays(np.column_stack([gx.ravel(), gy.ravel()]))
+    hits = scene.cast_rays(rays)
+    plain, smoothed = sky_visibility(scene, rays, hits), sky_visibility(scene, rays, hits, (5, 4))
+    assert (plain < 1.0).all() and (smoothed < 1.0).all()
+    # the mean over the grid is kept up to the window's edge weighting, and the spread shrinks
+    assert abs(smoothed.mean() - plain.mean()) < 0.05
+    assert smoothed.std() <= plain.std()
+    with pytest.raises(ValueError, match="does not hold"):
+        sky_visibility(scene, rays, hits, (4, 4))
 
 
 def test_sky_visibility_stops_beyond_its_range(box_meshes, actors_factory):
