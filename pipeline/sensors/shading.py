@@ -72,10 +72,10 @@ def shade(
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
     sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
     (:mod:`pipeline.sensors.indirect`; ``image_shape`` (H, W): the rays are a camera's pixel centres, row-major,
-    and the sky occlusion is smoothed over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the
-    static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over
-    the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the wet sheen add theirs with
-    numpy.
+    and the sky occlusion is smoothed over each surface). A positive ``pixel_angle_rad`` (the camera's angle per
+    pixel) textures the static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are
+    compiled passes over the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
+    wet sheen add theirs with numpy.
     """
     mats = _materials()
     if pixel_angle_rad > 0:
