@@ -68,14 +68,17 @@ def vignette(image: np.ndarray, strength: float) -> np.ndarray:
     return image * vignette_gain(image.shape[0], image.shape[1], float(strength))
 
 
+def luminance(image: np.ndarray) -> np.ndarray:
+    """(...) float32 Rec. 709 luminance of a (..., 3) float32 linear RGB image."""
+    return image[..., 0] * np.float32(0.2126) + image[..., 1] * np.float32(0.7152) + image[..., 2] * np.float32(0.0722)
+
+
 def wide_dynamic_range(image: np.ndarray, gamma: float) -> np.ndarray:
     """Compress the (H, W, 3) float32 linear ``image``'s range: each pixel scaled by (L / WDR_PIVOT)^(gamma - 1),
-    L its Rec. 709 luminance (floored at 1e-6); gamma 1 returns the image unchanged."""
+    L its :func:`luminance` (floored at 1e-6); gamma 1 returns the image unchanged."""
     if gamma == 1.0:
         return image
-    luminance = image[..., 0] * np.float32(0.2126) + image[..., 1] * np.float32(0.7152) + image[..., 2] * np.float32(
-        0.0722)
-    scale = np.power(np.maximum(luminance, np.float32(1e-6)) / np.float32(WDR_PIVOT), np.float32(gamma - 1.0))
+    scale = np.power(np.maximum(luminance(image), np.float32(1e-6)) / np.float32(WDR_PIVOT), np.float32(gamma - 1.0))
     return image * per_channel(scale.astype(np.float32))
 
 
@@ -289,8 +292,7 @@ def auto_exposure_gain(image: np.ndarray) -> float:
     AE_KEY over the image's log-average luminance (Rec. 709 weights, every 4th pixel and row, +1e-4 against log 0),
     clipped to AE_GAIN_LIMITS."""
     sub = np.asarray(image, np.float32)[::4, ::4]
-    luminance = 0.2126 * sub[..., 0] + 0.7152 * sub[..., 1] + 0.0722 * sub[..., 2]
-    log_average = float(np.exp(np.mean(np.log(1e-4 + np.maximum(luminance, 0.0)), dtype=np.float64)))
+    log_average = float(np.exp(np.mean(np.log(1e-4 + np.maximum(luminance(sub), 0.0)), dtype=np.float64)))
     return float(np.clip(AE_KEY / log_average, *AE_GAIN_LIMITS))
 
 
