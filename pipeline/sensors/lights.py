@@ -3,8 +3,13 @@
 A :class:`SpotLights` holds L spot lights (world frame, metres). Each has an elliptical cone about its axis
 (half-widths ``tan_h`` / ``tan_v`` measured as tangents in the light's left / up directions) whose edge fades
 over the fraction ``soft`` of its radius (smoothstep), an inverse-square fall-off windowed to zero at
-``range_m`` ((1 - (d/R)^4)^2, so a light's reach is bounded), and an RGB intensity = irradiance at 1 m on
-the axis. Lamps are downward circular cones; low beams are wide, flat cones pitched slightly down.
+``range_m`` ((1 - (d/R)^4)^2, so a light's reach is bounded), and an RGB intensity = irradiance at 1 m where
+the beam is brightest. Lamps are downward circular cones of uniform intensity; low beams are wide, flat cones
+pitched slightly down with a beam pattern inside (:func:`beam_pattern`): a real low beam concentrates its light just
+below its cut-off (ECE R112 asks >= 10,100 cd at 0.57-0.86 deg below the horizon and only >= 1,700 cd at 1.72 deg
+down and 9 deg to the side), so that the road far ahead is lit and the road just in front of the car is not glaring;
+a uniform cone, whose light on the road falls as 1/d^3, lit a bright pool a few metres ahead and left the road
+beyond it dark.
 
 Shading is vectorised over (light, hit) pairs: hit points are bucketed once per call in a 2D grid
 (:class:`PointGrid`, radix-sorted cell ids), and each light only visits the points in the cells its range
@@ -12,6 +17,19 @@ covers (cells outside its range or, seen from above, outside its horizontal half
 a cheap exact test (range, in front, facing) precedes the cone and shading terms, and pairs whose light is
 below MIN_IRRADIANCE are dropped. The number of lights per frame is bounded by the condition (the ego, the
 nearest ``max_other_vehicles`` vehicles ahead of the camera, the nearest ``max_lamps`` lamps).
+
+Retroreflection: road markings (glass beads), sign sheeting, number plates, reflex reflectors and, weakly, asphalt
+send light back towards its source. A driver (or a camera beside the headlamps) sees them far brighter than their
+diffuse reflection: a marking 30 m ahead, lit at 1.2 deg grazing incidence, returns about 15 times its Lambertian
+radiance. Each material's coefficient of retroreflected luminance R (cd m^-2 lx^-1, at the 1.05 deg observation
+angle of the standard 30 m geometry, EN 1436 / CIE 54.2; ``Material.retroreflection``) adds
+pi * R * f(alpha) * E_perp * albedo / max(material albedo) to a hit lit by a light with illuminance E_perp
+perpendicular to the light's direction there, with alpha the angle at the hit between the light and the camera
+and f = (1.05 deg / max(alpha, 0.5 deg)) exp(-(alpha / 6 deg)^2) (glass-bead markings keep about half their R at
+2.3 deg; far from the light's direction nothing returns). The pi converts a luminance coefficient into the
+renderer's units (a Lambertian albedo rho reflects rho * E here, i.e. rho / pi cd m^-2 lx^-1). Worn paint (its
+textured albedo lower) returns less. Without it the road beyond a few metres went dark under low beams, and
+markings and plates did not stand out as they do in every night photograph.
 
 Shadow rays (per light family, ``shadows`` in the config): one Embree occlusion call per shadowed light with
 ray directions spanning the segment to the light (``t`` in [0, 1]). Shipped conditions cast them for street
@@ -31,6 +49,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.config.sensors import HeadlightConfig, StreetLampConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.actors import Actors, unit_to_world
+from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, Hits, take_columns
 
 # A vehicle's pair of low beams is modelled as ONE light of twice the intensity at the middle of the front
@@ -42,6 +61,28 @@ LIT_CLASSES = (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.
 DEFAULT_EGO_SIZE_M = (4.5, 1.8, 1.5)
 MIN_DISTANCE_M = 0.5  # the inverse-square law is clamped closer than this
 MIN_IRRADIANCE = 2e-3  # light below this (before exposure) is not shaded: under one 8-bit step on dark asphalt
+RETRO_REFERENCE_RAD = np.radians(1.05)  # observation angle of the 30 m geometry at which R is given
+RETRO_MIN_RAD = np.radians(0.5)  # closer to the light's direction R is taken as at this angle
+RETRO_WIDTH_RAD = np.radians(6.0)  # beyond a few degrees from the light's direction nothing returns
+RETRO_PEAK = float(RETRO_REFERENCE_RAD / RETRO_MIN_RAD)  # the largest value of the angular factor
+
+
+def _retro_per_material() -> np.ndarray:
+    """(M,) float32 pi * R / max(albedo) per material (0: not retroreflective); times a hit's albedo it gives the
+    retroreflected radiance per unit of perpendicular illuminance at the reference observation angle."""
+    mats = material_arrays()
+    return (np.pi * mats["retroreflection"] / np.maximum(mats["albedo"].max(axis=1), 1e-6)).astype(np.float32)
+
+
+_RETRO = _retro_per_material()
+
+
+def retro_angle_factor(cos_alpha: np.ndarray) -> np.ndarray:
+    """(M,) float32 angular factor f of retroreflection for the (M,) cosines of the angle at the hit between the
+    directions to the light and to the camera (1 at the reference angle of 1.05 deg, up to ``RETRO_PEAK``)."""
+    alpha = np.arccos(np.clip(cos_alpha, -1.0, 1.0)).astype(np.float32)
+    ratio = alpha * np.float32(1.0 / RETRO_WIDTH_RAD)
+    return np.float32(RETRO_REFERENCE_RAD) / np.maximum(alpha, np.float32(RETRO_MIN_RAD)) * np.exp(-ratio * ratio)
 
 
 @dataclass(frozen=True)
@@ -56,6 +97,8 @@ class SpotLights:
         tan_up: (L,) float64 tangent of the half-angle above the axis (a low beam's cut-off; = tan_v for lamps).
         soft: (L,) float64 fraction of the cone radius over which the edge fades, in (0, 1].
         range_m: (L,) float64 cut-off distance. shadows: (L,) bool, cast shadow rays.
+        peak_band_rad, falloff, spread_h_rad, floor_h: (L,) float64 the beam pattern (:func:`beam_pattern`);
+            falloff 0 and spread_h_rad inf give a uniform cone.
     """
 
     position_m: np.ndarray
@@ -68,6 +111,10 @@ class SpotLights:
     soft: np.ndarray
     range_m: np.ndarray
     shadows: np.ndarray
+    peak_band_rad: np.ndarray
+    falloff: np.ndarray
+    spread_h_rad: np.ndarray
+    floor_h: np.ndarray
 
     def __len__(self) -> int:
         return len(self.position_m)
@@ -75,7 +122,7 @@ class SpotLights:
     @classmethod
     def empty(cls) -> SpotLights:
         z3, z = np.zeros((0, 3)), np.zeros(0)
-        return cls(z3, z3, z3, z3.astype(np.float32), z, z, z, z, z, np.zeros(0, bool))
+        return cls(z3, z3, z3, z3.astype(np.float32), z, z, z, z, z, np.zeros(0, bool), z, z, z, z)
 
     @classmethod
     def concatenate(cls, parts: list[SpotLights]) -> SpotLights:
@@ -85,13 +132,33 @@ class SpotLights:
         return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__))
 
 
-def _spots(position, axis, up, rgb, tan_h, tan_v, tan_up, soft, range_m, shadows) -> SpotLights:
+def _spots(position, axis, up, rgb, tan_h, tan_v, tan_up, soft, range_m, shadows, peak_band_rad=1.0, falloff=0.0,
+           spread_h_rad=np.inf, floor_h=1.0) -> SpotLights:
     n = len(position)
     full = lambda v: np.broadcast_to(np.asarray(v, np.float64), (n,)).copy()  # noqa: E731
     return SpotLights(np.asarray(position, np.float64).reshape(n, 3), np.asarray(axis, np.float64).reshape(n, 3),
                       np.asarray(up, np.float64).reshape(n, 3),
                       np.broadcast_to(np.asarray(rgb, np.float32), (n, 3)).copy(), full(tan_h), full(tan_v),
-                      full(tan_up), full(soft), full(range_m), np.broadcast_to(np.asarray(shadows, bool), (n,)).copy())
+                      full(tan_up), full(soft), full(range_m), np.broadcast_to(np.asarray(shadows, bool), (n,)).copy(),
+                      full(peak_band_rad), full(falloff), full(spread_h_rad), full(floor_h))
+
+
+def beam_pattern(tan_left: np.ndarray, tan_up: np.ndarray, lights: SpotLights, k: int) -> np.ndarray:
+    """(M,) float32 relative intensity of light ``k`` in M directions given as tangents of their angles to its
+    left and above its axis ((M,) float32 each): 1 in the peak band (from the cut-off, ``tan_up`` of the light above
+    the axis, down to ``peak_band_rad`` below it), below it (peak band / angle below the cut-off) ** ``falloff``;
+    across the beam times floor + (1 - floor) exp(-(angle to the side / ``spread_h_rad``)^2). The cone's edges
+    (:func:`light_radiance`) cut it off; a uniform cone (falloff 0, spread inf) is 1 everywhere."""
+    out = np.ones(len(tan_left), np.float32)
+    if lights.falloff[k] > 0:
+        below = np.float32(np.arctan(lights.tan_up[k])) - np.arctan(tan_up)
+        band = np.float32(lights.peak_band_rad[k])
+        out *= (band / np.maximum(below, band)) ** np.float32(lights.falloff[k])
+    if np.isfinite(lights.spread_h_rad[k]):
+        side = np.arctan(np.abs(tan_left)) * np.float32(1.0 / lights.spread_h_rad[k])
+        floor = np.float32(lights.floor_h[k])
+        out *= floor + (1 - floor) * np.exp(-side * side)
+    return out
 
 
 def _beam_axes(yaw_rad: np.ndarray, pitch_down_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -107,9 +174,11 @@ def _headlight_spots(position: np.ndarray, axis: np.ndarray, up: np.ndarray, lam
                      cfg: HeadlightConfig, shadows: bool) -> SpotLights:
     """One light per vehicle carrying ``lamps`` (n,) lamps' worth of intensity."""
     rgb = cfg.intensity * np.asarray(cfg.color_rgb)[None, :] * np.asarray(lamps, np.float64)[:, None]
+    spread = np.inf if cfg.horizontal_falloff_deg is None else np.radians(cfg.horizontal_falloff_deg)
     return _spots(position, axis, up, rgb, np.tan(np.radians(cfg.half_angle_h_deg)),
                   np.tan(np.radians(cfg.half_angle_v_deg)), np.tan(np.radians(cfg.half_angle_up_deg)), cfg.soft_edge,
-                  cfg.range_m, shadows)
+                  cfg.range_m, shadows, np.radians(cfg.peak_band_deg), cfg.vertical_falloff, spread,
+                  cfg.horizontal_floor)
 
 
 def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT_EGO_SIZE_M) -> SpotLights:
@@ -227,7 +296,8 @@ def light_radiance(
     specular: np.ndarray,
     shininess: np.ndarray,
 ) -> np.ndarray:
-    """(N, 3) float32 radiance that ``lights`` add to N camera hits: albedo * E + specular highlights.
+    """(N, 3) float32 radiance that ``lights`` add to N camera hits: albedo * E + specular highlights +
+    retroreflection (module docstring; the material of each hit from ``hits.material``).
 
     Args:
         rays: (N, 6) float32 [origin | unit direction], world. hits: their first hits.
@@ -249,6 +319,7 @@ def light_radiance(
     pos = [np.take(c, grid.order) for c in (px, py, ray[2] + ray[5] * t)]
     nrm = [np.take(hits.normal[:, k], src_all) for k in range(3)]
     view = [-np.take(ray[3 + k], grid.order) for k in range(3)]
+    retro = np.take(_RETRO, np.take(hits.material, src_all))
     diffuse = [np.zeros(n, np.float32) for _ in range(3)]
     shine = [np.zeros(n, np.float32) for _ in range(3)]
     for k in range(len(lights)):  # loop over lights; every point in reach is vectorised
@@ -267,15 +338,20 @@ def light_radiance(
         cand, d2, axial, n_dot_v = cand[ok], d2[ok], axial[ok], n_dot_v[ok]
         v, nv = [c[ok] for c in v], [c[ok] for c in nv]
         left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
-        a = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / (axial * np.float32(lights.tan_h[k]))
-        b = -(v[0] * up[0] + v[1] * up[1] + v[2] * up[2]) / axial  # > 0 above the axis (v points to the light)
-        b /= np.where(b > 0, np.float32(lights.tan_up[k]), np.float32(lights.tan_v[k]))
+        # Tangents of the angles to the left of and above the axis (v points from the surface to the light).
+        tan_left = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / axial
+        tan_above = -(v[0] * up[0] + v[1] * up[1] + v[2] * up[2]) / axial
+        a = tan_left * np.float32(1.0 / lights.tan_h[k])
+        b = tan_above / np.where(tan_above > 0, np.float32(lights.tan_up[k]), np.float32(lights.tan_v[k]))
         edge = np.clip((1.0 - np.sqrt(a * a + b * b)) * np.float32(1.0 / lights.soft[k]), 0.0, 1.0)
         window = np.clip(1.0 - (d2 * np.float32(1.0 / lights.range_m[k] ** 2)) ** 2, 0.0, 1.0) ** 2
         inv_d = 1.0 / np.sqrt(d2)
         strength = edge * edge * (3.0 - 2.0 * edge) * window / np.maximum(d2, np.float32(MIN_DISTANCE_M ** 2))
-        # Drop pairs whose light is negligible (below MIN_IRRADIANCE on a white surface, highlights included).
-        bright = np.flatnonzero(strength * np.float32(lights.rgb[k].max()) > MIN_IRRADIANCE)
+        strength *= beam_pattern(tan_left, tan_above, lights, k)
+        # Drop pairs whose light is negligible (below MIN_IRRADIANCE on a white surface, highlights and the most
+        # a retroreflector can return included).
+        gain = 1.0 + np.take(retro, cand) * np.float32(RETRO_PEAK)
+        bright = np.flatnonzero(strength * gain * np.float32(lights.rgb[k].max()) > MIN_IRRADIANCE)
         if not len(bright):
             continue
         cand, strength, inv_d, n_dot_v = cand[bright], strength[bright], inv_d[bright], n_dot_v[bright]
@@ -287,6 +363,11 @@ def light_radiance(
                                                                            + np.float32(1e-12))
         spec = specular[src] * np.clip(n_dot_h, 0.0, 1.0) ** shininess[src]
         w, s = strength * n_dot_v * inv_d, strength * spec
+        back = np.flatnonzero(np.take(retro, cand) > 0)  # retroreflectors: E_perp = strength
+        if len(back):
+            cos_alpha = (v[0][back] * np.take(view[0], cand[back]) + v[1][back] * np.take(view[1], cand[back])
+                         + v[2][back] * np.take(view[2], cand[back])) * inv_d[back]
+            w[back] += strength[back] * np.take(retro, cand[back]) * retro_angle_factor(cos_alpha)
         if lights.shadows[k]:
             start = np.stack([np.take(pos[c], cand) + nv[c] * np.float32(2e-3) for c in range(3)], axis=1)
             seg = np.stack(v, axis=1) * (1.0 - 0.05 * inv_d)[:, None]  # stop 5 cm short of the lamp

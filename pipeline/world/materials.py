@@ -22,6 +22,10 @@ class Material:
     emissive_rgb: light emitted (lamps, lit tail lights), linear RGB, may exceed 1.
     fresnel_f0: mirror reflectance at normal incidence (Schlick's F0; 0: no mirror reflection traced): clear-coat
         paint and glass ~0.04-0.05, metals far more (:mod:`pipeline.sensors.indirect`).
+    retroreflection: coefficient of retroreflected luminance R, cd m^-2 lx^-1, at the 1.05 deg observation angle of
+        the 30 m geometry (EN 1436 R_L for markings; the coefficient of retroreflection R_A of sheeting and
+        reflectors, per unit area); 0: none. Lit by a lamp near the camera, such a surface returns far more than
+        its diffuse light (:mod:`pipeline.sensors.lights`).
     """
 
     albedo_rgb: tuple[float, float, float]
@@ -30,15 +34,22 @@ class Material:
     reflectivity: float = 0.2
     emissive_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
     fresnel_f0: float = 0.0
+    retroreflection: float = 0.0
 
 
 # Road surfaces by day: weathered asphalt reflects 0.10-0.20 of sunlight (fresh 0.05; US EPA, "Reducing Urban Heat
 # Islands: Compendium of Strategies", Cool Pavements, 2012), white road paint about pi x its luminance coefficient Qd,
 # 0.4-0.6 (EN 1436 asks Qd >= 0.13 cd/m^2/lx of dry white markings). An asphalt of 0.09 with 0.85 paint made streets
 # near black with zebra stripes the detector read as cars (docs/realism.md).
+# Retroreflection R at 1.05 deg observation (cd m^-2 lx^-1): worn dry white markings 0.1 (EN 1436 class R2 asks
+# >= 0.1 of permanent white markings, new ones reach 0.15-0.3); asphalt 0.01, an order below the markings (our
+# estimate: the background that markings' night contrast is specified against). Sheeting, plates and reflectors are
+# given at 0.2-0.33 deg in their standards (ASTM D4956 type I white sheeting ~70, ECE R104 tape and R3 reflex
+# reflectors far more) and fall steeply with the angle; at 1.05 deg our values (plates and sign faces 4, white tape
+# 20, red tape 4, a tail lamp's reflex reflector over its whole lens 0.5) are estimates of that fall.
 MATERIALS: dict[str, Material] = {
-    "asphalt": Material((0.17, 0.17, 0.17), specular=0.05, reflectivity=0.12),
-    "lane_paint": Material((0.6, 0.6, 0.57), specular=0.05, reflectivity=0.75),
+    "asphalt": Material((0.17, 0.17, 0.17), specular=0.05, reflectivity=0.12, retroreflection=0.01),
+    "lane_paint": Material((0.6, 0.6, 0.57), specular=0.05, reflectivity=0.75, retroreflection=0.1),
     "concrete": Material((0.45, 0.44, 0.42), reflectivity=0.35),
     "kerb": Material((0.55, 0.55, 0.53), reflectivity=0.40),
     "grass": Material((0.10, 0.22, 0.06), reflectivity=0.45),
@@ -52,10 +63,11 @@ MATERIALS: dict[str, Material] = {
     "paint": Material((0.5, 0.5, 0.5), specular=0.5, shininess=256.0, reflectivity=0.45, fresnel_f0=0.05),
     "glass": Material((0.03, 0.035, 0.04), specular=0.8, shininess=1024.0, reflectivity=0.05, fresnel_f0=0.05),
     "rubber": Material((0.03, 0.03, 0.03), reflectivity=0.05),
-    "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90),
+    "plate": Material((0.80, 0.80, 0.75), reflectivity=0.90, retroreflection=4.0),
     "headlight": Material((0.3, 0.32, 0.35), specular=0.9, shininess=96.0, reflectivity=0.80,  # clear lens
                           fresnel_f0=0.05),
-    "taillight": Material((0.5, 0.015, 0.015), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
+    "taillight": Material((0.5, 0.015, 0.015), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05,
+                          retroreflection=0.5),
     "lamp": Material((0.9, 0.85, 0.7), reflectivity=0.5),
     "skin": Material((0.60, 0.45, 0.35), reflectivity=0.30),
     "cloth": Material((0.20, 0.22, 0.30), reflectivity=0.25),
@@ -74,12 +86,12 @@ MATERIALS: dict[str, Material] = {
     "rim": Material((0.55, 0.56, 0.58), specular=0.6, shininess=48.0, reflectivity=0.60, fresnel_f0=0.3),
     "trim": Material((0.035, 0.035, 0.04), specular=0.15, shininess=24.0, reflectivity=0.10),
     # Appended by the trucks' conspicuity markings (retroreflective tape; pipeline/world/actor_shapes.py).
-    "reflector_red": Material((0.55, 0.04, 0.03), specular=0.3, reflectivity=0.95),
-    "reflector_white": Material((0.85, 0.85, 0.82), specular=0.3, reflectivity=0.95),
+    "reflector_red": Material((0.55, 0.04, 0.03), specular=0.3, reflectivity=0.95, retroreflection=4.0),
+    "reflector_white": Material((0.85, 0.85, 0.82), specular=0.3, reflectivity=0.95, retroreflection=20.0),
     # Amber side marker lamps of long vehicles (ECE R48; glow with the vehicle lights: pipeline/sensors/shading.py).
     "marker_lamp": Material((0.6, 0.3, 0.02), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
     # A vehicle's rear number plate: the plate, lit by its plate lamp with the vehicle lights (shading.py).
-    "plate_rear": Material((0.80, 0.80, 0.75), reflectivity=0.90),
+    "plate_rear": Material((0.80, 0.80, 0.75), reflectivity=0.90, retroreflection=4.0),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
@@ -95,7 +107,7 @@ def material_index(name: str) -> int:
 
 def material_arrays() -> dict[str, np.ndarray]:
     """The table as arrays indexed by material index: albedo (M, 3), specular (M,), shininess (M,),
-    reflectivity (M,), emissive (M, 3), fresnel_f0 (M,), all float32."""
+    reflectivity (M,), emissive (M, 3), fresnel_f0 (M,), retroreflection (M,), all float32."""
     mats = [MATERIALS[n] for n in MATERIAL_NAMES]
     return {
         "albedo": np.array([m.albedo_rgb for m in mats], dtype=np.float32),
@@ -104,4 +116,5 @@ def material_arrays() -> dict[str, np.ndarray]:
         "reflectivity": np.array([m.reflectivity for m in mats], dtype=np.float32),
         "emissive": np.array([m.emissive_rgb for m in mats], dtype=np.float32),
         "fresnel_f0": np.array([m.fresnel_f0 for m in mats], dtype=np.float32),
+        "retroreflection": np.array([m.retroreflection for m in mats], dtype=np.float32),
     }

@@ -61,11 +61,22 @@ def test_night_is_darker_than_morning(actors_factory, wall):
     assert unlifted < lifted < morning
 
 
+def low_beam_pattern(cfg, below_cutoff_deg: float, side_deg: float) -> float:
+    """The beam pattern of a headlight config in closed form (the config's definitions, not the code's)."""
+    vertical = min(1.0, cfg.peak_band_deg / below_cutoff_deg) ** cfg.vertical_falloff
+    if cfg.horizontal_falloff_deg is None:
+        return vertical
+    floor = cfg.horizontal_floor
+    return vertical * (floor + (1 - floor) * np.exp(-((side_deg / cfg.horizontal_falloff_deg) ** 2)))
+
+
 def test_headlight_on_axis_irradiance_is_closed_form():
     # The ego's low beam (one light of two lamps) hits the road where its axis, pitched down by p, meets it:
-    # there the cone factor is 1 and E = 2 I rgb sin(p) window(s) / s^2, s the distance along the axis.
+    # there the cone factor is 1 and E = 2 I rgb pattern sin(p) window(s) / s^2, s the distance along the axis,
+    # with the pattern of a direction half_angle_up below the cut-off, straight ahead.
     night = night_without_others()
     cfg = night.headlights
+    assert cfg.vertical_falloff > 0 and cfg.horizontal_falloff_deg is not None  # the shipped night has a pattern
     light = ego_headlights(EGO, cfg)
     assert len(light) == 1
     p = np.radians(cfg.pitch_down_deg)
@@ -76,7 +87,8 @@ def test_headlight_on_axis_irradiance_is_closed_form():
     rays = down_ray(on_axis)
     out = shade(scene, rays, scene.cast_rays(rays), night, light)
     window = (1.0 - (s / cfg.range_m) ** 4) ** 2
-    irradiance = 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * np.sin(p) * window / s**2
+    pattern = low_beam_pattern(cfg, cfg.half_angle_up_deg, 0.0)
+    irradiance = 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * pattern * np.sin(p) * window / s**2
     ambient = np.asarray(night.ambient_rgb)
     expected = ALBEDO * (ambient + irradiance) * night.exposure
     np.testing.assert_allclose(out[0], expected, rtol=1e-4)
@@ -150,3 +162,72 @@ def test_lights_per_frame_are_bounded(actors_factory):
     lamps = np.column_stack([np.arange(200) * 5.0, np.full(200, 6.0), np.full(200, 7.0)])
     lights = night.frame_lights(actors, EGO, np.array([0.6, 0.0, 1.4]), lamps)
     assert len(lights) == 1 + night.headlights.max_other_vehicles + night.street_lamps.max_lamps
+
+
+def test_low_beam_pattern_is_closed_form_across_and_down_the_beam():
+    # Road points at several distances and bearings: the headlight's share of the light (the night minus the same
+    # night without headlights) over the uniform cone's (the pattern switched off) is the pattern of the direction
+    # from the lamp, from the config's definitions: peak band, vertical fall-off, horizontal Gaussian with a floor.
+    night = night_without_others()
+    cfg = night.headlights
+    uniform = cfg.model_copy(update={"vertical_falloff": 0.0, "horizontal_falloff_deg": None})
+    dark = Condition(night.config.model_copy(update={"headlights": None}))
+    scene = FrameScene(StaticScene([ground()]), Actors.empty())
+    lamp = ego_headlights(EGO, cfg).position_m[0]
+    cutoff_above_horizon_deg = cfg.half_angle_up_deg - cfg.pitch_down_deg
+    for ahead_m, side_deg in ((12.0, 0.0), (25.0, 6.0), (40.0, 12.0), (70.0, 3.0), (8.0, 20.0)):
+        bearing = np.radians(side_deg)
+        point = lamp + ahead_m * np.array([np.cos(bearing), np.sin(bearing), 0.0])
+        point[2] = 0.0
+        rays = down_ray(point)
+        hits = scene.cast_rays(rays)
+        base = shade(scene, rays, hits, dark)[0]
+        lit = shade(scene, rays, hits, night, ego_headlights(EGO, cfg))[0] - base
+        flat = shade(scene, rays, hits, night, ego_headlights(EGO, uniform))[0] - base
+        # Angles of the direction lamp -> point in the beam's frame (pitched down, so "side" is about its up axis).
+        light = ego_headlights(EGO, cfg)
+        d = point - lamp
+        axial = d @ light.axis[0]
+        left = np.cross(light.up[0], light.axis[0])
+        side = np.degrees(np.arctan(abs(d @ left) / axial))
+        below_cutoff = cfg.half_angle_up_deg - np.degrees(np.arctan((d @ light.up[0]) / axial))
+        expected = low_beam_pattern(cfg, below_cutoff, side)
+        np.testing.assert_allclose(lit / flat, expected, rtol=2e-3)
+        assert below_cutoff > cutoff_above_horizon_deg  # every point is on the road, below the horizontal
+
+
+def test_retroreflection_is_closed_form_and_returns_towards_the_lamp():
+    # A marking lit by the ego's lamp, seen from a camera beside the lamp and from one far from it: the retroreflected
+    # term is pi R f(alpha) E_perp albedo / max(albedo), f = (1.05 deg / max(alpha, 0.5 deg)) exp(-(alpha / 6 deg)^2),
+    # alpha the angle at the marking between the lamp and the camera, E_perp the irradiance across the lamp's ray.
+    night = night_without_others()
+    cfg = night.headlights
+    light = ego_headlights(EGO, cfg)
+    paint = material_arrays()
+    k = material_index("lane_paint")
+    albedo, r_l = paint["albedo"][k], paint["retroreflection"][k]
+    assert r_l > 0 and paint["retroreflection"][material_index("concrete")] == 0
+    lamp = light.position_m[0]
+    marking = np.array([lamp[0] + 30.0, 0.0, 0.0])
+    dark = Condition(night.config.model_copy(update={"headlights": None}))
+    out = {}
+    for name, eye in (("beside", lamp + [-1.7, 0.0, 0.8]), ("far", marking + [-10.0, 12.0, 6.0])):
+        scene = FrameScene(StaticScene([ground(material="lane_paint")]), Actors.empty())
+        direction = (marking - eye) / np.linalg.norm(marking - eye)
+        rays = np.array([[*eye, *direction]], np.float32)
+        hits = scene.cast_rays(rays)
+        added = shade(scene, rays, hits, night, light)[0] - shade(scene, rays, hits, dark)[0]
+        to_lamp, to_eye = lamp - marking, eye - marking
+        dist = np.linalg.norm(to_lamp)
+        cos_alpha = to_lamp @ to_eye / (dist * np.linalg.norm(to_eye))
+        alpha = np.degrees(np.arccos(cos_alpha))
+        beam = -to_lamp  # lamp -> marking
+        below_cutoff = cfg.half_angle_up_deg - np.degrees(np.arctan((beam @ light.up[0]) / (beam @ light.axis[0])))
+        e_perp = 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * low_beam_pattern(cfg, below_cutoff, 0.0) * (
+            1.0 - (dist / cfg.range_m) ** 4) ** 2 / dist**2
+        diffuse = albedo * e_perp * to_lamp[2] / dist
+        retro = np.pi * r_l * (1.05 / max(alpha, 0.5)) * np.exp(-((alpha / 6.0) ** 2)) * e_perp * albedo / albedo.max()
+        np.testing.assert_allclose(added, (diffuse + retro) * night.exposure, rtol=2e-3)
+        out[name] = added.mean()
+    # Seen from beside the lamp the marking returns many times its diffuse light; seen from far off, almost none.
+    assert out["beside"] > 5.0 * out["far"]

@@ -215,7 +215,8 @@ class SkyConfig(_ConditionPart):
 
 
 class HeadlightConfig(_ConditionPart):
-    """Vehicle low beams: elliptical spot cones with a soft edge, aimed slightly down, 1/d^2 fall-off."""
+    """Vehicle low beams: elliptical spot cones with a soft edge, aimed slightly down, 1/d^2 fall-off, and a beam
+    pattern inside the cone: brightest just below the cut-off, fading downwards and to the sides."""
 
     ego: bool = Field(True, description="the ego's two headlights light the scene")
     others: bool = Field(True, description="other vehicles' headlights light the scene")
@@ -230,6 +231,19 @@ class HeadlightConfig(_ConditionPart):
     range_m: float = Field(80.0, gt=0.0, description="cut-off distance of the light, metres")
     max_other_vehicles: int = Field(8, ge=0, le=64, description="other vehicles lit, nearest to the camera first")
     shadows: bool = Field(False, description="shadow rays for other vehicles' headlights (the ego's never need them)")
+    # The beam pattern inside the cone (pipeline/sensors/lights.py). The defaults give a uniform cone.
+    peak_band_deg: float = Field(
+        1.0, gt=0.0, le=45.0, description="band below the cut-off where the beam is at its peak intensity, degrees")
+    vertical_falloff: float = Field(
+        0.0, ge=0.0, le=4.0,
+        description="below the peak band the intensity falls as (peak_band / angle below the cut-off) ** this "
+                    "(0: uniform)")
+    horizontal_falloff_deg: float | None = Field(
+        None, gt=0.0, le=90.0,
+        description="width of the bright middle of the beam: intensity x (floor + (1 - floor) exp(-(angle / this)^2))"
+                    " across it, degrees (None: uniform across)")
+    horizontal_floor: float = Field(
+        1.0, ge=0.0, le=1.0, description="share of the peak intensity the beam keeps far to the sides")
 
 
 class StreetLampConfig(_ConditionPart):
