@@ -196,8 +196,9 @@ def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.nd
                 sun: np.ndarray, colours: tuple[np.ndarray, ...], specular: np.ndarray,
                 shininess: np.ndarray) -> None:
     """Blend one bounce of mirror reflection into ``radiance`` ((N, 3) float32, in place) on hits of materials with
-    ``fresnel_f0`` (M,) > 0: radiance = (1 - F) radiance + F env, env lit by ``sun`` (3,) and ``colours`` (sun,
-    ambient, zenith, horizon: each (3,) float32) without shadows, with the ``specular``/``shininess`` tables."""
+    ``fresnel_f0`` (M,) > 0: radiance = (1 - F) radiance + F env, env lit by ``sun`` (3,) and ``colours`` (sun and
+    ambient, (3,) float32 each, and the sky's (SKY_PARAMS,) float32 parameters: :mod:`pipeline.sensors.sky`) without
+    shadows, with the ``specular``/``shininess`` tables."""
     f0 = fresnel_f0[hits.material]
     rows = np.flatnonzero(hits.hit & (f0 > 0) & (hits.t_m < INDIRECT_RANGE_M))
     if not len(rows):
@@ -212,7 +213,7 @@ def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.nd
     lit = np.flatnonzero(n_dot_l > 0)
     t_b = bounce.t_m
     env = sky_and_sun(mirror, bounce.hit & (t_b <= MIRROR_RANGE_M), normal, as_input(bounce.material, np.int32),
-                      as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), bool), specular, shininess,
-                      sun, *colours)
+                      as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), np.float32), specular,
+                      shininess, sun, *colours)
     w = weight[:, None]
     radiance[rows] = radiance[rows] * (1.0 - w) + env * w

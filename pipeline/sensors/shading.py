@@ -21,7 +21,9 @@ import numpy as np
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
-from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.sensors.shadows import sun_shares
+from pipeline.sensors.sky import sky_rays
+from pipeline.sensors.sunlight import sky_and_sun
 from pipeline.sensors.textures import textured_albedo
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.scene import FrameScene, Hits, rowdot
@@ -46,25 +48,18 @@ NIGHT_GLOWS = {
 WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
 WET_SHININESS = 80.0
 WATER_F0 = 0.02
-SUN_MAP_RANGE_M = 100.0  # hits nearer than this test their sun shadow rays' cells (farther: a few pixel rows)
 WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
 def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
-    """(N, 3) float32 sky radiance for (N, 3) unit view directions: horizon-to-zenith blend."""
-    return np.stack(_sky_channels(directions[:, 2], condition), axis=1)
-
-
-def _sky_channels(up_z: np.ndarray, condition: Condition) -> list[np.ndarray]:
-    """:func:`sky` as three (N,) float32 channels, from the (N,) z components of the view directions."""
-    up = np.sqrt(np.clip(np.asarray(up_z, np.float32), 0.0, 1.0))
-    zen, hor = np.asarray(condition.sky_zenith_rgb, np.float32), np.asarray(condition.sky_horizon_rgb, np.float32)
-    return [hor[k] + (zen[k] - hor[k]) * up for k in range(3)]
+    """(N, 3) float32 sky radiance of (N, 3) unit view directions: the condition's (:mod:`pipeline.sensors.sky`)."""
+    return sky_rays(directions, condition.sky_params)
 
 
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
     indirect: bool = False, pixel_angle_rad: float = 0.0, image_shape: tuple[int, int] | None = None,
+    sunlit: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
@@ -87,15 +82,13 @@ def shade(
     sun = condition.sun_direction
     mat = hits.material
     rays = as_input(rays, np.float32)
-    normal, t_m = as_input(hits.normal, np.float32), as_input(hits.t_m, np.float32)
-    n_dot_l, lit, shadow = sun_rays(rays, normal, t_m, sun)
-    unshadowed = np.ones(len(lit), bool)
-    if condition.shadows and condition.sun_elevation_deg > 0 and len(lit):
-        unshadowed = ~_sun_blocked(scene, shadow, t_m[lit], sun)
-    rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb, condition.sky_zenith_rgb,
-                                                condition.sky_horizon_rgb)]
+    normal = as_input(hits.normal, np.float32)
+    # The realistic camera's sun is a disc (soft shadows: pipeline.sensors.shadows); the fast preset's a point.
+    disc = condition.sun_disc if indirect else sun[None]
+    n_dot_l, lit, sunlit = sun_shares(scene, rays, hits, condition, disc, image_shape, pixel_angle_rad, sunlit)
+    rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb)] + [condition.sky_params]
     out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
-                      as_input(hits.color, np.float32), n_dot_l, lit, unshadowed, mats["specular"],
+                      as_input(hits.color, np.float32), n_dot_l, lit, sunlit, mats["specular"],
                       mats["shininess"], sun, *rgb)
     if indirect:
         # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
@@ -121,17 +114,6 @@ def shade(
     if condition.exposure != 1.0:
         out *= condition.exposure
     return out
-
-
-def _sun_blocked(scene: FrameScene, shadow: np.ndarray, t_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
-    """(M,) bool: the (M, 6) float32 ``shadow`` rays towards the sun (from :func:`sunlight.sun_rays`) from hits
-    at distances ``t_m`` ((M,) float32) are blocked."""
-    origin = [shadow[:, k] for k in range(3)]  # views: the tests below read them in place
-    # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
-    static_rays = np.ones(len(t_m), bool)
-    near = np.flatnonzero(t_m < SUN_MAP_RANGE_M)
-    static_rays[near] = scene.static.sun_candidates(*origin, sun, rows=near)
-    return scene.occluded_rays(shadow, actor_rays=scene.sun_actor_candidates(*origin, sun), static_rays=static_rays)
 
 
 def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:
