@@ -31,9 +31,9 @@ from pipeline.core.config.sensors import (
 from pipeline.core.geometry import Transform
 from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
-from pipeline.sensors.post import sensor_noise
+from pipeline.sensors.post import luminance, sensor_noise
 from pipeline.sensors.shadows import sun_disc
-from pipeline.sensors.sky import REC709_LUMA, gradient_params, preetham_params
+from pipeline.sensors.sky import gradient_params, preetham_params
 from pipeline.world.actors import Actors
 
 KOSCHMIEDER = 3.912  # -ln(0.02): contrast threshold of 2 %
@@ -104,7 +104,7 @@ class Condition:
         model; the Preetham sky scaled to the ambient's luminance)."""
         sky = self.config.sky
         if sky.model == "preetham":
-            return preetham_params(self.sun_direction, sky.turbidity, float(REC709_LUMA @ np.asarray(sky.ambient_rgb)))
+            return preetham_params(self.sun_direction, sky.turbidity, float(luminance(np.asarray(sky.ambient_rgb))))
         return gradient_params(sky.zenith_rgb, sky.horizon_rgb)
 
     @property

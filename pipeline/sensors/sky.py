@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.post import luminance
 
 SKY_MODELS = ("gradient", "preetham")
 # The parameter vector: [model, zenith rgb, horizon rgb, sun direction, Perez A..E for Y, x, y, zenith value / F(0,
@@ -43,7 +44,6 @@ _MODEL, _ZENITH, _HORIZON, _SUN, _PEREZ, _ZENITH_YXY, _SCALE = 0, 1, 4, 7, 10, 2
 SKY_PARAMS = 29
 # CIE XYZ -> linear sRGB (IEC 61966-2-1; Rec. 709 primaries, D65 white).
 XYZ_TO_RGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
-REC709_LUMA = np.array([0.2126, 0.7152, 0.0722])
 MIN_COS_ZENITH = 1e-3  # the Perez term e^(B / cos theta) is taken at no lower cos theta (it is ~0 there already)
 # Perez coefficients (rows A..E) as (slope, intercept) in the turbidity T: Preetham et al. 1999, appendix A.2.
 _PEREZ_Y = ((0.1787, -1.4630), (-0.3554, 0.4275), (-0.0227, 5.3251), (0.1206, -2.5771), (-0.0670, 0.3703))
@@ -116,7 +116,7 @@ def preetham_params(sun: np.ndarray, turbidity: float, mean_luminance: float) ->
     params[_PEREZ:_PEREZ + 15] = coefficients.reshape(-1)
     params[_ZENITH_YXY:_ZENITH_YXY + 3] = zenith / [perez(c, 0.0, theta_s) for c in coefficients]
     params[_SCALE] = 1.0
-    unscaled = float(REC709_LUMA @ sky_rays(_COSINE_DIRECTIONS, params).astype(np.float64).mean(axis=0))
+    unscaled = float(luminance(sky_rays(_COSINE_DIRECTIONS, params).astype(np.float64)).mean())
     params[_SCALE] = mean_luminance / unscaled
     return params
 

@@ -11,8 +11,8 @@ import pytest
 
 from pipeline.core.config import ConfigError
 from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.post import luminance
 from pipeline.sensors.sky import (
-    REC709_LUMA,
     gradient_params,
     perez,
     perez_coefficients,
@@ -94,18 +94,18 @@ def test_daylight_sky_is_brightest_at_the_sun_and_bluest_overhead_away_from_it(s
     params = preetham_params(sun, 2.5, 0.4)
     el, az = np.meshgrid(np.linspace(0.0, 90.0, 181), np.linspace(-180.0, 180.0, 721))
     d = _direction(el.ravel(), az.ravel())
-    lum = sky_rays(d, params) @ REC709_LUMA
+    lum = luminance(sky_rays(d, params))
     brightest = d[np.argmax(lum)]
     assert np.degrees(np.arccos(np.clip(brightest @ sun, -1, 1))) < 5.0
     # Away from the sun: brighter and whiter (a smaller blue share) at the horizon than high up; bluest overhead.
     away = _direction(np.array([0.0, 40.0, 90.0]), 220.0)
     horizon, high, zenith = sky_rays(away, params)
-    assert horizon @ REC709_LUMA > high @ REC709_LUMA
+    assert luminance(horizon) > luminance(high)
     blue = [v[2] / v.sum() for v in (horizon, high, zenith)]
     assert blue[0] < blue[1] and blue[0] < blue[2]
     # Around the sun brighter than at the same elevation opposite it.
     near, opposite = sky_rays(_direction(np.full(2, sun_elevation_deg), np.array([50.0, 220.0])), params)
-    assert near @ REC709_LUMA > 2.0 * (opposite @ REC709_LUMA)
+    assert luminance(near) > 2.0 * luminance(opposite)
 
 
 def test_daylight_sky_gives_the_ambients_luminance_to_a_surface_facing_up():
@@ -116,7 +116,7 @@ def test_daylight_sky_gives_the_ambients_luminance_to_a_surface_facing_up():
     phi = (np.arange(360) + 0.5) * 2 * np.pi / 360
     t, p = np.meshgrid(theta, phi, indexing="ij")
     d = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1).reshape(-1, 3)
-    lum = (sky_rays(d, params).astype(np.float64) @ REC709_LUMA).reshape(t.shape)
+    lum = luminance(sky_rays(d, params).astype(np.float64)).reshape(t.shape)
     mean = (lum * np.cos(t) * np.sin(t)).sum() * (np.pi / 2 / 180) * (2 * np.pi / 360) / np.pi
     assert mean == pytest.approx(0.38, rel=5e-3)
 
