@@ -6,9 +6,8 @@ The condition (:class:`pipeline.sensors.conditions.Condition`: morning / night /
 exposure, glow and wetness as properties, and the frame's spot lights (:mod:`pipeline.sensors.lights`: headlights,
 street lamps); this module only shades.
 
-Wet surfaces (``Condition.wetness`` w in [0, 1], road-like materials only): albedo x (1 - 0.55 w), specular
-raised to at least 0.6 w with a sharper highlight, plus a Fresnel (Schlick, water F0 = 0.02) mirror of the
-sky scaled by w: the sheen of a wet road. Reflections of the scene itself are not traced.
+In the rain (``Condition.wetness``) roads and vehicles are wet (:mod:`pipeline.sensors.wet`): darker road with a
+sheen of the sky, a water film on vehicles' paint and glass that strengthens their mirror reflections.
 """
 
 from __future__ import annotations
@@ -25,8 +24,9 @@ from pipeline.sensors.shadows import sun_shares
 from pipeline.sensors.sky import sky_rays
 from pipeline.sensors.sunlight import sky_and_sun
 from pipeline.sensors.textures import textured_albedo
+from pipeline.sensors.wet import wet_sheen, wet_surfaces
 from pipeline.world.materials import material_arrays, material_index
-from pipeline.world.scene import FrameScene, Hits, rowdot
+from pipeline.world.scene import FrameScene, Hits
 
 if TYPE_CHECKING:  # the condition calls nothing here: shading only reads its properties
     from pipeline.sensors.conditions import Condition
@@ -45,10 +45,6 @@ NIGHT_GLOWS = {
     "lamp": (STREET_LAMP_RGB, "lamp_glow", False),
     "marker_lamp": (MARKER_LAMP_RGB, "tail_glow", True),
 }
-WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
-WET_SHININESS = 80.0
-WATER_F0 = 0.02
-WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
 def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
@@ -78,7 +74,7 @@ def shade(
                                                                hits.material, hits.normal, hits.color, pixel_angle_rad))
     wet = None
     if condition.wetness > 0:
-        wet, hits, mats = _wet(hits, mats, condition.wetness)
+        wet, hits, mats = wet_surfaces(hits, mats, condition.wetness)
     sun = condition.sun_direction
     mat = hits.material
     rays = as_input(rays, np.float32)
@@ -95,7 +91,8 @@ def shade(
         visibility = sky_visibility(scene, rays, hits, image_shape)
         dim = np.flatnonzero(visibility < 1.0)
         out[dim] -= hits.color[dim] * rgb[1] * (1.0 - visibility[dim])[:, None]
-        reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"])
+        reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"],
+                    None if wet is None else wet.film)
     glowing = np.flatnonzero(mats["glows"][mat] & hits.hit)
     out[glowing] += np.take(mats["emissive"], mat[glowing], axis=0)
     on_actor = hits.instance_id[glowing] > 0
@@ -109,34 +106,12 @@ def shade(
         out[plates] += hits.color[plates] * np.float32(PLATE_LAMP_IRRADIANCE * condition.tail_glow)
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
-    if wet is not None and len(wet):
-        out[wet] += _wet_sheen(np.take(rays, wet, axis=0), np.take(hits.normal, wet, axis=0), condition)
+    if wet is not None and len(wet.road):
+        out[wet.road] += wet_sheen(np.take(rays, wet.road, axis=0), np.take(hits.normal, wet.road, axis=0),
+                                   condition.sky_params, condition.wetness)
     if condition.exposure != 1.0:
         out *= condition.exposure
     return out
-
-
-def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:
-    """Wet hits (indices), the hits with darkened albedo there, and the material table made shinier."""
-    wet_ids = np.array([material_index(n) for n in WET_MATERIALS])
-    wet = np.flatnonzero(hits.hit & np.isin(hits.material, wet_ids))
-    color = hits.color.copy()
-    color[wet] *= np.float32(1.0 - 0.55 * wetness)
-    mats = dict(mats)
-    mats["specular"] = mats["specular"].copy()
-    mats["shininess"] = mats["shininess"].copy()
-    mats["specular"][wet_ids] = np.maximum(mats["specular"][wet_ids], 0.6 * wetness)
-    mats["shininess"][wet_ids] = WET_SHININESS
-    return wet, dataclasses.replace(hits, color=color), mats
-
-
-def _wet_sheen(rays: np.ndarray, normal: np.ndarray, condition: Condition) -> np.ndarray:
-    """(M, 3) float32 sky mirrored by a water film: wetness * Fresnel(Schlick) * sky(reflected direction)."""
-    d = rays[:, 3:]
-    cos_v = np.clip(-rowdot(d, normal), 0.0, 1.0)
-    fresnel = WATER_F0 + (1.0 - WATER_F0) * (1.0 - cos_v) ** 5
-    reflected = d + 2.0 * cos_v[:, None] * normal
-    return (sky(reflected, condition) * (WET_SHEEN * condition.wetness * fresnel)[:, None]).astype(np.float32)
 
 
 def _materials() -> dict[str, np.ndarray]:
