@@ -196,11 +196,15 @@ def _lent_sun_shares(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: n
 
 
 def _sky_level(condition: Condition) -> float:
-    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure."""
+    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure: over 8
+    azimuths, the directions' z = 0.1 (a daylight sky is brighter towards the sun; a gradient is the same all round)."""
     if condition.fog_visibility_m is not None:
         level = float(np.mean(condition.fog_rgb))
     else:
-        level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), condition).mean())
+        azimuth = np.arange(8) * (np.pi / 4)
+        flat = np.sqrt(1.0 - 0.1 ** 2)
+        around = np.column_stack([flat * np.cos(azimuth), flat * np.sin(azimuth), np.full(8, 0.1)])
+        level = float(sky(around.astype(np.float32), condition).mean(axis=0).mean())
     return level * condition.exposure
 
 
