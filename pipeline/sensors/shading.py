@@ -59,13 +59,16 @@ def shade(
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
-    radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
+    radiance = albedo * (ambient + sun * max(n.l, 0) * sunlit) + sun * specular * sunlit + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
-    sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
-    (:mod:`pipeline.sensors.indirect`; ``image_shape`` (H, W): the rays are a camera's pixel centres, row-major,
-    and the sky occlusion is smoothed over each surface). A positive ``pixel_angle_rad`` (the camera's angle per
-    pixel) textures the static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are
-    compiled passes over the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
+    sky (:mod:`pipeline.sensors.sky`). ``sunlit`` is the share of the sun's disc a hit sees
+    (:mod:`pipeline.sensors.shadows`; with ``indirect`` the sun is a disc, else a point); the ``sunlit`` argument
+    ((N,) float32, optional) gives it per ray (NaN: traced here). With ``indirect``, the ambient term is scaled by
+    the sky's visibility and mirror reflections are blended in (:mod:`pipeline.sensors.indirect`; ``image_shape``
+    (H, W): the rays are a camera's pixel centres, row-major, and the sky occlusion and the penumbrae are smoothed
+    over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the static world's
+    albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over the rays
+    (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
     wet sheen add theirs with numpy.
     """
     mats = _materials()

@@ -4,7 +4,7 @@
 and the shadow rays that start from them (each towards a point of the sun's disc), casts those, then
 :func:`sky_and_sun` for ``albedo * (ambient + sun * n.l * sunlit) + sun * specular * sunlit`` on hits and the sky
 (:mod:`pipeline.sensors.sky`) on misses. In numpy these were ~25 array passes over the image's rays; compiled
-(:mod:`pipeline.core.jit`), two. All arithmetic is float32, as it was in numpy.
+(:mod:`pipeline.core.jit`), two (this one and ``sun_rays``). All arithmetic is float32, as it was in numpy.
 """
 
 from __future__ import annotations
