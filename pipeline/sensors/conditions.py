@@ -12,6 +12,7 @@ see the fog colour (d = infinity).
 
 from __future__ import annotations
 
+from functools import cached_property
 from pathlib import Path
 
 import cv2
@@ -30,7 +31,9 @@ from pipeline.core.config.sensors import (
 from pipeline.core.geometry import Transform
 from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
-from pipeline.sensors.post import sensor_noise
+from pipeline.sensors.post import luminance, sensor_noise
+from pipeline.sensors.shadows import sun_disc
+from pipeline.sensors.sky import gradient_params, preetham_params
 from pipeline.world.actors import Actors
 
 KOSCHMIEDER = 3.912  # -ln(0.02): contrast threshold of 2 %
@@ -81,16 +84,28 @@ class Condition:
         return self.config.sun.shadows
 
     @property
+    def sun_angular_radius_rad(self) -> float:
+        """The sun disc's angular radius, radians (0: a point)."""
+        return float(np.radians(self.config.sun.angular_radius_deg))
+
+    @cached_property
+    def sun_disc(self) -> np.ndarray:
+        """(S, 3) float32 unit directions over the sun's disc that shadow rays sample
+        (:func:`pipeline.sensors.shadows.sun_disc`; the one direction :attr:`sun_direction` for a point sun)."""
+        return sun_disc(self.sun_direction, self.sun_angular_radius_rad)
+
+    @property
     def ambient_rgb(self) -> tuple[float, float, float]:
         return self.config.sky.ambient_rgb
 
-    @property
-    def sky_zenith_rgb(self) -> tuple[float, float, float]:
-        return self.config.sky.zenith_rgb
-
-    @property
-    def sky_horizon_rgb(self) -> tuple[float, float, float]:
-        return self.config.sky.horizon_rgb
+    @cached_property
+    def sky_params(self) -> np.ndarray:
+        """(SKY_PARAMS,) float32: the sky's parameters for :func:`pipeline.sensors.sky.sky_radiance` (the configured
+        model; the Preetham sky scaled to the ambient's luminance)."""
+        sky = self.config.sky
+        if sky.model == "preetham":
+            return preetham_params(self.sun_direction, sky.turbidity, float(luminance(np.asarray(sky.ambient_rgb))))
+        return gradient_params(sky.zenith_rgb, sky.horizon_rgb)
 
     @property
     def exposure(self) -> float:

@@ -29,6 +29,7 @@ import numpy as np
 
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.sunlight import sky_and_sun
+from pipeline.sensors.wet import WATER_F0
 from pipeline.world.scene import FrameScene, Hits
 
 AO_SAMPLES = 8
@@ -167,11 +168,12 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
 
 
 @kernel("Tuple((float32[:, ::1], float32[::1]))(float32[:, ::1], float32[::1], float32[:, ::1], int64[::1], "
-        "float32[::1])")
-def mirror_rays(rays, t_m, normal, rows, f0):
+        "float32[::1], float32[::1], float32)")
+def mirror_rays(rays, t_m, normal, rows, f0, film, film_f0):
     """The mirror rays of the hits ``rows`` ((K, 6) float32, from the hit lifted 2 mm + 0.1 mm per metre along the
     normal, which faces the viewer) and their Fresnel weights F = F0 + (1 - F0) (1 - cos)^5 (Schlick), ``f0`` (K,)
-    float32 per row, cos the angle between the view ray and the normal."""
+    float32 per row, cos the angle between the view ray and the normal; where a row has a water ``film`` w > 0
+    ((K,) float32), F + w F_film (1 - F) with F_film Schlick's of ``film_f0`` (:mod:`pipeline.sensors.wet`)."""
     out = np.empty((rows.size, 6), np.float32)
     weight = np.empty(rows.size, np.float32)
     for j in range(rows.size):
@@ -189,22 +191,28 @@ def mirror_rays(rays, t_m, normal, rows, f0):
         g = np.float32(1) - cos
         g2 = g * g
         weight[j] = f0[j] + (np.float32(1) - f0[j]) * g2 * g2 * g
+        if film[j] > 0:
+            water = film_f0 + (np.float32(1) - film_f0) * g2 * g2 * g
+            weight[j] += film[j] * water * (np.float32(1) - weight[j])
     return out, weight
 
 
 def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.ndarray, fresnel_f0: np.ndarray,
                 sun: np.ndarray, colours: tuple[np.ndarray, ...], specular: np.ndarray,
-                shininess: np.ndarray) -> None:
+                shininess: np.ndarray, film: np.ndarray | None = None) -> None:
     """Blend one bounce of mirror reflection into ``radiance`` ((N, 3) float32, in place) on hits of materials with
-    ``fresnel_f0`` (M,) > 0: radiance = (1 - F) radiance + F env, env lit by ``sun`` (3,) and ``colours`` (sun,
-    ambient, zenith, horizon: each (3,) float32) without shadows, with the ``specular``/``shininess`` tables."""
+    ``fresnel_f0`` (M,) > 0: radiance = (1 - F) radiance + F env, env lit by ``sun`` (3,) and ``colours`` (sun and
+    ambient, (3,) float32 each, and the sky's (SKY_PARAMS,) float32 parameters: :mod:`pipeline.sensors.sky`) without
+    shadows, with the ``specular``/``shininess`` tables. ``film`` (N,) float32, optional: a water film's weight per
+    hit (:mod:`pipeline.sensors.wet`), which strengthens F (:func:`mirror_rays`)."""
     f0 = fresnel_f0[hits.material]
     rows = np.flatnonzero(hits.hit & (f0 > 0) & (hits.t_m < INDIRECT_RANGE_M))
     if not len(rows):
         return
     t = np.where(hits.hit, hits.t_m, 0.0).astype(np.float32)
+    water = np.zeros(len(rows), np.float32) if film is None else as_input(film[rows], np.float32)
     mirror, weight = mirror_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows,
-                                 as_input(f0[rows], np.float32))
+                                 as_input(f0[rows], np.float32), water, np.float32(WATER_F0))
     bounce = scene.cast_rays(mirror)
     normal = as_input(bounce.normal, np.float32)
     # n.l as sun_rays computes it (float32, in this order), without the shadow rays: reflections are unshadowed.
@@ -212,7 +220,7 @@ def reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, radiance: np.nd
     lit = np.flatnonzero(n_dot_l > 0)
     t_b = bounce.t_m
     env = sky_and_sun(mirror, bounce.hit & (t_b <= MIRROR_RANGE_M), normal, as_input(bounce.material, np.int32),
-                      as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), bool), specular, shininess,
-                      sun, *colours)
+                      as_input(bounce.color, np.float32), n_dot_l, lit, np.ones(len(lit), np.float32), specular,
+                      shininess, sun, *colours)
     w = weight[:, None]
     radiance[rows] = radiance[rows] * (1.0 - w) + env * w

@@ -26,6 +26,13 @@ from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
 from pipeline.sensors.post import apply_post, auto_exposure_gain, motion_flow
 from pipeline.sensors.shading import shade, sky, to_srgb8
+from pipeline.sensors.shadows import (
+    SHADOW_FILTER_DEPTH,
+    SHADOW_FILTER_NORMAL_COS,
+    borrowed_shares,
+    pixel_shares,
+    sun_shares,
+)
 from pipeline.world.scene import FrameScene, Hits, make_rays
 
 
@@ -96,20 +103,23 @@ def render_camera(
         radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
                                  hits.t_m, hits.hit)
     else:
+        # The pixel centres' share of the sun's disc, smoothed over penumbrae, lent to the samples on their surfaces.
+        sunlit = _centre_sun_shares(scene, rays, hits, condition, (h, w), texture_rad) if indirect else None
         # Every pixel gets its centre sample; pixels on an edge (edge_pixels) get the stratified samples instead.
         if camera.config.samples_everywhere:
             radiance, where = np.zeros((h * w, 3), np.float32), np.arange(h * w)
         else:
-            radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
-                                     hits.t_m, hits.hit)
+            radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w),
+                                           sunlit), hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
         for sample in samples:  # loop over samples; all chosen pixels vectorised
             sample_rays = make_rays(cam_to_world.translation, sample[where], cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, mask)
+            lent = None if sunlit is None else _lent_sun_shares(sunlit, hits, sample_hits, where, (h, w))
             edge += condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect,
-                                        texture_rad), sample_hits.t_m,
+                                        texture_rad, sunlit=lent), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
     flow = None
@@ -165,12 +175,36 @@ def edge_pixels(hits: Hits, depth_m: np.ndarray) -> np.ndarray:
     return cv2.dilate(edge.view(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
 
 
+def _centre_sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition,
+                       image_shape: tuple[int, int], pixel_angle_rad: float) -> np.ndarray:
+    """(H * W,) float32: the share of the sun's disc each pixel centre's hit sees, smoothed over penumbrae
+    (:func:`pipeline.sensors.shadows.sun_shares`); NaN where the hit does not face the sun."""
+    _, lit, share = sun_shares(scene, rays, hits, condition, condition.sun_disc, image_shape, pixel_angle_rad)
+    return pixel_shares(len(rays), lit, share)
+
+
+def _lent_sun_shares(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray,
+                     image_shape: tuple[int, int]) -> np.ndarray:
+    """(K,) float32: for the samples of the pixels ``where``, the ``centre`` share of the pixel or a neighbour on
+    the sample's surface (:func:`pipeline.sensors.shadows.borrowed_shares`), NaN where there is none."""
+    h, w = image_shape
+    return borrowed_shares(centre, as_input(hits.instance_id, np.int32), as_input(hits.normal, np.float32),
+                           as_input(hits.t_m, np.float32), as_input(where, np.int64),
+                           as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
+                           np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
+                           np.float32(SHADOW_FILTER_NORMAL_COS), np.float32(SHADOW_FILTER_DEPTH))
+
+
 def _sky_level(condition: Condition) -> float:
-    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure."""
+    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure: over 8
+    azimuths, the directions' z = 0.1 (a daylight sky is brighter towards the sun; a gradient is the same all round)."""
     if condition.fog_visibility_m is not None:
         level = float(np.mean(condition.fog_rgb))
     else:
-        level = float(sky(np.array([[1.0, 0.0, 0.1]], np.float32), condition).mean())
+        azimuth = np.arange(8) * (np.pi / 4)
+        flat = np.sqrt(1.0 - 0.1 ** 2)
+        around = np.column_stack([flat * np.cos(azimuth), flat * np.sin(azimuth), np.full(8, 0.1)])
+        level = float(sky(around.astype(np.float32), condition).mean(axis=0).mean())
     return level * condition.exposure
 
 

@@ -6,9 +6,8 @@ The condition (:class:`pipeline.sensors.conditions.Condition`: morning / night /
 exposure, glow and wetness as properties, and the frame's spot lights (:mod:`pipeline.sensors.lights`: headlights,
 street lamps); this module only shades.
 
-Wet surfaces (``Condition.wetness`` w in [0, 1], road-like materials only): albedo x (1 - 0.55 w), specular
-raised to at least 0.6 w with a sharper highlight, plus a Fresnel (Schlick, water F0 = 0.02) mirror of the
-sky scaled by w: the sheen of a wet road. Reflections of the scene itself are not traced.
+In the rain (``Condition.wetness``) roads and vehicles are wet (:mod:`pipeline.sensors.wet`): darker road with a
+sheen of the sky, a water film on vehicles' paint and glass that strengthens their mirror reflections.
 """
 
 from __future__ import annotations
@@ -21,10 +20,13 @@ import numpy as np
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
-from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.sensors.shadows import sun_shares
+from pipeline.sensors.sky import sky_rays
+from pipeline.sensors.sunlight import sky_and_sun
 from pipeline.sensors.textures import textured_albedo
+from pipeline.sensors.wet import wet_sheen, wet_surfaces
 from pipeline.world.materials import material_arrays, material_index
-from pipeline.world.scene import FrameScene, Hits, rowdot
+from pipeline.world.scene import FrameScene, Hits
 
 if TYPE_CHECKING:  # the condition calls nothing here: shading only reads its properties
     from pipeline.sensors.conditions import Condition
@@ -43,38 +45,30 @@ NIGHT_GLOWS = {
     "lamp": (STREET_LAMP_RGB, "lamp_glow", False),
     "marker_lamp": (MARKER_LAMP_RGB, "tail_glow", True),
 }
-WET_MATERIALS = ("asphalt", "lane_paint", "concrete", "kerb")
-WET_SHININESS = 80.0
-WATER_F0 = 0.02
-SUN_MAP_RANGE_M = 100.0  # hits nearer than this test their sun shadow rays' cells (farther: a few pixel rows)
-WET_SHEEN = 0.5  # share of the mirrored sky kept: the scene itself (buildings, cars) is not traced
 
 
 def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
-    """(N, 3) float32 sky radiance for (N, 3) unit view directions: horizon-to-zenith blend."""
-    return np.stack(_sky_channels(directions[:, 2], condition), axis=1)
-
-
-def _sky_channels(up_z: np.ndarray, condition: Condition) -> list[np.ndarray]:
-    """:func:`sky` as three (N,) float32 channels, from the (N,) z components of the view directions."""
-    up = np.sqrt(np.clip(np.asarray(up_z, np.float32), 0.0, 1.0))
-    zen, hor = np.asarray(condition.sky_zenith_rgb, np.float32), np.asarray(condition.sky_horizon_rgb, np.float32)
-    return [hor[k] + (zen[k] - hor[k]) * up for k in range(3)]
+    """(N, 3) float32 sky radiance of (N, 3) unit view directions: the condition's (:mod:`pipeline.sensors.sky`)."""
+    return sky_rays(directions, condition.sky_params)
 
 
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
     indirect: bool = False, pixel_angle_rad: float = 0.0, image_shape: tuple[int, int] | None = None,
+    sunlit: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
-    radiance = albedo * (ambient + sun * max(n.l, 0) * unshadowed) + sun * specular + emission + the
+    radiance = albedo * (ambient + sun * max(n.l, 0) * sunlit) + sun * specular * sunlit + emission + the
     ``lights``' diffuse and specular terms (:func:`pipeline.sensors.lights.light_radiance`); misses see the
-    sky. With ``indirect``, the ambient term is scaled by the sky's visibility and mirror reflections are blended in
-    (:mod:`pipeline.sensors.indirect`; ``image_shape`` (H, W): the rays are a camera's pixel centres, row-major,
-    and the sky occlusion is smoothed over each surface). A positive ``pixel_angle_rad`` (the camera's angle per
-    pixel) textures the static world's albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are
-    compiled passes over the rays (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
+    sky (:mod:`pipeline.sensors.sky`). ``sunlit`` is the share of the sun's disc a hit sees
+    (:mod:`pipeline.sensors.shadows`; with ``indirect`` the sun is a disc, else a point); the ``sunlit`` argument
+    ((N,) float32, optional) gives it per ray (NaN: traced here). With ``indirect``, the ambient term is scaled by
+    the sky's visibility and mirror reflections are blended in (:mod:`pipeline.sensors.indirect`; ``image_shape``
+    (H, W): the rays are a camera's pixel centres, row-major, and the sky occlusion and the penumbrae are smoothed
+    over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the static world's
+    albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over the rays
+    (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
     wet sheen add theirs with numpy.
     """
     mats = _materials()
@@ -83,26 +77,25 @@ def shade(
                                                                hits.material, hits.normal, hits.color, pixel_angle_rad))
     wet = None
     if condition.wetness > 0:
-        wet, hits, mats = _wet(hits, mats, condition.wetness)
+        wet, hits, mats = wet_surfaces(hits, mats, condition.wetness)
     sun = condition.sun_direction
     mat = hits.material
     rays = as_input(rays, np.float32)
-    normal, t_m = as_input(hits.normal, np.float32), as_input(hits.t_m, np.float32)
-    n_dot_l, lit, shadow = sun_rays(rays, normal, t_m, sun)
-    unshadowed = np.ones(len(lit), bool)
-    if condition.shadows and condition.sun_elevation_deg > 0 and len(lit):
-        unshadowed = ~_sun_blocked(scene, shadow, t_m[lit], sun)
-    rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb, condition.sky_zenith_rgb,
-                                                condition.sky_horizon_rgb)]
+    normal = as_input(hits.normal, np.float32)
+    # The realistic camera's sun is a disc (soft shadows: pipeline.sensors.shadows); the fast preset's a point.
+    disc = condition.sun_disc if indirect else sun[None]
+    n_dot_l, lit, sunlit = sun_shares(scene, rays, hits, condition, disc, image_shape, pixel_angle_rad, sunlit)
+    rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb)] + [condition.sky_params]
     out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
-                      as_input(hits.color, np.float32), n_dot_l, lit, unshadowed, mats["specular"],
+                      as_input(hits.color, np.float32), n_dot_l, lit, sunlit, mats["specular"],
                       mats["shininess"], sun, *rgb)
     if indirect:
         # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
         visibility = sky_visibility(scene, rays, hits, image_shape)
         dim = np.flatnonzero(visibility < 1.0)
         out[dim] -= hits.color[dim] * rgb[1] * (1.0 - visibility[dim])[:, None]
-        reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"])
+        reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"],
+                    None if wet is None else wet.film)
     glowing = np.flatnonzero(mats["glows"][mat] & hits.hit)
     out[glowing] += np.take(mats["emissive"], mat[glowing], axis=0)
     on_actor = hits.instance_id[glowing] > 0
@@ -116,45 +109,12 @@ def shade(
         out[plates] += hits.color[plates] * np.float32(PLATE_LAMP_IRRADIANCE * condition.tail_glow)
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
-    if wet is not None and len(wet):
-        out[wet] += _wet_sheen(np.take(rays, wet, axis=0), np.take(hits.normal, wet, axis=0), condition)
+    if wet is not None and len(wet.road):
+        out[wet.road] += wet_sheen(np.take(rays, wet.road, axis=0), np.take(hits.normal, wet.road, axis=0),
+                                   condition.sky_params, condition.wetness)
     if condition.exposure != 1.0:
         out *= condition.exposure
     return out
-
-
-def _sun_blocked(scene: FrameScene, shadow: np.ndarray, t_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
-    """(M,) bool: the (M, 6) float32 ``shadow`` rays towards the sun (from :func:`sunlight.sun_rays`) from hits
-    at distances ``t_m`` ((M,) float32) are blocked."""
-    origin = [shadow[:, k] for k in range(3)]  # views: the tests below read them in place
-    # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
-    static_rays = np.ones(len(t_m), bool)
-    near = np.flatnonzero(t_m < SUN_MAP_RANGE_M)
-    static_rays[near] = scene.static.sun_candidates(*origin, sun, rows=near)
-    return scene.occluded_rays(shadow, actor_rays=scene.sun_actor_candidates(*origin, sun), static_rays=static_rays)
-
-
-def _wet(hits: Hits, mats: dict[str, np.ndarray], wetness: float) -> tuple[np.ndarray, Hits, dict[str, np.ndarray]]:
-    """Wet hits (indices), the hits with darkened albedo there, and the material table made shinier."""
-    wet_ids = np.array([material_index(n) for n in WET_MATERIALS])
-    wet = np.flatnonzero(hits.hit & np.isin(hits.material, wet_ids))
-    color = hits.color.copy()
-    color[wet] *= np.float32(1.0 - 0.55 * wetness)
-    mats = dict(mats)
-    mats["specular"] = mats["specular"].copy()
-    mats["shininess"] = mats["shininess"].copy()
-    mats["specular"][wet_ids] = np.maximum(mats["specular"][wet_ids], 0.6 * wetness)
-    mats["shininess"][wet_ids] = WET_SHININESS
-    return wet, dataclasses.replace(hits, color=color), mats
-
-
-def _wet_sheen(rays: np.ndarray, normal: np.ndarray, condition: Condition) -> np.ndarray:
-    """(M, 3) float32 sky mirrored by a water film: wetness * Fresnel(Schlick) * sky(reflected direction)."""
-    d = rays[:, 3:]
-    cos_v = np.clip(-rowdot(d, normal), 0.0, 1.0)
-    fresnel = WATER_F0 + (1.0 - WATER_F0) * (1.0 - cos_v) ** 5
-    reflected = d + 2.0 * cos_v[:, None] * normal
-    return (sky(reflected, condition) * (WET_SHEEN * condition.wetness * fresnel)[:, None]).astype(np.float32)
 
 
 def _materials() -> dict[str, np.ndarray]:

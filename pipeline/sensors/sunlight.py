@@ -1,9 +1,10 @@
-"""The sun's and the sky's share of a camera frame's radiance: two compiled passes over the rays.
+"""The sun's and the sky's share of a camera frame's radiance: a compiled pass over the rays.
 
-:func:`pipeline.sensors.shading.shade` calls :func:`sun_rays` for the hits that face the sun and the shadow rays
-that start from them, casts those, then :func:`sky_and_sun` for ``albedo * (ambient + sun * n.l) + sun *
-specular`` on hits and the sky on misses. In numpy these were ~25 array passes over the image's rays; compiled
-(:mod:`pipeline.core.jit`), two. All arithmetic is float32, as it was in numpy.
+:func:`pipeline.sensors.shading.shade` calls :func:`pipeline.sensors.shadows.sun_rays` for the hits that face the sun
+and the shadow rays that start from them (each towards a point of the sun's disc), casts those, then
+:func:`sky_and_sun` for ``albedo * (ambient + sun * n.l * sunlit) + sun * specular * sunlit`` on hits and the sky
+(:mod:`pipeline.sensors.sky`) on misses. In numpy these were ~25 array passes over the image's rays; compiled
+(:mod:`pipeline.core.jit`), two (this one and ``sun_rays``). All arithmetic is float32, as it was in numpy.
 """
 
 from __future__ import annotations
@@ -11,45 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.core.jit import kernel
-
-
-@kernel("Tuple((float32[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], float32[:, ::1], float32[::1], "
-        "float32[::1])")
-def sun_rays(rays, normal, t_m, sun):
-    """The hits facing the sun, and their shadow rays.
-
-    Args:
-        rays: (N, 6) float32 camera rays [origin | unit direction], world frame.
-        normal: (N, 3) float32 hit normals (0 for misses); t_m: (N,) float32 hit distances.
-        sun: (3,) float32 unit vector towards the sun.
-
-    Returns:
-        n_dot_l: (N,) float32 normal . sun (0 for misses).
-        lit: (M,) int64 the rays with n_dot_l > 0, ascending.
-        shadow: (M, 6) float32 their shadow rays [origin | sun]: from the hit point lifted off the surface along
-        the normal by 1 mm + 0.1 mm per metre of distance (against self-intersection).
-    """
-    n = t_m.size
-    n_dot_l = np.empty(n, np.float32)
-    count = 0
-    for i in range(n):
-        d = normal[i, 0] * sun[0] + normal[i, 1] * sun[1] + normal[i, 2] * sun[2]
-        n_dot_l[i] = d
-        if d > 0:
-            count += 1
-    lit = np.empty(count, np.int64)
-    shadow = np.empty((count, 6), np.float32)
-    j = 0
-    for i in range(n):
-        if n_dot_l[i] > 0:
-            lit[j] = i
-            t = t_m[i]
-            lift = np.float32(1e-3) + np.float32(1e-4) * t
-            for k in range(3):
-                shadow[j, k] = rays[i, k] + rays[i, 3 + k] * t + normal[i, k] * lift
-                shadow[j, 3 + k] = sun[k]
-            j += 1
-    return n_dot_l, lit, shadow
+from pipeline.sensors.sky import sky_radiance
 
 
 @kernel("float32(float32, float32)")
@@ -70,22 +33,22 @@ def _power(x, exponent):
 
 
 @kernel("float32[:, ::1](float32[:, ::1], bool_[::1], float32[:, ::1], int32[::1], float32[:, ::1], float32[::1], "
-        "int64[::1], bool_[::1], float32[::1], float32[::1], float32[::1], float32[::1], float32[::1], "
-        "float32[::1], float32[::1])")
-def sky_and_sun(rays, hit, normal, material, color, n_dot_l, lit, unshadowed, specular, shininess, sun, sun_rgb,
-                ambient_rgb, zenith_rgb, horizon_rgb):
-    """(N, 3) float32 linear radiance: on hits, ``color * (ambient + sun_rgb * max(n.l, 0) * unshadowed) + sun_rgb *
-    specular``, the highlight Blinn-Phong, ``specular[m] * clip(n.h, 0, 1) ** shininess[m]`` (:func:`_power`)
-    with h the half-vector of the sun and the view direction, on unshadowed sunlit hits of materials m with
-    specular > 0; on misses, the sky: horizon + (zenith - horizon) * sqrt(clip(up, 0, 1)) for the ray's upward
-    component.
+        "int64[::1], float32[::1], float32[::1], float32[::1], float32[::1], float32[::1], float32[::1], "
+        "float32[::1])")
+def sky_and_sun(rays, hit, normal, material, color, n_dot_l, lit, sunlit, specular, shininess, sun, sun_rgb,
+                ambient_rgb, sky):
+    """(N, 3) float32 linear radiance: on hits, ``color * (ambient + sun_rgb * max(n.l, 0) * sunlit) + sun_rgb *
+    specular * sunlit``, the highlight Blinn-Phong, ``specular[m] * clip(n.h, 0, 1) ** shininess[m]``
+    (:func:`_power`) with h the half-vector of the sun and the view direction, on sunlit hits of materials m with
+    specular > 0; on misses, the sky (:func:`pipeline.sensors.sky.sky_radiance` of the ray's direction).
 
     Args:
         rays: (N, 6) float32; hit: (N,) bool; normal: (N, 3) float32; material: (N,) int32; color: (N, 3)
             float32 albedo.
-        n_dot_l, lit: from :func:`sun_rays`; unshadowed: (M,) bool per ``lit`` ray, its shadow ray was not blocked.
-        specular, shininess: (K,) float32 per material. sun: (3,) float32 towards the sun. sun_rgb, ambient_rgb,
-            zenith_rgb, horizon_rgb: (3,) float32 linear RGB.
+        n_dot_l, lit: from :func:`sun_rays`; sunlit: (M,) float32 per ``lit`` ray, the share of the sun's disc its
+            shadow rays saw (1 unshadowed, 0 in full shadow).
+        specular, shininess: (K,) float32 per material. sun: (3,) float32 towards the sun. sun_rgb, ambient_rgb:
+            (3,) float32 linear RGB. sky: (SKY_PARAMS,) float32 (:mod:`pipeline.sensors.sky`).
     """
     n = hit.size
     direct = np.empty(n, np.float32)
@@ -94,9 +57,12 @@ def sky_and_sun(rays, hit, normal, material, color, n_dot_l, lit, unshadowed, sp
     spec = np.zeros(n, np.float32)
     for j in range(lit.size):
         i = lit[j]
-        if not unshadowed[j]:
+        share = sunlit[j]
+        if not share > 0:
             direct[i] = 0
             continue
+        if share < 1:
+            direct[i] *= share
         m = material[i]
         if not specular[m] > 0:
             continue
@@ -105,13 +71,13 @@ def sky_and_sun(rays, hit, normal, material, color, n_dot_l, lit, unshadowed, sp
             np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + np.float32(1e-12))
         n_dot_h = min(max(n_dot_h, np.float32(0)), np.float32(1))
         spec[i] = specular[m] * _power(n_dot_h, shininess[m])
+        if share < 1:
+            spec[i] *= share
     out = np.empty((n, 3), np.float32)
     for i in range(n):
         if hit[i]:
             for k in range(3):
                 out[i, k] = color[i, k] * (ambient_rgb[k] + sun_rgb[k] * direct[i]) + sun_rgb[k] * spec[i]
         else:
-            up = np.sqrt(min(max(rays[i, 5], np.float32(0)), np.float32(1)))
-            for k in range(3):
-                out[i, k] = horizon_rgb[k] + (zenith_rgb[k] - horizon_rgb[k]) * up
+            out[i, 0], out[i, 1], out[i, 2] = sky_radiance(rays[i, 3], rays[i, 4], rays[i, 5], sky)
     return out

@@ -20,7 +20,7 @@ Design (measured with bench/bench_render_core.py; the figures are in docs/perfor
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
   along the sun; a few per cent of the lit pixels); against the static world only those from
-  hits within SUN_MAP_RANGE_M (:mod:`pipeline.sensors.shading`) whose grid cell of the static world's projection
+  hits within SUN_MAP_RANGE_M (:mod:`pipeline.sensors.shadows`) whose grid cell of the static world's projection
   along the sun lies as high as they do (:class:`pipeline.world.sunmap.SunMap`), and all from farther hits.
 - "Object k alone" (ground truth) is exact without building a scene per object: the placement of a
   canonical mesh is affine, so a ray transformed into the actor's unit box frame hits the cached

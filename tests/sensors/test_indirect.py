@@ -151,7 +151,7 @@ def test_mirror_rays_closed_form():
     rays = np.array([[0.0, 0.0, 10.0, *d]], np.float32)
     t = np.array([10.0 / np.cos(np.pi / 3)], np.float32)
     mirror, weight = mirror_rays(rays, t, np.array([[0.0, 0.0, 1.0]], np.float32), np.array([0]),
-                                 np.array([0.05], np.float32))
+                                 np.array([0.05], np.float32), np.zeros(1, np.float32), np.float32(0.02))
     np.testing.assert_allclose(mirror[0, 3:], [d[0], 0.0, -d[2]], atol=1e-6)
     np.testing.assert_allclose(mirror[0, :3], [10.0 * np.tan(np.pi / 3), 0.0, 2e-3 + 1e-4 * t[0]], atol=1e-4)
     assert weight[0] == pytest.approx(0.05 + 0.95 * 0.5 ** 5, rel=1e-5)

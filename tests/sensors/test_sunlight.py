@@ -6,11 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.sensors.sunlight import sky_and_sun, sun_rays
+from pipeline.sensors.shadows import sun_rays
+from pipeline.sensors.sky import gradient_params
+from pipeline.sensors.sunlight import sky_and_sun
 
 SUN = np.array([0.0, 0.6, 0.8], np.float32)
 SUN_RGB, AMBIENT = np.array([2.0, 1.5, 1.0], np.float32), np.array([0.5, 0.25, 0.125], np.float32)
 ZENITH, HORIZON = np.array([0.1, 0.2, 0.6], np.float32), np.array([0.7, 0.8, 0.9], np.float32)
+POINT_SUN = SUN[None]  # a point sun: every shadow ray along SUN
 
 
 def _rays(directions):
@@ -23,19 +26,37 @@ def test_hits_facing_the_sun_get_shadow_rays_from_just_above_the_hit():
     rays = _rays([[1, 0, -1], [1, 0, -1], [0, 1, 0], [0, 0, 1]])
     normal = np.float32([[0, 0, 1], [0, 0, -1], [0, -1, 0], [0, 0, 0]])  # up; down; towards y-; a miss
     t = np.float32([10.0, 10.0, 20.0, np.inf])
-    n_dot_l, lit, shadow = sun_rays(rays, normal, t, SUN)
+    n_dot_l, lit, shadow, which = sun_rays(rays, normal, t, SUN, POINT_SUN, 0)
     np.testing.assert_allclose(n_dot_l, [0.8, -0.8, -0.6, 0.0], atol=1e-7)
     assert lit.tolist() == [0]
     hit_point = rays[0, :3] + 10.0 * rays[0, 3:]
     np.testing.assert_allclose(shadow[0, :3], hit_point + (1e-3 + 1e-4 * 10.0) * normal[0], atol=1e-6)
     np.testing.assert_array_equal(shadow[0, 3:], SUN)
+    assert which.tolist() == [0]
+
+
+def test_shadow_rays_follow_the_disc_cell_of_their_pixel():
+    # A 4 x 4 image of ground lit from above: pixel (x, y) takes disc row 4 v + u, u and v from x and y modulo 4
+    # (bit-reversed: each 2 x 2 block covers both halves of the disc in both axes).
+    rays = _rays([[0, 0, -1]] * 16)
+    normal = np.tile(np.float32([0, 0, 1]), (16, 1))
+    disc = np.arange(48, dtype=np.float32).reshape(16, 3)  # stand-ins: only which row is copied matters
+    _, lit, shadow, which = sun_rays(rays, normal, np.full(16, 2.0, np.float32), SUN, disc, 4)
+    reversed2 = [0, 2, 1, 3]
+    expected = [4 * reversed2[y] + reversed2[x] for y in range(4) for x in range(4)]
+    assert lit.tolist() == list(range(16)) and which.tolist() == expected
+    np.testing.assert_array_equal(shadow[:, 3:], disc[expected])
+    for y in range(3):
+        for x in range(3):  # every 2 x 2 block: both halves of the disc in u and in v
+            block = [which[(y + a) * 4 + x + b] for a in (0, 1) for b in (0, 1)]
+            assert sorted((k % 4) // 2 + 2 * ((k // 4) // 2) for k in block) == [0, 1, 2, 3]
 
 
 def _shade(rays, hit, normal, material, color, unshadowed, specular, shininess):
-    n_dot_l, lit, _ = sun_rays(rays, normal, np.full(len(rays), 5.0, np.float32), SUN)
+    n_dot_l, lit, _, _ = sun_rays(rays, normal, np.full(len(rays), 5.0, np.float32), SUN, POINT_SUN, 0)
     return sky_and_sun(rays, np.asarray(hit), normal, np.asarray(material, np.int32), np.asarray(color, np.float32),
-                       n_dot_l, lit, np.asarray(unshadowed)[: len(lit)], np.asarray(specular, np.float32),
-                       np.asarray(shininess, np.float32), SUN, SUN_RGB, AMBIENT, ZENITH, HORIZON)
+                       n_dot_l, lit, np.asarray(unshadowed, np.float32)[: len(lit)], np.asarray(specular, np.float32),
+                       np.asarray(shininess, np.float32), SUN, SUN_RGB, AMBIENT, gradient_params(ZENITH, HORIZON))
 
 
 def test_lambert_shadow_highlight_and_sky():
@@ -76,3 +97,12 @@ def test_power_is_within_a_few_ulps_of_the_exact_power(exponent):
     tiny = exact < 1e-30  # float32 underflow: both ~0
     np.testing.assert_allclose(got[~tiny], exact[~tiny], rtol=4e-5 if exponent <= 1024 else 1e-6)
     assert np.all(got[tiny] < 1e-30) and got[0] == 0.0 and got[-1] == 1.0
+
+
+def test_a_partly_seen_sun_scales_its_light_and_highlight():
+    # As ray 2 of test_lambert_shadow_highlight_and_sky (n.l = 0.8, a full highlight), with a quarter of the sun's
+    # disc seen: sun light and highlight x 0.25, the ambient unchanged.
+    rays = _rays([[0, 0.6, -0.8]])
+    out = _shade(rays, [True], np.float32([[0, 0, 1]]), [1], [[0.2, 0.2, 0.2]], unshadowed=[0.25],
+                 specular=[0.0, 0.5], shininess=[1.0, 40.0])
+    np.testing.assert_allclose(out[0], 0.2 * (AMBIENT + SUN_RGB * 0.8 * 0.25) + SUN_RGB * 0.5 * 0.25, rtol=1e-5)

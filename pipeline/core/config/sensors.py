@@ -204,13 +204,24 @@ class SunConfig(_ConditionPart):
     color_rgb: RGB = _rgb("colour of the sunlight (scaled by intensity)", (1.0, 0.94, 0.85))
     intensity: float = Field(2.6, ge=0.0, description="irradiance scale; 1 lights white paper to ~1 at exposure 1")
     shadows: bool = Field(True, description="cast shadow rays towards the sun")
+    angular_radius_deg: float = Field(0.27, ge=0.0, le=5.0, description="the sun disc's angular radius, degrees "
+                                      "(0.27: the real sun; its shadows have penumbrae); 0 = a point: hard shadows")
 
 
 class SkyConfig(_ConditionPart):
-    """Background radiance (rays that hit nothing) and the fill light it gives every surface."""
+    """Background radiance (rays that hit nothing) and the fill light it gives every surface.
 
-    zenith_rgb: RGB = _rgb("sky radiance straight up", (0.18, 0.32, 0.65))
-    horizon_rgb: RGB = _rgb("sky radiance at the horizon", (0.65, 0.75, 0.85))
+    ``model`` "gradient" blends ``horizon_rgb`` to ``zenith_rgb``; "preetham" is the analytic daylight sky of Preetham,
+    Shirley and Smits (1999) from the sun's direction and ``turbidity``, scaled so that the light it gives a surface
+    facing up matches ``ambient_rgb``'s luminance (:mod:`pipeline.sensors.sky`); it needs the sun above the horizon.
+    """
+
+    model: Literal["gradient", "preetham"] = Field(
+        "gradient", description="gradient: zenith_rgb to horizon_rgb; preetham: physical daylight sky from the sun")
+    turbidity: float = Field(3.0, ge=1.7, le=10.0, description="haze of the preetham sky: 2 very clear, 3 clear, "
+                             "6 hazy (Preetham et al. 1999; below 1.7 the model fails)")
+    zenith_rgb: RGB = _rgb("sky radiance straight up (gradient)", (0.18, 0.32, 0.65))
+    horizon_rgb: RGB = _rgb("sky radiance at the horizon (gradient)", (0.65, 0.75, 0.85))
     ambient_rgb: RGB = _rgb("ambient (sky fill) irradiance on every surface", (0.45, 0.5, 0.6))
 
 
@@ -350,3 +361,10 @@ class ConditionConfig(_Model):
     noise: SensorNoiseConfig = Field(default_factory=SensorNoiseConfig)
     lens: LensConfig = Field(default_factory=LensConfig)
     lidar: LidarConditionConfig = Field(default_factory=LidarConditionConfig)
+
+    @model_validator(mode="after")
+    def _daylight_sky_needs_the_sun(self) -> ConditionConfig:
+        if self.sky.model == "preetham" and not self.sun.elevation_deg > 0:
+            raise ValueError(f"sky.model: preetham is a daylight sky and needs the sun above the horizon "
+                             f"(sun.elevation_deg > 0), got sun.elevation_deg {self.sun.elevation_deg}")
+        return self
