@@ -64,6 +64,7 @@ class Facades:
         frames: the window frames behind the panes, quads: frame (F,), lo, hi (F, 3), material (F,).
         panes: frame (P,) int64, lo, hi (P, 3) (across lo = hi = -depth), glass material (P,) int32, lit (P,) bool,
             blind (P,) float64 share of the pane's height covered from the top (0: none), shop (P,) bool.
+        style: (N,) int64 index into STYLES; depth_m: (N,) float64 the glass's depth behind the wall's outer plane.
     """
 
     origin: np.ndarray
@@ -71,6 +72,8 @@ class Facades:
     boxes: dict[str, tuple[np.ndarray, ...]]
     frames: tuple[np.ndarray, ...]
     panes: dict[str, np.ndarray]
+    style: np.ndarray
+    depth_m: np.ndarray
 
     def add_to(self, part: PartBuilder) -> None:
         """Add the façades' triangles to ``part`` (boxes, frames, then panes split at their blinds)."""
@@ -116,6 +119,8 @@ class _Collector:
         self.boxes: dict[str, list[np.ndarray]] = {k: [] for k in _SIDES}
         self.frames: list[np.ndarray] = []
         self.panes: list[np.ndarray] = []
+        self.style: list[int] = []
+        self.depth: list[float] = []
 
     def box(self, kind: str, frame: int, lo, hi, material: str | int | np.ndarray) -> None:
         """Boxes in one frame: ``lo``, ``hi`` (K, 3) or (3,) bounds, ``material`` a name or (K,) indices."""
@@ -141,7 +146,8 @@ class _Collector:
         panes = {"frame": pa[:, 0].astype(np.int64), "lo": pa[:, 1:4], "hi": pa[:, 4:7],
                  "material": pa[:, 7].astype(np.int32), "lit": pa[:, 8] > 0, "blind": pa[:, 9], "shop": pa[:, 10] > 0}
         return Facades(rects.reshape(-1, 3), axis, boxes,
-                       (fr[:, 0].astype(np.int64), fr[:, 1:4], fr[:, 4:7], fr[:, 7].astype(np.int32)), panes)
+                       (fr[:, 0].astype(np.int64), fr[:, 1:4], fr[:, 4:7], fr[:, 7].astype(np.int32)), panes,
+                       np.array(self.style, np.int64), np.array(self.depth, np.float64))
 
 
 def layout(rects: np.ndarray, heights: np.ndarray, rng: np.random.Generator) -> Facades:
@@ -150,6 +156,9 @@ def layout(rects: np.ndarray, heights: np.ndarray, rng: np.random.Generator) -> 
     building with a shop floor grows by its extra height)."""
     rects = np.asarray(rects, np.float64).copy()
     rects[:, :, 2] = rects[:, :1, 2]
+    a, b = rects[:, 1, :2] - rects[:, 0, :2], rects[:, 3, :2] - rects[:, 0, :2]
+    if np.any(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] >= 0):
+        raise ValueError("footprints must run clockwise seen from above (each face's outside on its left)")
     out = _Collector()
     for b in range(len(rects)):
         lengths = np.linalg.norm(np.roll(rects[b], -1, axis=0)[:, :2] - rects[b, :, :2], axis=1)
@@ -179,6 +188,8 @@ def _building(out: _Collector, frame0: int, lengths: np.ndarray, height: float, 
         end, fit, piers, inset = depth + 0.15, True, False, 0.015
         if rng.random() < 0.6:
             glass = material_index("glass_tinted")
+    out.style.append(STYLES.index(style))
+    out.depth.append(depth)
     floors = max(1, int(height // FLOOR_M))
     shop = floors >= 2 and lengths[0] >= 8.0 and rng.random() < SHOP_SHARE
     ground = rng.uniform(4.0, 4.5) if shop else FLOOR_M
