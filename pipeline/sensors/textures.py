@@ -1,7 +1,9 @@
 """Procedural surface textures of the static world: albedo varied by position, as a photograph shows it.
 
 Flat albedo reads as a diagram: real asphalt has grain, darker repair patches and cracks; markings are worn;
-grass has dry and lush patches; concrete and façades weather; foliage is clumps of light and shade. Each
+grass has dry and lush patches; concrete and façades weather; brick walls are courses of bricks, each its own shade,
+in lighter mortar; behind window glass lie darker and lighter rooms, blinds have slats; foliage is clumps of light
+and shade. Each
 textured material multiplies (or, for worn markings, blends) its albedo by a function of the hit's world
 position: sums of value-noise octaves (a hashed lattice, smoothly interpolated), written here, so a surface looks
 the same from every frame and every camera, and the same seed-free pattern is reproducible bit for bit.

@@ -1,11 +1,12 @@
 """Props beside the roads: buildings, trees, street lamps and highway barriers, placed by seeded rules
 against an occupancy raster (:mod:`pipeline.world.occupancy`) so none stands on a paved surface.
 
-- Buildings: boxes (random footprint and floors) with a glazed band per floor, along the right side of
-  every non-highway edge, their fronts 3 m behind the edge's outermost lane (the sidewalk in town), kept
-  at least 2 m from any paved cell and 1 m from each other.
-- Trees: a row in the strip between sidewalk and buildings, and scattered over free ground >= 4 m from
-  pavement (parks, block interiors, highway verges).
+- Buildings: random footprints and floors along the right side of every non-highway edge, their fronts 3 m
+  behind the edge's outermost lane (the sidewalk in town), kept at least 2 m from any paved cell and 1 m from
+  each other; their walls, recessed windows, shop fronts and doors come from :mod:`pipeline.world.facades`.
+- Trees (:mod:`pipeline.world.trees`): a row in the strip between sidewalk and buildings (deciduous species, crowns
+  narrow across the street), and scattered over free ground >= 4 m from pavement (parks, block interiors, highway
+  verges; conifers too).
 - Street lamps: every ~30 m on the outer side of town sidewalks, every ~50 m beyond highway shoulders;
   7 m / 10 m poles with an arm over the road; their head positions are the night light sources.
 - Street furniture (town edges only): traffic signs on 2.2-2.6 m posts 0.35 m from the kerb, facing the
