@@ -10,14 +10,15 @@ window is a recess whose reveals catch the light. Styles, drawn per building:
 
 - punched: windows 1.1-1.6 m wide and 1.4-1.8 m tall between piers 0.6-1.8 m wide, 15-25 cm deep reveals;
 - ribbon: tall spandrels (1.2-1.7 m) between bands of glass divided by thin mullions;
-- curtain: glass from slab edge to slab edge, thin mullions and transoms (frame colour), tinted glass;
+- curtain: glass from slab edge to slab edge, thin mullions, slab edges in the frame colour, often tinted glass
+  (mullions are not boxes: the frame behind the panes shows between them);
 - and, on SHOP_SHARE of the buildings, a taller ground floor of shop windows (about 2.6-3 m of glass, wide
   bays) under a fascia board.
 
-Every building has a door on its front. Panes vary: a share of them (BLIND_SHARE) has a blind or curtain drawn
-over its upper part (material ``window_blind``), and a share, drawn per building from LIT_RATE (shops:
-SHOP_LIT_RATE), is lit from inside (``window_lit``: glass by day, a warm glow with the lamps at dusk and night,
-pipeline.sensors.shading NIGHT_GLOWS). Wall colours come from WALLS.
+Every building has a door on its front. Panes vary: a share of them has a blind or curtain closed (BLIND_CLOSED)
+or drawn over its upper part (BLIND_PARTIAL; material ``window_blind``), and a share, drawn per building from
+LIT_RATE (shops: SHOP_LIT_RATE), is lit from inside (``window_lit``: glass by day, a warm glow with the lamps at
+dusk and night, pipeline.sensors.shading NIGHT_GLOWS). Wall colours come from WALLS.
 
 Frame of face j: origin at footprint corner j (at the footprint's base height), 'along' from corner j to corner
 j + 1, 'across' outwards (the face's normal), z up: the wall's outer plane is across = 0, the glass across = -depth.
