@@ -110,14 +110,14 @@ def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
     return v / np.linalg.norm(v, axis=1, keepdims=True), f
 
 
-_ICO_V, _ICO_F = _icosahedron()
+ICO_VERTICES, ICO_FACES = _icosahedron()  # the unit icosahedron: (12, 3) float64 on the unit sphere, (20, 3) int32
 
 
 def blobs(centre: np.ndarray, radii: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Ellipsoid-like icosahedra (tree crowns): centre (N, 3), radii (N, 3), yaw (N,). 20 triangles each."""
     centre, radii = np.atleast_2d(centre), np.atleast_2d(radii)
-    verts = _place(_ICO_V[None] * radii[:, None, :], centre, np.asarray(yaw, dtype=np.float64).reshape(-1))
-    return verts, _instance_tris(_ICO_F, len(centre), len(_ICO_V))
+    verts = _place(ICO_VERTICES[None] * radii[:, None, :], centre, np.asarray(yaw, dtype=np.float64).reshape(-1))
+    return verts, _instance_tris(ICO_FACES, len(centre), len(ICO_VERTICES))
 
 
 def quads(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

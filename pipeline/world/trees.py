@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.world.materials import material_index
-from pipeline.world.primitives import _ICO_F, _ICO_V
+from pipeline.world.primitives import ICO_FACES, ICO_VERTICES
 
 LOBES = 5
 TIERS = 4
@@ -111,7 +111,7 @@ def grow(base: np.ndarray, species: np.ndarray, rng: np.random.Generator, yaw: n
     semi = np.stack([np.minimum(radius, 1.5 * across), across, radius * aspect], 1)  # no crown longer than 1.5:1
     turn = rng.uniform(0.0, 2.0 * np.pi, n)
     lobe_yaw = rng.uniform(0.0, 2.0 * np.pi, (n, LOBES))
-    jitter = 1.0 + VERTEX_JITTER * rng.uniform(-1.0, 1.0, (n, LOBES, len(_ICO_V)))
+    jitter = 1.0 + VERTEX_JITTER * rng.uniform(-1.0, 1.0, (n, LOBES, len(ICO_VERTICES)))
     tier_jitter = rng.uniform(-1.0, 1.0, (n, TIERS, RIM_POINTS))
     conifer = species == list(SPECIES).index("conifer")
     parts = [_deciduous(base[~conifer], fork[~conifer], trunk_r[~conifer], semi[~conifer], yaw[~conifer],
@@ -144,10 +144,10 @@ def _deciduous(base, fork, trunk_r, semi, yaw, turn, lobe_yaw, jitter, foliage):
     centre_z = fork + 0.7 * semi[:, 2]
     crown = base + np.stack([np.zeros(n), np.zeros(n), centre_z], 1)
     lobe_c = crown[:, None] + _rotate_z(unit * semi[:, None], yaw[:, None])  # (n, LOBES, 3)
-    local = _rotate_z(_ICO_V[None, None] * jitter[..., None], lobe_yaw[..., None])  # unit lobes, turned
+    local = _rotate_z(ICO_VERTICES[None, None] * jitter[..., None], lobe_yaw[..., None])  # unit lobes, turned
     lobe_v = lobe_c[:, :, None] + _rotate_z(local * _LOBE_R[None, :, None, None] * semi[:, None, None],
                                             yaw[:, None, None])
-    lobe_t = _instances(_ICO_F, n * LOBES, len(_ICO_V))
+    lobe_t = _instances(ICO_FACES, n * LOBES, len(ICO_VERTICES))
     fork_p = base + np.stack([np.zeros(n), np.zeros(n), fork], 1)
     trunk_v, trunk_t = frusta(base - [0.0, 0.0, 0.1], fork_p, trunk_r, 0.75 * trunk_r, TRUNK_SIDES)
     ends = lobe_c[:, LIMB_LOBES].reshape(-1, 3)
@@ -158,8 +158,8 @@ def _deciduous(base, fork, trunk_r, semi, yaw, turn, lobe_yaw, jitter, foliage):
     verts = np.concatenate([lobe_v.reshape(-1, 3), trunk_v, limb_v])
     tris = np.concatenate([lobe_t, trunk_t + len(lobe_v.reshape(-1, 3)),
                            limb_t + len(lobe_v.reshape(-1, 3)) + len(trunk_v)])
-    mat = np.concatenate([np.repeat(foliage, LOBES * len(_ICO_F)), np.full(len(trunk_t) + len(limb_t), bark)])
-    tree = np.concatenate([np.repeat(np.arange(n), LOBES * len(_ICO_V)), np.repeat(np.arange(n), 2 * TRUNK_SIDES),
+    mat = np.concatenate([np.repeat(foliage, LOBES * len(ICO_FACES)), np.full(len(trunk_t) + len(limb_t), bark)])
+    tree = np.concatenate([np.repeat(np.arange(n), LOBES * len(ICO_VERTICES)), np.repeat(np.arange(n), 2 * TRUNK_SIDES),
                            np.repeat(np.arange(n), 2 * LIMB_SIDES * k)])
     return verts, tris, mat, tree, lobe_v[..., 2].reshape(n, -1).max(axis=1) - base[:, 2]
 

@@ -225,9 +225,9 @@ def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
 def test_static_foliage_gets_smooth_normals(material):
     """A ray at an icosahedron of foliage gets the corners' normals interpolated at the hit (on a regular
     icosahedron the corner normals are the vertex directions, exactly), one of another material its face's normal."""
-    from pipeline.world.primitives import _ICO_F, _ICO_V
+    from pipeline.world.primitives import ICO_FACES, ICO_VERTICES
 
-    mesh = Mesh(_ICO_V * 2.0, _ICO_F, material_index(material), SemanticClass.VEGETATION)
+    mesh = Mesh(ICO_VERTICES * 2.0, ICO_FACES, material_index(material), SemanticClass.VEGETATION)
     scene = FrameScene(StaticScene([mesh]), Actors.empty())
     rng = np.random.default_rng(0)
     target = rng.normal(size=(200, 3)) * 0.3
@@ -237,7 +237,7 @@ def test_static_foliage_gets_smooth_normals(material):
     d = target - origins
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     point = origins + d * hits.t_m[:, None]
-    v = (_ICO_V * 2.0)[_ICO_F]  # (20, 3, 3)
+    v = (ICO_VERTICES * 2.0)[ICO_FACES]  # (20, 3, 3)
     # Which face: the one whose plane holds the point.
     face_n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
