@@ -30,12 +30,12 @@ import numpy as np
 from pipeline.core.classes import SemanticClass
 from pipeline.traffic.roadgeometry import CARRIAGEWAY_KINDS, RoadGeometry
 from pipeline.world import facades, furniture, trees
+from pipeline.world.facades import FLOOR_M
 from pipeline.world.occupancy import Grid
 from pipeline.world.polygons import cumulative_length, interpolate, offset_polyline, resample, ribbon
 from pipeline.world.primitives import PartBuilder, boxes, prisms, quads
 from pipeline.world.roadmesh import lane_points
 
-FLOOR_M = 3.2
 SETBACK_M = 3.0
 _BARRIER_PROFILE = ((0.3, 0.0), (0.12, 0.8), (-0.12, 0.8), (-0.3, 0.0))  # (left offset, height), left to right
 _MEDIAN_PROFILE = ((0.2, 0.0), (0.08, 0.8), (-0.08, 0.8), (-0.2, 0.0))
