@@ -44,6 +44,7 @@ NIGHT_GLOWS = {
     "headlight": (HEAD_LIGHT_RGB, "head_glow", True),
     "lamp": (STREET_LAMP_RGB, "lamp_glow", False),
     "marker_lamp": (MARKER_LAMP_RGB, "tail_glow", True),
+    "window_lit": (np.array([0.2, 0.12, 0.05], np.float32), "lamp_glow", False),  # rooms lit behind façade panes
 }
 
 

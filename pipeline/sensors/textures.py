@@ -1,7 +1,9 @@
 """Procedural surface textures of the static world: albedo varied by position, as a photograph shows it.
 
 Flat albedo reads as a diagram: real asphalt has grain, darker repair patches and cracks; markings are worn;
-grass has dry and lush patches; concrete and façades weather; foliage is clumps of light and shade. Each
+grass has dry and lush patches; concrete and façades weather; brick walls are courses of bricks, each its own shade,
+in lighter mortar; behind window glass lie darker and lighter rooms, blinds have slats; foliage is clumps of light
+and shade. Each
 textured material multiplies (or, for worn markings, blends) its albedo by a function of the hit's world
 position: sums of value-noise octaves (a hashed lattice, smoothly interpolated), written here, so a surface looks
 the same from every frame and every camera, and the same seed-free pattern is reproducible bit for bit.
@@ -23,15 +25,22 @@ from pipeline.core.jit import as_input, kernel
 from pipeline.world.materials import MATERIAL_NAMES, material_arrays, material_index
 
 # Texture kinds per material (0 = flat).
-FLAT, ASPHALT, MARKING, GRASS, WEATHERED, FOLIAGE = range(6)
+FLAT, ASPHALT, MARKING, GRASS, WEATHERED, FOLIAGE, WINDOW, BLIND, BRICK = range(9)
 TEXTURE_OF_MATERIAL = {
     "asphalt": ASPHALT,
     "lane_paint": MARKING,
     "grass": GRASS,
     "concrete": WEATHERED, "kerb": WEATHERED, "barrier": WEATHERED, "building": WEATHERED,
-    "building_light": WEATHERED, "building_dark": WEATHERED,
-    "foliage": FOLIAGE,
+    "building_light": WEATHERED, "building_dark": WEATHERED, "plaster_white": WEATHERED, "plaster_ochre": WEATHERED,
+    "plaster_grey": WEATHERED, "plaster_rose": WEATHERED,
+    "brick": BRICK, "brick_dark": BRICK,
+    "foliage": FOLIAGE, "foliage_light": FOLIAGE, "foliage_dark": FOLIAGE,
+    "building_glass": WINDOW, "glass_tinted": WINDOW, "window_lit": WINDOW,
+    "window_blind": BLIND,
 }
+# Brick courses: 65 mm bricks and 10 mm joints (a 75 mm course), 215 mm bricks in running bond; mortar is lighter.
+BRICK_COURSE_M, BRICK_LENGTH_M, JOINT_M = 0.075, 0.225, 0.01
+MORTAR_RGB = np.array([0.50, 0.48, 0.44], np.float32)
 MIN_COS_INCIDENCE = 0.2  # grazing hits count their footprint as at this cosine (the road far ahead)
 
 
@@ -58,7 +67,7 @@ def textured_albedo(rays: np.ndarray, t_m: np.ndarray, hit: np.ndarray, instance
         raise ValueError(f"pixel_angle_rad must be positive, got {pixel_angle_rad}")
     return _texture(as_input(rays, np.float32), as_input(t_m, np.float32), as_input(hit, bool),
                     as_input(instance_id, np.int32), as_input(material, np.int32), as_input(normal, np.float32),
-                    as_input(color, np.float32), _KINDS, _ASPHALT_RGB, np.float64(pixel_angle_rad))
+                    as_input(color, np.float32), _KINDS, _ASPHALT_RGB, MORTAR_RGB, np.float64(pixel_angle_rad))
 
 
 @kernel("float64(int64, int64, int64, int64)")
@@ -163,9 +172,27 @@ def _crack(x, y, footprint_m):
     return 0.0 if d >= half else min(1.0, CRACK_WIDTH_M / footprint_m) * (1.0 - d / half)
 
 
+@kernel("float64(float64, float64, float64, float64)")
+def _brick(s, z, footprint_m, out_mortar):
+    """Brick pattern at (s along the wall, z): the albedo factor of the brick's face (each brick its own shade), or
+    with ``out_mortar`` > 0 the share of the pixel that is mortar, both faded to their means as the footprint grows
+    past a course."""
+    course = np.floor(z / BRICK_COURSE_M)
+    u = s / BRICK_LENGTH_M + 0.5 * (course - 2.0 * np.floor(course / 2.0))
+    brick = np.floor(u)
+    joint_z, joint_s = JOINT_M / BRICK_COURSE_M, JOINT_M / BRICK_LENGTH_M
+    mean = joint_z + joint_s - joint_z * joint_s  # the mortar's share of a wall
+    k = _keep(BRICK_COURSE_M, footprint_m)
+    if out_mortar > 0.0:
+        fz, fs = z / BRICK_COURSE_M - course, u - brick
+        mortar = 1.0 if fz < joint_z or fs < joint_s else 0.0
+        return k * mortar + (1.0 - k) * mean
+    return 1.0 + k * 0.14 * _lattice(np.int64(brick), np.int64(course), 0, 51)
+
+
 @kernel("float32[:, ::1](float32[:, ::1], float32[::1], boolean[::1], int32[::1], int32[::1], float32[:, ::1], "
-        "float32[:, ::1], int8[::1], float32[::1], float64)")
-def _texture(rays, t_m, hit, instance_id, material, normal, color, kinds, asphalt_rgb, pixel_angle_rad):
+        "float32[:, ::1], int8[::1], float32[::1], float32[::1], float64)")
+def _texture(rays, t_m, hit, instance_id, material, normal, color, kinds, asphalt_rgb, mortar_rgb, pixel_angle_rad):
     """:func:`textured_albedo`'s loop over the hits."""
     out = color.copy()
     for i in range(t_m.size):
@@ -210,9 +237,25 @@ def _texture(rays, t_m, hit, instance_id, material, normal, color, kinds, asphal
                 x, y, z, 0.15, f, 33)
             for c in range(3):
                 out[i, c] = np.float32(color[i, c] * m)
-        else:  # foliage: clumps in light and shade
+        elif kind == 5:  # foliage: clumps in light and shade
             m = 1.0 + 0.3 * _octave3(x, y, z, 0.4, f, 41) + 0.2 * _octave3(x, y, z, 1.5, f, 42)
             m = max(m, 0.3)
             for c in range(3):
                 out[i, c] = np.float32(color[i, c] * m)
+        elif kind == 6:  # window glass: the rooms behind, darker and lighter (furniture, walls, shade)
+            m = 1.0 + 0.6 * _octave3(x, y, z, 1.1, f, 61) + 0.35 * _octave3(x, y, z, 0.35, f, 62)
+            m = min(max(m, 0.35), 2.2)
+            for c in range(3):
+                out[i, c] = np.float32(color[i, c] * m)
+        elif kind == 7:  # blinds and curtains: slats 5 cm apart, their colour varying from window to window
+            m = 1.0 + 0.25 * _octave3(x, y, z, 1.6, f, 71) + 0.12 * _keep(0.05, f) * np.sin(z * (2.0 * np.pi / 0.05))
+            for c in range(3):
+                out[i, c] = np.float32(color[i, c] * m)
+        else:  # brick: courses in running bond along the wall (its horizontal direction from the normal), stained
+            s = x * -np.float64(normal[i, 1]) + y * np.float64(normal[i, 0])
+            mortar = _brick(s, z, f, 1.0)
+            shade = _brick(s, z, f, 0.0)
+            m = 1.0 + 0.08 * _octave3(x, y, z, 2.5, f, 31) + 0.05 * _octave3(x, y, z, 0.6, f, 32)
+            for c in range(3):
+                out[i, c] = np.float32(((1.0 - mortar) * color[i, c] * shade + mortar * mortar_rgb[c]) * m)
     return out

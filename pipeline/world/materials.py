@@ -92,6 +92,25 @@ MATERIALS: dict[str, Material] = {
     "marker_lamp": Material((0.6, 0.3, 0.02), specular=0.5, shininess=96.0, reflectivity=0.70, fresnel_f0=0.05),
     # A vehicle's rear number plate: the plate, lit by its plate lamp with the vehicle lights (shading.py).
     "plate_rear": Material((0.80, 0.80, 0.75), reflectivity=0.90, retroreflection=4.0),
+    # Appended by the façades (pipeline/world/facades.py): wall colours (plaster, brick, render; albedo 0.2-0.7 like
+    # real façades), window frames, tinted curtain-wall glass, a pane with a blind or curtain behind it, a pane lit
+    # from inside (glass by day; it glows with the lamps at dusk and night: pipeline/sensors/shading.py), doors.
+    "brick": Material((0.38, 0.15, 0.09), reflectivity=0.30),
+    "brick_dark": Material((0.30, 0.16, 0.11), reflectivity=0.28),
+    "plaster_white": Material((0.68, 0.66, 0.62), reflectivity=0.40),
+    "plaster_ochre": Material((0.58, 0.44, 0.24), reflectivity=0.35),
+    "plaster_grey": Material((0.40, 0.41, 0.42), reflectivity=0.32),
+    "plaster_rose": Material((0.60, 0.42, 0.36), reflectivity=0.34),
+    "frame_dark": Material((0.05, 0.05, 0.055), specular=0.3, shininess=32.0, reflectivity=0.30),
+    "frame_white": Material((0.65, 0.65, 0.63), specular=0.2, shininess=32.0, reflectivity=0.50),
+    "glass_tinted": Material((0.03, 0.05, 0.06), specular=0.7, shininess=64.0, reflectivity=0.08, fresnel_f0=0.10),
+    "window_blind": Material((0.42, 0.40, 0.36), specular=0.6, shininess=64.0, reflectivity=0.15, fresnel_f0=0.08),
+    "window_lit": Material((0.11, 0.10, 0.09), specular=0.6, shininess=64.0, reflectivity=0.08, fresnel_f0=0.08),
+    "door": Material((0.09, 0.07, 0.06), specular=0.2, shininess=24.0, reflectivity=0.20),
+    # Appended by the trees (pipeline/world/trees.py): foliage of other species (lighter lime or birch green, dark
+    # conifer green).
+    "foliage_light": Material((0.11, 0.22, 0.06), reflectivity=0.42),
+    "foliage_dark": Material((0.04, 0.11, 0.05), reflectivity=0.38),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)

@@ -110,17 +110,51 @@ def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
     return v / np.linalg.norm(v, axis=1, keepdims=True), f
 
 
-_ICO_V, _ICO_F = _icosahedron()
+ICO_VERTICES, ICO_FACES = _icosahedron()  # the unit icosahedron: (12, 3) float64 on the unit sphere, (20, 3) int32
 
 
 def blobs(centre: np.ndarray, radii: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Ellipsoid-like icosahedra (tree crowns): centre (N, 3), radii (N, 3), yaw (N,). 20 triangles each."""
     centre, radii = np.atleast_2d(centre), np.atleast_2d(radii)
-    verts = _place(_ICO_V[None] * radii[:, None, :], centre, np.asarray(yaw, dtype=np.float64).reshape(-1))
-    return verts, _instance_tris(_ICO_F, len(centre), len(_ICO_V))
+    verts = _place(ICO_VERTICES[None] * radii[:, None, :], centre, np.asarray(yaw, dtype=np.float64).reshape(-1))
+    return verts, _instance_tris(ICO_FACES, len(centre), len(ICO_VERTICES))
 
 
 def quads(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Flat quads from corners (N, 4, 3) given in CCW order seen from the front -> (4N, 3), (2N, 3)."""
     tris = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
     return corners.reshape(-1, 3), _instance_tris(tris, len(corners), 4)
+
+
+# The faces of _CUBE_TRIS by name, in a box's own frame (x along, y across, z up): pairs of triangle rows.
+BOX_SIDES = {"bottom": (0, 1), "top": (2, 3), "back": (4, 5), "end": (6, 7), "front": (8, 9), "start": (10, 11)}
+
+
+def _frame_points(local: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Points (N, K, 3) given as (along, across, z) in per-item frames -> (N*K, 3) world: ``origin`` (N, 3), ``axis``
+    (N, 2) the unit horizontal 'along' direction; 'across' is its left (a right-handed frame with z up)."""
+    ax, ay = axis[:, None, 0], axis[:, None, 1]
+    x = origin[:, None, 0] + local[..., 0] * ax - local[..., 1] * ay
+    y = origin[:, None, 1] + local[..., 0] * ay + local[..., 1] * ax
+    return np.stack([x, y, origin[:, None, 2] + local[..., 2]], -1).reshape(-1, 3)
+
+
+def frame_boxes(origin: np.ndarray, axis: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                sides: tuple[str, ...] = tuple(BOX_SIDES)) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes given by their bounds ``lo``, ``hi`` (N, 3) as (along, across, z) in per-box frames (``origin`` (N, 3),
+    unit horizontal ``axis`` (N, 2), across = its left), with only the named ``sides`` (of BOX_SIDES: "front" faces
+    +across, "back" -across, "end" +along, "start" -along). Returns (8N, 3) vertices, (2 len(sides) N, 3)
+    triangles, counter-clockwise seen from outside."""
+    local = lo[:, None, :] + (hi - lo)[:, None, :] * (_CUBE[None] + 0.5)
+    rows = [r for s in sides for r in BOX_SIDES[s]]
+    return _frame_points(local, origin, axis), _instance_tris(_CUBE_TRIS[rows], len(lo), 8)
+
+
+def frame_quads(origin: np.ndarray, axis: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertical rectangles facing +across in per-item frames (as :func:`frame_boxes`): ``lo``, ``hi`` (N, 3) with
+    equal 'across' (the plane's offset). Returns (4N, 3) vertices, (2N, 3) triangles (counter-clockwise seen from
+    +across)."""
+    # The front face of _CUBE (y = +0.5): corners 2, 3, 7, 6 -> (hi x, lo z), (lo x, lo z), (lo x, hi z), (hi x, hi z).
+    corners = np.stack([np.stack([hi[:, 0], lo[:, 0], lo[:, 0], hi[:, 0]], 1), np.repeat(lo[:, 1:2], 4, 1),
+                        np.stack([lo[:, 2], lo[:, 2], hi[:, 2], hi[:, 2]], 1)], -1)
+    return _frame_points(corners, origin, axis), _instance_tris(np.array([[0, 1, 2], [0, 2, 3]], np.int32), len(lo), 4)

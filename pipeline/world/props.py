@@ -1,11 +1,12 @@
 """Props beside the roads: buildings, trees, street lamps and highway barriers, placed by seeded rules
 against an occupancy raster (:mod:`pipeline.world.occupancy`) so none stands on a paved surface.
 
-- Buildings: boxes (random footprint and floors) with a glazed band per floor, along the right side of
-  every non-highway edge, their fronts 3 m behind the edge's outermost lane (the sidewalk in town), kept
-  at least 2 m from any paved cell and 1 m from each other.
-- Trees: a row in the strip between sidewalk and buildings, and scattered over free ground >= 4 m from
-  pavement (parks, block interiors, highway verges).
+- Buildings: random footprints and floors along the right side of every non-highway edge, their fronts 3 m
+  behind the edge's outermost lane (the sidewalk in town), kept at least 2 m from any paved cell and 1 m from
+  each other; their walls, recessed windows, shop fronts and doors come from :mod:`pipeline.world.facades`.
+- Trees (:mod:`pipeline.world.trees`): a row in the strip between sidewalk and buildings (deciduous species, crowns
+  narrow across the street), and scattered over free ground >= 4 m from pavement (parks, block interiors, highway
+  verges; conifers too).
 - Street lamps: every ~30 m on the outer side of town sidewalks, every ~50 m beyond highway shoulders;
   7 m / 10 m poles with an arm over the road; their head positions are the night light sources.
 - Street furniture (town edges only): traffic signs on 2.2-2.6 m posts 0.35 m from the kerb, facing the
@@ -28,18 +29,21 @@ import numpy as np
 
 from pipeline.core.classes import SemanticClass
 from pipeline.traffic.roadgeometry import CARRIAGEWAY_KINDS, RoadGeometry
-from pipeline.world import furniture
-from pipeline.world.materials import material_index
+from pipeline.world import facades, furniture, trees
+from pipeline.world.facades import FLOOR_M
 from pipeline.world.occupancy import Grid
 from pipeline.world.polygons import cumulative_length, interpolate, offset_polyline, resample, ribbon
-from pipeline.world.primitives import PartBuilder, blobs, boxes, prisms, quads
+from pipeline.world.primitives import PartBuilder, boxes, prisms, quads
 from pipeline.world.roadmesh import lane_points
 
-FLOOR_M = 3.2
 SETBACK_M = 3.0
 _BARRIER_PROFILE = ((0.3, 0.0), (0.12, 0.8), (-0.12, 0.8), (-0.3, 0.0))  # (left offset, height), left to right
 _MEDIAN_PROFILE = ((0.2, 0.0), (0.08, 0.8), (-0.08, 0.8), (-0.2, 0.0))
-_FACADES = ("building", "building_light", "building_dark")
+# Species shares (round, oval, spreading, conifer; pipeline.world.trees.SPECIES) of street trees and of the trees
+# scattered over parks, block interiors and verges.
+STREET_TREES = (0.5, 0.35, 0.15, 0.0)
+SCATTERED_TREES = (0.35, 0.2, 0.15, 0.3)
+STREET_CROWN_ACROSS_M = 1.7
 
 
 class PropPlacer:
@@ -130,47 +134,25 @@ class PropPlacer:
         return None
 
     def _building_meshes(self, rects: np.ndarray, heights: np.ndarray) -> None:
-        """Boxes over footprints (N, 4, 3) of ``heights`` (N,), plus a window band per floor."""
-        along = rects[:, 1, :2] - rects[:, 0, :2]
-        across = rects[:, 3, :2] - rects[:, 0, :2]
-        centre = rects.mean(axis=1)
-        centre[:, 2] = rects[:, 0, 2] - 0.5 + heights / 2  # sink 0.5 m so slopes never show a gap
-        size = np.stack([np.linalg.norm(along, axis=1), np.linalg.norm(across, axis=1), heights + 0.5], 1)
-        yaw = np.arctan2(along[:, 1], along[:, 0])
-        verts, tris = boxes(centre, size, yaw, bottom=False)
-        facade = np.array([material_index(n) for n in _FACADES])[self.rng.integers(0, len(_FACADES), len(rects))]
-        self.parts["building"].add(verts, tris, np.repeat(facade, 10))
-        # Windows: one glass band per floor, 3 cm proud of the walls, 1 m short of each corner.
-        floors = np.floor(heights / FLOOR_M).astype(int)
-        b = np.repeat(np.arange(len(rects)), floors)
-        level = np.concatenate([np.arange(k) for k in floors]) * FLOOR_M
-        band_z = rects[b, 0, 2] + level + 0.9 + 0.65
-        v, t = boxes(np.concatenate([centre[b, :2], band_z[:, None]], 1),
-                     np.stack([size[b, 0] - 2.0, size[b, 1] + 0.06, np.full(len(b), 1.3)], 1), yaw[b], bottom=False)
-        keep = np.ones((len(b), 10), dtype=bool)
-        keep[:, :2] = False  # the band's top is inside the building
-        self.parts["building"].add(v, t.reshape(len(b), 10, 3)[keep], "building_glass")
-        v, t = boxes(np.concatenate([centre[b, :2], band_z[:, None]], 1),
-                     np.stack([size[b, 0] + 0.06, size[b, 1] - 2.0, np.full(len(b), 1.3)], 1), yaw[b], bottom=False)
-        self.parts["building"].add(v, t.reshape(len(b), 10, 3)[keep], "building_glass")
+        """Walls, recessed windows, doors and shop fronts over footprints (N, 4, 3) of ``heights`` (N,)."""
+        facades.layout(rects, heights, self.rng).add_to(self.parts["building"])
 
     # -- trees ---------------------------------------------------------------------------------------
-    def _trees(self, xy: np.ndarray, z: np.ndarray) -> None:
+    def _trees(self, xy: np.ndarray, z: np.ndarray, shares: tuple[float, ...], yaw: np.ndarray | None = None,
+               max_across_m: float = np.inf) -> None:
+        """Trees at (n, 2) ``xy`` on ground height ``z`` (n,), their species drawn with ``shares`` (one per species
+        of :data:`trees.SPECIES`)."""
         n = len(xy)
         if not n:
             return
-        trunk_h = self.rng.uniform(1.8, 3.2, n)
-        crown_r = self.rng.uniform(1.4, 2.6, n)
-        base = np.concatenate([xy, z[:, None] - 0.1], 1)
-        self.parts["vegetation"].add(*prisms(base, self.rng.uniform(0.12, 0.22, n), trunk_h + 0.5, 5), "bark")
-        crown = base + np.stack([np.zeros(n), np.zeros(n), trunk_h + crown_r * 1.1], 1)
-        radii = np.stack([crown_r, crown_r * self.rng.uniform(0.8, 1.0, n), crown_r * 1.25], 1)
-        self.parts["vegetation"].add(*blobs(crown, radii, self.rng.uniform(0, np.pi, n)), "foliage")
+        species = self.rng.choice(len(trees.SPECIES), n, p=shares)
+        grown = trees.grow(np.concatenate([xy, z[:, None]], 1), species, self.rng, yaw, max_across_m)
+        self.parts["vegetation"].add(grown.vertices, grown.triangles, grown.material)
         r = 0.5
         self.take(xy[:, None, :] + np.array([[-r, -r], [r, -r], [r, r], [-r, r]])[None])
 
     def _street_trees(self) -> None:
-        spots, zs = [], []
+        spots, zs, yaws = [], [], []
         for edge, lanes in self.edges.items():
             if edge in self.highway:
                 continue
@@ -179,12 +161,15 @@ class PropPlacer:
             length = cumulative_length(line)[-1]
             s = np.arange(self.rng.uniform(3.0, 9.0), length - 3.0, self.rng.uniform(10.0, 18.0))
             if len(s):
-                pos, _ = interpolate(line, s)
+                pos, direction = interpolate(line, s)
                 ok = ~self.grid.near(self.paved, pos, 0.7, outside=True) & self.free(pos)
                 spots.append(pos[ok, :2])
                 zs.append(pos[ok, 2])
+                yaws.append(np.arctan2(direction[ok, 1], direction[ok, 0]))
         if spots:
-            self._trees(np.concatenate(spots), np.concatenate(zs))
+            # Crowns stay within STREET_CROWN_ACROSS_M across the street: the façades stand SETBACK_M - 1.2 m behind.
+            self._trees(np.concatenate(spots), np.concatenate(zs), STREET_TREES, np.concatenate(yaws),
+                        STREET_CROWN_ACROSS_M)
 
     def _scattered_trees(self, area_per_tree_m2: float = 1500.0, max_trees: int = 2000) -> None:
         x0, y0 = self.grid.x0, self.grid.y0
@@ -192,7 +177,7 @@ class PropPlacer:
         n = min(max_trees, int((x1 - x0) * (y1 - y0) / area_per_tree_m2))
         xy = self.rng.uniform((x0, y0), (x1, y1), (n, 2))
         ok = ~self.grid.near(self.paved, xy, 4.0, outside=True) & ~self.grid.near(self.taken, xy, 2.0, outside=True)
-        self._trees(xy[ok], np.zeros(int(ok.sum())))
+        self._trees(xy[ok], np.zeros(int(ok.sum())), SCATTERED_TREES)
 
     # -- street lamps and barriers -----------------------------------------------------------------
     def _lamps(self, edge: str, lanes) -> np.ndarray:

@@ -252,8 +252,16 @@ def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray
     return box_lo - CHUNK_PAD_M, box_hi + CHUNK_PAD_M
 
 
+# Static materials shaded with smooth normals (pipeline.world.smooth_normals): tree crowns and trunks are coarse
+# polyhedra (pipeline.world.trees) that should read as round clumps and round trunks; creases sharper than
+# SMOOTH_CREASE_DEG (a conifer tier's rim) stay sharp.
+SMOOTH_MATERIALS = ("foliage", "foliage_light", "foliage_dark", "bark")
+SMOOTH_CREASE_DEG = 80.0
+
+
 class StaticScene:
-    """The static world (built once per run): all meshes merged into one Embree geometry.
+    """The static world (built once per run): all meshes merged into one Embree geometry. Hits on SMOOTH_MATERIALS
+    get interpolated corner normals (as actors' do), the others their triangle's normal.
 
     Attributes:
         triangle_material: (T,) int32; triangle_semantic: (T,) uint8; num_triangles: T.
@@ -274,6 +282,12 @@ class StaticScene:
             self.triangle_semantic = np.concatenate([np.full(len(m), int(m.semantic), np.uint8) for m in meshes])
             self._scene = _embree(merged.vertices, merged.triangles)
             self._vertices, self._triangles = merged.vertices, merged.triangles
+            smooth = np.flatnonzero(np.isin(merged.material, [material_index(n) for n in SMOOTH_MATERIALS]))
+            self._smooth_row = np.full(self.num_triangles, -1, np.int64)  # triangle -> row of _corner_normals
+            self._smooth_row[smooth] = np.arange(len(smooth))
+            self._corner_normals = smooth_normals.corner_normals(
+                merged.vertices, merged.triangles[smooth], np.ones(3), SMOOTH_CREASE_DEG) if len(smooth) else \
+                np.zeros((0, 3, 3), np.float32)
             self.chunk_boxes = chunk_boxes(merged.vertices, merged.triangles)
             self.floor_z_m = float(np.min(merged.vertices[:, 2]))
         else:
@@ -282,6 +296,7 @@ class StaticScene:
             self.triangle_semantic = np.zeros(0, np.uint8)
             self._scene = None
             self._vertices, self._triangles = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+            self._smooth_row, self._corner_normals = np.zeros(0, np.int64), np.zeros((0, 3, 3), np.float32)
             self.chunk_boxes = (np.zeros((0, 3)), np.zeros((0, 3)))
 
     def set_triangle_materials(self, mesh_index: int, triangles: np.ndarray, material: np.ndarray | int) -> None:
@@ -301,10 +316,26 @@ class StaticScene:
         misses, so it must contain every ray that can hit (e.g. from :attr:`chunk_boxes`)."""
         n = len(rays)
         if self._scene is not None and (where is None or np.count_nonzero(where) > SUBSET_MAX * n):
-            return _cast(self._scene, rays, threads)  # gathering and scattering would cost more than they save
+            # All the rays: gathering and scattering would cost more than they save.
+            return self._smoothed(rays, *_cast(self._scene, rays, threads, uv=True))
         sub = np.flatnonzero(where) if self._scene is not None else np.zeros(0, np.int64)
-        hits = _cast(self._scene, np.take(rays, sub, axis=0), threads) if len(sub) else _NO_HITS
-        return spread_cast(n, sub, *hits)
+        if not len(sub):
+            return spread_cast(n, sub, *_NO_HITS)
+        picked = np.take(rays, sub, axis=0)
+        return spread_cast(n, sub, *self._smoothed(picked, *_cast(self._scene, picked, threads, uv=True)))
+
+    def _smoothed(self, rays: np.ndarray, t: np.ndarray, prim: np.ndarray, normal: np.ndarray, uv: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, prim, normal) of a cast of ``rays``, the normals of hits on smooth triangles interpolated."""
+        if not len(self._corner_normals):
+            return t, prim, normal
+        hit = np.flatnonzero(np.isfinite(t))
+        row = self._smooth_row[prim[hit]]
+        on = hit[row >= 0]
+        if len(on):
+            normal[on] = smooth_normals.interpolate(self._corner_normals[row[row >= 0]], uv[on], normal[on],
+                                                    rays[on, 3:])
+        return t, prim, normal
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0, where: np.ndarray | None = None
                  ) -> np.ndarray:

@@ -15,7 +15,7 @@ from pipeline.world.actors import Actors
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
-from tests.sensors.conftest import camera_config
+from tests.sensors.conftest import camera_config, wall_mesh
 
 EGO = Transform.from_xyz_rpy((0.0, 0.0, 0.75))  # a car's box centre is 0.75 m above the road
 MATTE = "concrete"  # no specular term: closed forms hold for the diffuse light alone
@@ -231,3 +231,21 @@ def test_retroreflection_is_closed_form_and_returns_towards_the_lamp():
         out[name] = added.mean()
     # Seen from beside the lamp the marking returns many times its diffuse light; seen from far off, almost none.
     assert out["beside"] > 5.0 * out["far"]
+
+
+def test_lit_windows_glow_with_the_lamps_only_when_lights_are_on():
+    """A lit pane adds the NIGHT_GLOWS radiance times the condition's lamp_glow (times the exposure) when the lights are
+    on, and nothing by day: by day it is glass like the others."""
+    from pipeline.sensors.shading import NIGHT_GLOWS
+
+    rgb, scale, actors_only = NIGHT_GLOWS["window_lit"]
+    assert scale == "lamp_glow" and not actors_only
+    rays = np.array([[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]], np.float32)  # square onto a wall 10 m ahead
+    for name, glows in (("night", True), ("dusk", True), ("morning", False)):
+        cond = get_condition(name)
+        dark = Condition(cond.config.model_copy(update={"vehicle_lights": cond.config.vehicle_lights.model_copy(
+            update={"lamp_glow": 0.0})}))
+        lit_scene = FrameScene(StaticScene([wall_mesh(10.0, material="window_lit")]), Actors.empty())
+        out, off = (shade(lit_scene, rays, lit_scene.cast_rays(rays), c) for c in (cond, dark))
+        added = np.asarray(rgb) * cond.lamp_glow * cond.exposure if glows else np.zeros(3)
+        np.testing.assert_allclose(out[0] - off[0], added, rtol=1e-5, atol=1e-7)

@@ -86,3 +86,41 @@ def test_worn_markings_blend_towards_the_asphalt():
 def test_bad_pixel_angle_is_refused():
     with pytest.raises(ValueError, match="pixel_angle_rad"):
         textured_albedo(*_ground_hits(_grid(4), 10.0, "asphalt"), pixel_angle_rad=0.0)
+
+
+def _wall_hits(points_yz: np.ndarray, distance_m: float, material: str):
+    """Rays along +x onto a wall x = 0 facing -x at (y, z) points (N, 2): the arguments of :func:`textured_albedo`."""
+    n = len(points_yz)
+    rays = np.zeros((n, 6), np.float32)
+    rays[:, 0], rays[:, 1:3], rays[:, 3] = -distance_m, points_yz, 1.0
+    normal = np.tile(np.float32([-1.0, 0.0, 0.0]), (n, 1))
+    colour = np.tile(material_arrays()["albedo"][material_index(material)], (n, 1)).astype(np.float32)
+    return (rays, np.full(n, distance_m, np.float32), np.ones(n, bool), np.zeros(n, np.int32),
+            np.full(n, material_index(material), np.int32), normal, colour)
+
+
+def test_brick_courses_and_their_mean_from_afar():
+    """Near, a brick wall is bricks (each its own shade) and mortar joints in their share of the wall; from afar, where
+    a pixel spans many courses, it is the two blended in that share, uniformly."""
+    from pipeline.sensors.textures import BRICK_COURSE_M, BRICK_LENGTH_M, JOINT_M, MORTAR_RGB
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([0.0, 1.0], [4.0, 5.0], (4000, 2))
+    brick = material_arrays()["albedo"][material_index("brick")]
+    share = JOINT_M / BRICK_COURSE_M + JOINT_M / BRICK_LENGTH_M - JOINT_M**2 / (BRICK_COURSE_M * BRICK_LENGTH_M)
+    far = textured_albedo(*_wall_hits(pts, 10.0, "brick"), pixel_angle_rad=1.0)  # a 10 m footprint
+    np.testing.assert_allclose(far, np.tile((1 - share) * brick + share * MORTAR_RGB, (len(pts), 1)), rtol=1e-5)
+    near = textured_albedo(*_wall_hits(pts, 2.0, "brick"), pixel_angle_rad=0.0005)  # 1 mm
+    mortar = np.abs(near[:, 1] / near[:, 0] - MORTAR_RGB[1] / MORTAR_RGB[0]) < 0.05
+    assert abs(mortar.mean() - share) < 0.03
+    shades = near[~mortar, 0] / brick[0]  # each brick's shade (1 +- 0.14) times the stains (1 +- 0.13)
+    assert shades.std() > 0.04 and shades.min() > 0.86 * 0.87 and shades.max() < 1.14 * 1.13
+
+
+def test_window_glass_shows_rooms_behind_it():
+    """Glass varies (furniture and shade behind it) about its albedo, within [0.35, 2.2] times it."""
+    pts = np.random.default_rng(1).uniform([0.0, 1.0], [20.0, 20.0], (3000, 2))
+    for name in ("building_glass", "window_lit", "glass_tinted"):
+        out = textured_albedo(*_wall_hits(pts, 10.0, name), pixel_angle_rad=0.001)[:, 0]
+        base = material_arrays()["albedo"][material_index(name)][0]
+        assert out.std() > 0.15 * base and 0.35 * base - 1e-6 <= out.min() and out.max() <= 2.2 * base + 1e-6

@@ -219,3 +219,37 @@ def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
     assert by_actors.any() and not (by_actors & ~cand).any()
     np.testing.assert_array_equal(scene.occluded_rays(rays, actor_rays=cand), scene.occluded_rays(rays))
     assert cand.mean() < 0.5
+
+
+@pytest.mark.parametrize("material", ["foliage", "building"])
+def test_static_foliage_gets_smooth_normals(material):
+    """A ray at an icosahedron of foliage gets the corners' normals interpolated at the hit (on a regular
+    icosahedron the corner normals are the vertex directions, exactly), one of another material its face's normal."""
+    from pipeline.world.primitives import ICO_FACES, ICO_VERTICES
+
+    mesh = Mesh(ICO_VERTICES * 2.0, ICO_FACES, material_index(material), SemanticClass.VEGETATION)
+    scene = FrameScene(StaticScene([mesh]), Actors.empty())
+    rng = np.random.default_rng(0)
+    target = rng.normal(size=(200, 3)) * 0.3
+    origins = target + rng.normal(size=(200, 3)) * 0.1 + [[0.0, 0.0, 10.0]]
+    hits = scene.cast(origins, target - origins)
+    assert hits.hit.all()
+    d = target - origins
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    point = origins + d * hits.t_m[:, None]
+    v = (ICO_VERTICES * 2.0)[ICO_FACES]  # (20, 3, 3)
+    # Which face: the one whose plane holds the point.
+    face_n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
+    face = np.argmin(np.abs(np.einsum("fk,nk->nf", face_n, point) - np.einsum("fk,fk->f", face_n, v[:, 0])[None]), 1)
+    if material == "building":
+        np.testing.assert_allclose(hits.normal, face_n[face], atol=1e-5)
+        return
+    a, b, c = v[face, 0], v[face, 1], v[face, 2]
+    area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    w = np.stack([np.linalg.norm(np.cross(q - p, point - p), axis=1) for p, q in ((b, c), (c, a), (a, b))], 1)
+    w /= area[:, None]  # barycentric weights of a, b, c
+    expected = np.einsum("nk,nkd->nd", w, v[face] / 2.0)
+    expected /= np.linalg.norm(expected, axis=1, keepdims=True)
+    np.testing.assert_allclose(hits.normal, expected, atol=1e-4)
+    assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", hits.normal, face_n[face]), -1, 1))).max() > 10.0
