@@ -1,8 +1,8 @@
 """The fixed tiny run of the byte-identity test (tests/test_byte_identity.py) and its two kinds of digest.
 
 simulate (highway, seed 3, 200 vehicles, 90 s warm-up, 0.3 s recorded) -> render (a 320x240 camera and a
-32-channel LiDAR, the default rig's radar left out: a rig without radars; night and fog, two frames each) ->
-export (COCO of both records, KITTI and YOLO of the night record) -> evaluate (the COCO ground truth against
+32-channel LiDAR, the default rig's radar left out: a rig without radars; night, fog and morning, two frames each) ->
+export (COCO of all records, KITTI and YOLO of the night record) -> evaluate (the COCO ground truth against
 detections made from it by a fixed shift and
 score, grouped by condition). MCAP and rosbag2 are left out: they embed each record's meta.json (command
 line, paths). Everything goes through the CLI (``pipeline.stages.cli.main``), so the test holds whatever
@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 
 GOLDEN = Path(__file__).resolve().parent / "data" / "byte_identity_golden.json"
-CONDITIONS = ("night", "fog")
+CONDITIONS = ("night", "fog", "morning")  # morning: the daylight look (sky model, soft shadows)
 ISA_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512vl", "avx512bw", "avx512dq")
 
 
