@@ -36,15 +36,23 @@ TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
 HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
 STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
 MARKER_LAMP_RGB = np.array([1.6, 0.7, 0.05], np.float32)  # amber side markers of long vehicles
-PLATE_LAMP_IRRADIANCE = 0.6  # a rear plate's lamp, times the plate's albedo (white light on the plate)
+PLATE_LAMP_RGB = np.array([0.6, 0.6, 0.6], np.float32)  # a rear plate's lamp: white light on the plate
+# A room lit behind a façade pane: warm (tungsten-like) light times the pane's textured albedo, so each window shows
+# its own room, brighter or dimmer, instead of a flat saturated rectangle.
+ROOM_LIGHT_RGB = np.array([0.8, 0.55, 0.3], np.float32)
 # What glows with the vehicle lights (dusk, night): material -> (radiance added, the condition's glow scale, on actors
-# only). A rear plate is lit, not glowing: its lamp's PLATE_LAMP_IRRADIANCE times its albedo.
+# only).
 NIGHT_GLOWS = {
     "taillight": (TAIL_LIGHT_RGB, "tail_glow", True),
     "headlight": (HEAD_LIGHT_RGB, "head_glow", True),
     "lamp": (STREET_LAMP_RGB, "lamp_glow", False),
     "marker_lamp": (MARKER_LAMP_RGB, "tail_glow", True),
-    "window_lit": (np.array([0.2, 0.12, 0.05], np.float32), "lamp_glow", False),  # rooms lit behind façade panes
+}
+# What is lit, not glowing, with the lights on: material -> (irradiance, times the hit's albedo; the glow scale; on
+# actors only). A rear plate under its plate lamp; a room behind a lit pane (its albedo is the room's, textured).
+NIGHT_LIT = {
+    "plate_rear": (PLATE_LAMP_RGB, "tail_glow", True),
+    "window_lit": (ROOM_LIGHT_RGB, "lamp_glow", False),
 }
 
 
@@ -106,8 +114,10 @@ def shade(
         for name, (rgb, scale, actors_only) in NIGHT_GLOWS.items():
             which = mat[glowing] == material_index(name)
             out[glowing[which & on_actor if actors_only else which]] += rgb * np.float32(getattr(condition, scale))
-        plates = glowing[(mat[glowing] == material_index("plate_rear")) & on_actor]
-        out[plates] += hits.color[plates] * np.float32(PLATE_LAMP_IRRADIANCE * condition.tail_glow)
+        for name, (rgb, scale, actors_only) in NIGHT_LIT.items():
+            which = mat[glowing] == material_index(name)
+            lit = glowing[which & on_actor if actors_only else which]
+            out[lit] += hits.color[lit] * (rgb * np.float32(getattr(condition, scale)))
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
     if wet is not None and len(wet.road):
@@ -120,7 +130,7 @@ def shade(
 
 def _materials() -> dict[str, np.ndarray]:
     mats = material_arrays()
-    lights = [material_index(n) for n in (*NIGHT_GLOWS, "plate_rear")]
+    lights = [material_index(n) for n in (*NIGHT_GLOWS, *NIGHT_LIT)]
     mats["glows"] = (mats["emissive"].max(axis=1) > 0) | np.isin(np.arange(len(mats["specular"])), lights)
     return mats
 

@@ -18,7 +18,7 @@ window is a recess whose reveals catch the light. Styles, drawn per building:
 Every building has a door on its front. Panes vary: a share of them has a blind or curtain closed (BLIND_CLOSED)
 or drawn over its upper part (BLIND_PARTIAL; material ``window_blind``), and a share, drawn per building from
 LIT_RATE (shops: SHOP_LIT_RATE), is lit from inside (``window_lit``: glass by day, a warm glow with the lamps at
-dusk and night, pipeline.sensors.shading NIGHT_GLOWS). Wall colours come from WALLS.
+dusk and night, pipeline.sensors.shading NIGHT_LIT). Wall colours come from WALLS.
 
 Frame of face j: origin at footprint corner j (at the footprint's base height), 'along' from corner j to corner
 j + 1, 'across' outwards (the face's normal), z up: the wall's outer plane is across = 0, the glass across = -depth.

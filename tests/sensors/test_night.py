@@ -234,12 +234,13 @@ def test_retroreflection_is_closed_form_and_returns_towards_the_lamp():
 
 
 def test_lit_windows_glow_with_the_lamps_only_when_lights_are_on():
-    """A lit pane adds the NIGHT_GLOWS radiance times the condition's lamp_glow (times the exposure) when the lights are
-    on, and nothing by day: by day it is glass like the others."""
-    from pipeline.sensors.shading import NIGHT_GLOWS
+    """A lit pane adds its room's light (the NIGHT_LIT irradiance times the pane's albedo, times the condition's
+    lamp_glow and the exposure) when the lights are on, and nothing by day: by day it is glass like the others."""
+    from pipeline.sensors.shading import NIGHT_LIT
 
-    rgb, scale, actors_only = NIGHT_GLOWS["window_lit"]
+    rgb, scale, actors_only = NIGHT_LIT["window_lit"]
     assert scale == "lamp_glow" and not actors_only
+    albedo = material_arrays()["albedo"][material_index("window_lit")]
     rays = np.array([[0.0, 0.0, 1.0, 1.0, 0.0, 0.0]], np.float32)  # square onto a wall 10 m ahead
     for name, glows in (("night", True), ("dusk", True), ("morning", False)):
         cond = get_condition(name)
@@ -247,5 +248,5 @@ def test_lit_windows_glow_with_the_lamps_only_when_lights_are_on():
             update={"lamp_glow": 0.0})}))
         lit_scene = FrameScene(StaticScene([wall_mesh(10.0, material="window_lit")]), Actors.empty())
         out, off = (shade(lit_scene, rays, lit_scene.cast_rays(rays), c) for c in (cond, dark))
-        added = np.asarray(rgb) * cond.lamp_glow * cond.exposure if glows else np.zeros(3)
+        added = albedo * np.asarray(rgb) * cond.lamp_glow * cond.exposure if glows else np.zeros(3)
         np.testing.assert_allclose(out[0] - off[0], added, rtol=1e-5, atol=1e-7)
