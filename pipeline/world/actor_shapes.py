@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
-from pipeline.world.loft import BodySpec, decal, loft
+from pipeline.world.loft import BodySpec, decal, loft, side_strip, surface_point
 from pipeline.world.loft import wheel as loft_wheel
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
@@ -127,13 +127,58 @@ def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
     return parts
 
 
-def _car_body(spec: BodySpec, mirror_u: float, ends: Ends) -> list[Part]:
-    """A lofted car: body, four wheels set in the arches, door mirrors, lamps, plates and grille."""
+@dataclass(frozen=True)
+class Sides:
+    """What breaks up a body's sides, as strips laid onto the surface (:func:`pipeline.world.loft.side_strip`) on
+    both sides: door shut lines (dark gaps from the sill to the beltline; ``seams`` (u, z_low) with u along the body,
+    0 rear, 1 front, and the height they start at, None for just above the sill), door handles just ahead of a
+    door's rear edge at ``handles_u``, and horizontal ``bands`` (u0, u1, z, height): a van's sliding-door rail and
+    rubbing strips. A flat unbroken side read to the detector as a wall or a box, not a car or a van."""
+
+    seams: tuple[tuple[float, float | None], ...] = ()
+    handles_u: tuple[float, ...] = ()
+    bands: tuple[tuple[float, float, float, float], ...] = ()
+
+
+SEAM_WIDTH_M = 0.012  # a shut line: a 3-5 mm gap whose shadowed inside reads about a centimetre wide
+HANDLE_SIZE_M = (0.17, 0.035)
+
+
+def _side_details(body: Part, spec: BodySpec, sides: Sides) -> list[Part]:
+    verts, tris, _ = body
+    belt = np.asarray(spec.belt, np.float64).T
+    strips = []
+
+    def put(points_xz, width):
+        strip = side_strip(verts, tris, points_xz, width, "trim")
+        if strip is None:
+            raise ValueError(f"side detail at x, z = {np.round(points_xz[0], 2).tolist()} misses the body's side")
+        strips.append(strip)
+
+    for u, z_low in sides.seams:
+        x, top = (u - 0.5) * spec.length_m, float(np.interp(u, *belt)) - 0.015
+        z0 = spec.sill_z_m + 0.05 if z_low is None else z_low
+        # Where the underside rises towards an arch the side ends higher: start at the lowest height it covers.
+        while z0 < top - 0.1 and surface_point(verts, tris, np.array([x, 1e3, z0]), np.array([0.0, -1.0, 0.0])) is None:
+            z0 += 0.02
+        put(np.column_stack([np.full(6, x), np.linspace(z0, top, 6)]), SEAM_WIDTH_M)
+    for u in sides.handles_u:
+        x, z = (u - 0.5) * spec.length_m, float(np.interp(u, *belt)) - 0.1
+        put(np.array([[x - 0.5 * HANDLE_SIZE_M[0], z], [x, z], [x + 0.5 * HANDLE_SIZE_M[0], z]]), HANDLE_SIZE_M[1])
+    for u0, u1, z, height in sides.bands:
+        put(np.column_stack([(np.linspace(u0, u1, 8) - 0.5) * spec.length_m, np.full(8, z)]), height)
+    mirrored = [(v * [1.0, -1.0, 1.0], t[:, ::-1], m) for v, t, m in strips]
+    return strips + mirrored
+
+
+def _car_body(spec: BodySpec, mirror_u: float, ends: Ends, sides: Sides = Sides()) -> list[Part]:
+    """A lofted car: body, four wheels set in the arches, door mirrors, lamps, plates and grille, door lines."""
     body = loft(spec)
     half = 0.5 * spec.width_m
     xs = tuple((u - 0.5) * spec.length_m for u in spec.wheels_u)
     belt_z = float(np.interp(mirror_u, *np.asarray(spec.belt).T))
-    return [body, *_end_details(body, half, ends), *_wheels(xs, half - 0.03, spec.wheel_radius_m),
+    return [body, *_end_details(body, half, ends), *_side_details(body, spec, sides),
+            *_wheels(xs, half - 0.03, spec.wheel_radius_m),
             *_mirrors((mirror_u - 0.5) * spec.length_m, belt_z, half * (1.0 - 0.5 * spec.tumblehome))]
 
 
@@ -145,7 +190,8 @@ def sedan() -> Mesh:
                     sill_z_m=0.3, belt=((0.0, 0.92), (0.35, 0.98), (0.72, 0.98), (1.0, 0.86)),
                     wheels_u=(0.19, 0.8), wheel_radius_m=0.31, glass_u=(0.33, 0.72), pillars_u=(0.53,))
     ends = Ends(head_z=0.68, tail_z=0.86, plate_front_z=0.5, plate_rear_z=0.63, bumper_z=0.47)
-    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+    sides = Sides(seams=((0.712, None), (0.53, None), (0.278, None)), handles_u=(0.565, 0.313))
+    return merge(_car_body(spec, 0.71, ends, sides), ObjectClass.CAR)
 
 
 def hatchback() -> Mesh:
@@ -156,7 +202,8 @@ def hatchback() -> Mesh:
                     sill_z_m=0.3, belt=((0.0, 0.95), (0.5, 0.98), (1.0, 0.86)),
                     wheels_u=(0.16, 0.83), wheel_radius_m=0.3, glass_u=(0.1, 0.7), pillars_u=(0.47, 0.13))
     ends = Ends(head_z=0.64, tail_z=0.9, plate_front_z=0.49, plate_rear_z=0.68, bumper_z=0.48)
-    return merge(_car_body(spec, 0.7, ends), ObjectClass.CAR)
+    sides = Sides(seams=((0.735, None), (0.47, None), (0.255, None)), handles_u=(0.505, 0.29))
+    return merge(_car_body(spec, 0.7, ends, sides), ObjectClass.CAR)
 
 
 def estate() -> Mesh:
@@ -167,7 +214,8 @@ def estate() -> Mesh:
                     sill_z_m=0.3, belt=((0.0, 0.96), (0.5, 0.98), (1.0, 0.86)),
                     wheels_u=(0.18, 0.81), wheel_radius_m=0.32, glass_u=(0.07, 0.72), pillars_u=(0.52, 0.27))
     ends = Ends(head_z=0.65, tail_z=0.9, plate_front_z=0.5, plate_rear_z=0.68, bumper_z=0.48)
-    return merge(_car_body(spec, 0.72, ends), ObjectClass.CAR)
+    sides = Sides(seams=((0.723, None), (0.52, None), (0.267, None)), handles_u=(0.555, 0.3))
+    return merge(_car_body(spec, 0.72, ends, sides), ObjectClass.CAR)
 
 
 def suv() -> Mesh:
@@ -179,7 +227,8 @@ def suv() -> Mesh:
                     wheels_u=(0.17, 0.82), wheel_radius_m=0.37, glass_u=(0.08, 0.71), pillars_u=(0.5, 0.25),
                     corner_m=0.14)
     ends = Ends(head_z=0.88, tail_z=1.02, plate_front_z=0.64, plate_rear_z=0.84, bumper_z=0.62)
-    return merge(_car_body(spec, 0.71, ends), ObjectClass.CAR)
+    sides = Sides(seams=((0.721, None), (0.5, None), (0.269, None)), handles_u=(0.535, 0.3))
+    return merge(_car_body(spec, 0.71, ends, sides), ObjectClass.CAR)
 
 
 def coupe() -> Mesh:
@@ -190,7 +239,14 @@ def coupe() -> Mesh:
                     sill_z_m=0.28, belt=((0.0, 0.86), (0.5, 0.9), (1.0, 0.8)), tumblehome=0.26,
                     wheels_u=(0.19, 0.81), wheel_radius_m=0.32, glass_u=(0.36, 0.7))
     ends = Ends(head_z=0.6, tail_z=0.78, plate_front_z=0.46, plate_rear_z=0.58, bumper_z=0.44)
-    return merge(_car_body(spec, 0.69, ends), ObjectClass.CAR)
+    sides = Sides(seams=((0.716, None), (0.42, None)), handles_u=(0.455,))
+    return merge(_car_body(spec, 0.69, ends, sides), ObjectClass.CAR)
+
+
+# A van's cab door (its front edge above the front arch), a sliding door behind it with its rail running back at the
+# beltline, handles, and a black rubbing strip between the arches.
+VAN_SIDES = Sides(seams=((0.885, 0.76), (0.74, None), (0.455, None)), handles_u=(0.77, 0.69),
+                  bands=((0.3, 0.455, 1.12, 0.035), (0.26, 0.74, 0.62, 0.1)))
 
 
 def van() -> Mesh:
@@ -200,7 +256,7 @@ def van() -> Mesh:
                     sill_z_m=0.38, belt=((0.0, 1.1), (1.0, 1.1)), tumblehome=0.06, plan_taper=0.05,
                     wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86), corner_m=0.16)
     ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
-    return merge(_car_body(spec, 0.84, ends), ObjectClass.VAN)
+    return merge(_car_body(spec, 0.84, ends, VAN_SIDES), ObjectClass.VAN)
 
 
 def minibus() -> Mesh:
@@ -211,7 +267,7 @@ def minibus() -> Mesh:
                     wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86),
                     extra_glass=((0.05, 0.7, 1.25, 1.85),), pillars_u=(0.28, 0.5), corner_m=0.16)
     ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
-    return merge(_car_body(spec, 0.84, ends), ObjectClass.VAN)
+    return merge(_car_body(spec, 0.84, ends, VAN_SIDES), ObjectClass.VAN)
 
 
 def pickup() -> Mesh:
@@ -224,7 +280,8 @@ def pickup() -> Mesh:
     ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.82,
                 bumper_z=0.66)
     cover = cuboid(((0.03 - 0.5) * 5.4, -0.7, 1.1), ((0.39 - 0.5) * 5.4, 0.7, 1.12), "trim")  # black tonneau cover
-    return merge([*_car_body(spec, 0.71, ends), cover], ObjectClass.CAR)
+    sides = Sides(seams=((0.71, None), (0.56, None), (0.43, None)), handles_u=(0.595, 0.465))
+    return merge([*_car_body(spec, 0.71, ends, sides), cover], ObjectClass.CAR)
 
 
 def _truck_rear(x: float, z_lamp: float, half_w: float) -> list[Part]:

@@ -323,3 +323,29 @@ def decal(verts: np.ndarray, tris: np.ndarray, y: float, z: float, width: float,
                         for sx, sz in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
     quad = np.array([[0, 1, 2], [0, 2, 3]])
     return corners, quad, np.full(2, material_index(material), np.int32)
+
+
+def side_strip(verts: np.ndarray, tris: np.ndarray, points_xz: np.ndarray, width: float, material: str,
+               lift_m: float = 0.004) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A thin ribbon (``width`` across, of ``material``) laid along the body's left side (+y) through the points
+    (k, 2) of x and z (k >= 2): each point is where a ray along -y at that (x, z) meets the surface, lifted
+    ``lift_m`` along the normal there, so the strip follows the side's curvature (door shut lines, handles,
+    rubbing strips). None where a ray misses. Mirror it (y -> -y, winding reversed) for the right side."""
+    points_xz = np.asarray(points_xz, np.float64)
+    found = [surface_point(verts, tris, np.array([x, 1e3, z]), np.array([0.0, -1.0, 0.0])) for x, z in points_xz]
+    if any(f is None for f in found):
+        return None
+    centre = np.array([p + lift_m * n for p, n in found])
+    normal = np.array([n for _, n in found])
+    along = np.gradient(centre, axis=0)
+    across = np.cross(normal, along)
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    k = len(centre)
+    v = np.concatenate([centre - 0.5 * width * across, centre + 0.5 * width * across])
+    quads = [t for i in range(k - 1) for t in ((i, i + 1, k + i + 1), (i, k + i + 1, k + i))]
+    t = np.array(quads, np.int64)
+    # Face outwards (+y side): flip the winding where the normal of the first triangle points inwards.
+    a, b, c = v[t[0]]
+    if np.cross(b - a, c - a) @ normal[0] < 0:
+        t = t[:, ::-1]
+    return v, t, np.full(len(t), material_index(material), np.int32)
