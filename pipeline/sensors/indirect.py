@@ -96,6 +96,15 @@ def occlusion_rays(rays, t_m, normal, rows, pattern):
     return out
 
 
+@kernel("boolean(int64, int64, int32[::1], float32[:, ::1], float32[::1], float32, float32)")
+def same_surface(i, j, instance, normal, t_m, normal_cos, depth):
+    """Pixels i and j lie on one surface: the same instance, depths within ``depth`` of i's (relatively), normals'
+    cosine above ``normal_cos``."""
+    if instance[j] != instance[i] or abs(t_m[j] - t_m[i]) > depth * t_m[i]:
+        return False
+    return normal[i, 0] * normal[j, 0] + normal[i, 1] * normal[j, 1] + normal[i, 2] * normal[j, 2] >= normal_cos
+
+
 @kernel("float32[::1](float32[::1], boolean[::1], int32[::1], float32[:, ::1], float32[::1], int64, int64, int64, "
         "float32, float32)")
 def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, radius, normal_cos, depth):
@@ -113,12 +122,7 @@ def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, rad
             for yy in range(max(0, y - radius), min(height, y + radius + 1)):
                 for xx in range(max(0, x - radius), min(width, x + radius + 1)):
                     j = yy * width + xx
-                    if not traced[j] or instance[j] != instance[i]:
-                        continue
-                    if abs(t_m[j] - t_m[i]) > depth * t_m[i]:
-                        continue
-                    if (normal[i, 0] * normal[j, 0] + normal[i, 1] * normal[j, 1]
-                            + normal[i, 2] * normal[j, 2]) < normal_cos:
+                    if not traced[j] or not same_surface(i, j, instance, normal, t_m, normal_cos, depth):
                         continue
                     total += blocked[j]
                     count += 1

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.indirect import same_surface
 from pipeline.world.scene import FrameScene, Hits
 
 if TYPE_CHECKING:  # only its properties are read
@@ -267,20 +268,11 @@ def borrowed_shares(centre, instance, normal, t_m, where, sample_instance, sampl
     return out
 
 
-@kernel("boolean(int64, int64, int32[::1], float32[:, ::1], float32[::1], float32, float32)")
-def _same_surface(i, j, instance, normal, t_m, normal_cos, depth):
-    """Pixels i and j lie on one surface: the same instance, depths within ``depth`` of i's (relatively), normals'
-    cosine above ``normal_cos``."""
-    if instance[j] != instance[i] or abs(t_m[j] - t_m[i]) > depth * t_m[i]:
-        return False
-    return normal[i, 0] * normal[j, 0] + normal[i, 1] * normal[j, 1] + normal[i, 2] * normal[j, 2] >= normal_cos
-
-
 @kernel("boolean[::1](float32[::1], boolean[::1], int32[::1], float32[:, ::1], float32[::1], int64, int64, float32, "
         "float32, int64)")
 def _mixed_windows(value, traced, instance, normal, t_m, height, width, normal_cos, depth, radius):
     """(H * W,) bool: the ``traced`` pixels of a row-major H x W grid with a traced pixel of another ``value`` within
-    ``radius`` (a square window) on their surface (:func:`_same_surface`)."""
+    ``radius`` (a square window) on their surface (:func:`same_surface`)."""
     out = np.zeros(height * width, np.bool_)
     for y in range(height):
         for x in range(width):
@@ -290,7 +282,7 @@ def _mixed_windows(value, traced, instance, normal, t_m, height, width, normal_c
             for yy in range(max(0, y - radius), min(height, y + radius + 1)):
                 for xx in range(max(0, x - radius), min(width, x + radius + 1)):
                     j = yy * width + xx
-                    if traced[j] and value[j] != value[i] and _same_surface(i, j, instance, normal, t_m, normal_cos,
+                    if traced[j] and value[j] != value[i] and same_surface(i, j, instance, normal, t_m, normal_cos,
                                                                            depth):
                         out[i] = True
                         break
@@ -334,7 +326,7 @@ def _smooth_penumbrae(value, traced, mixed, occluder, rays, sun, e1, e2, spread,
             for yy in range(max(0, y - radius), min(height, y + radius + 1)):
                 for xx in range(max(0, x - radius), min(width, x + radius + 1)):
                     j = yy * width + xx
-                    if occluder[j] > d and _same_surface(i, j, instance, normal, t_m, normal_cos, depth):
+                    if occluder[j] > d and same_surface(i, j, instance, normal, t_m, normal_cos, depth):
                         d = occluder[j]
             if not d > 0:
                 continue
@@ -349,7 +341,7 @@ def _smooth_penumbrae(value, traced, mixed, occluder, rays, sun, e1, e2, spread,
                 wy = np.float32(0.5) if abs(yy - y) == r else np.float32(1)
                 for xx in range(max(0, x - r), min(width, x + r + 1)):
                     j = yy * width + xx
-                    if traced[j] and _same_surface(i, j, instance, normal, t_m, normal_cos, depth):
+                    if traced[j] and same_surface(i, j, instance, normal, t_m, normal_cos, depth):
                         wxy = wy * (np.float32(0.5) if abs(xx - x) == r else np.float32(1))
                         total += wxy * value[j]
                         weight += wxy
