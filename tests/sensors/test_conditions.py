@@ -45,6 +45,10 @@ def test_every_shipped_yaml_validates():
     ("name: bad\nlens: {vignetting: 1.5}\n", "lens.vignetting"),
     ("name: bad\nsky: {ambient_rgb: [0.1, -0.2, 0.1]}\n", "sky"),
     ("name: bad\nrain: {streak_length_px: [50.0, 10.0]}\n", "rain"),
+    ("name: bad\nsky: {model: hosek}\n", "sky.model"),
+    ("name: bad\nsky: {model: preetham, turbidity: 1.2}\n", "sky.turbidity"),
+    ("name: bad\nsun: {elevation_deg: -5.0}\nsky: {model: preetham}\n", "sky.model"),
+    ("name: bad\nsun: {angular_radius_deg: 9.0}\n", "sun.angular_radius_deg"),
 ])
 def test_bad_yaml_names_file_and_key(tmp_path: Path, body: str, key: str):
     path = tmp_path / "mine.yaml"
