@@ -116,8 +116,8 @@ def shade(
             out[glowing[which & on_actor if actors_only else which]] += rgb * np.float32(getattr(condition, scale))
         for name, (rgb, scale, actors_only) in NIGHT_LIT.items():
             which = mat[glowing] == material_index(name)
-            lit = glowing[which & on_actor if actors_only else which]
-            out[lit] += hits.color[lit] * (rgb * np.float32(getattr(condition, scale)))
+            under_lamp = glowing[which & on_actor if actors_only else which]
+            out[under_lamp] += hits.color[under_lamp] * (rgb * np.float32(getattr(condition, scale)))
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
     if wet is not None and len(wet.road):
