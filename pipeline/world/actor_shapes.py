@@ -87,27 +87,34 @@ def _wheels(xs: tuple[float, ...], y_outer: float, radius: float, width: float =
 
 @dataclass(frozen=True)
 class Ends:
-    """Lamps, plates and grille on a body's end faces, as :func:`pipeline.world.loft.decal` quads (metres; z of
-    centres above the ground; lamps centred at ``lamp_y`` of the half-width on each side)."""
+    """Lamps, plates, grille and air intake on a body's end faces, as :func:`pipeline.world.loft.decal` quads
+    (metres; z of centres above the ground; lamps centred at ``lamp_y`` of the half-width on each side). Lamps,
+    grille and intake follow the face round its rounded corners (the lamps wrap into the wings, as real clusters
+    do); plates are flat. A car's face reads by its lamps, grille and intake: two wide clusters with a dark grille
+    between them and a dark intake below; thin lamps at the outer edges over a dark band read as a rear."""
 
     head_z: float
     tail_z: float
     plate_front_z: float
     plate_rear_z: float
-    head_size: tuple[float, float] = (0.34, 0.12)
+    head_size: tuple[float, float] = (0.4, 0.15)
     tail_size: tuple[float, float] = (0.42, 0.17)
-    lamp_y: float = 0.66
+    lamp_y: float = 0.6
     grille: tuple[float, float] = (0.0, 0.13)  # (width, height) between the headlamps; width 0 = the gap between
+    intake: tuple[float, float] | None = None  # (width, height) of a dark intake in the front bumper, round the plate
     bumper_z: float | None = None  # a dark band across the rear bumper's lower part (0.1 m tall)
     rear: bool = True  # False: the body's rear face is hidden (a truck's cab), no rear lamps or plate
+
+
+LAMP_GRID = (8, 3)  # columns, rows of a conforming end decal (lamps, grille, intake)
 
 
 def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
     verts, tris, _ = body
     parts = []
 
-    def put(y, z, size, material, end):
-        part = decal(verts, tris, y, z, size[0], size[1], material, end)
+    def put(y, z, size, material, end, conform=LAMP_GRID, lift_m=0.006):
+        part = decal(verts, tris, y, z, size[0], size[1], material, end, lift_m=lift_m, conform=conform)
         if part is None:
             raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the body's {end} face")
         parts.append(part)
@@ -119,9 +126,13 @@ def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
             put(side * lamp_y, ends.tail_z, ends.tail_size, "taillight", "rear")
     grille_w = ends.grille[0] or 2.0 * (lamp_y - 0.5 * ends.head_size[0]) - 0.08
     put(0.0, ends.head_z - 0.01, (grille_w, ends.grille[1]), "trim", "front")
-    put(0.0, ends.plate_front_z, (0.52, 0.12), "plate", "front")
+    if ends.intake is not None:
+        put(0.0, ends.plate_front_z, ends.intake, "trim", "front")
+    # The front plate stands proud of the intake round it, following the nose's curve as the intake does (a flat
+    # quad would cut behind the intake where the nose bends).
+    put(0.0, ends.plate_front_z, (0.52, 0.12), "plate", "front", conform=(3, 3), lift_m=0.012)
     if ends.rear:
-        put(0.0, ends.plate_rear_z, (0.52, 0.12), "plate_rear", "rear")
+        put(0.0, ends.plate_rear_z, (0.52, 0.12), "plate_rear", "rear", conform=None)
     if ends.bumper_z is not None and ends.rear:
         put(0.0, ends.bumper_z, (1.5 * half_w, 0.1), "trim", "rear")
     return parts
@@ -189,7 +200,7 @@ def sedan() -> Mesh:
                                      (0.92, 0.84), (0.98, 0.7), (1.0, 0.5)),
                     sill_z_m=0.3, belt=((0.0, 0.92), (0.35, 0.98), (0.72, 0.98), (1.0, 0.86)),
                     wheels_u=(0.19, 0.8), wheel_radius_m=0.31, glass_u=(0.33, 0.72), pillars_u=(0.53,))
-    ends = Ends(head_z=0.68, tail_z=0.86, plate_front_z=0.5, plate_rear_z=0.63, bumper_z=0.47)
+    ends = Ends(head_z=0.68, tail_z=0.86, plate_front_z=0.5, plate_rear_z=0.63, bumper_z=0.47, intake=(1.0, 0.1))
     sides = Sides(seams=((0.712, None), (0.53, None), (0.278, None)), handles_u=(0.565, 0.313))
     return merge(_car_body(spec, 0.71, ends, sides), ObjectClass.CAR)
 
@@ -201,7 +212,7 @@ def hatchback() -> Mesh:
                                      (1.0, 0.5)),
                     sill_z_m=0.3, belt=((0.0, 0.95), (0.5, 0.98), (1.0, 0.86)),
                     wheels_u=(0.16, 0.83), wheel_radius_m=0.3, glass_u=(0.1, 0.7), pillars_u=(0.47, 0.13))
-    ends = Ends(head_z=0.64, tail_z=0.9, plate_front_z=0.49, plate_rear_z=0.68, bumper_z=0.48)
+    ends = Ends(head_z=0.64, tail_z=0.9, plate_front_z=0.49, plate_rear_z=0.68, bumper_z=0.48, intake=(0.95, 0.1))
     sides = Sides(seams=((0.735, None), (0.47, None), (0.255, None)), handles_u=(0.505, 0.29))
     return merge(_car_body(spec, 0.7, ends, sides), ObjectClass.CAR)
 
@@ -213,7 +224,7 @@ def estate() -> Mesh:
                                     (1.0, 0.5)),
                     sill_z_m=0.3, belt=((0.0, 0.96), (0.5, 0.98), (1.0, 0.86)),
                     wheels_u=(0.18, 0.81), wheel_radius_m=0.32, glass_u=(0.07, 0.72), pillars_u=(0.52, 0.27))
-    ends = Ends(head_z=0.65, tail_z=0.9, plate_front_z=0.5, plate_rear_z=0.68, bumper_z=0.48)
+    ends = Ends(head_z=0.65, tail_z=0.9, plate_front_z=0.5, plate_rear_z=0.68, bumper_z=0.48, intake=(1.0, 0.1))
     sides = Sides(seams=((0.723, None), (0.52, None), (0.267, None)), handles_u=(0.555, 0.3))
     return merge(_car_body(spec, 0.72, ends, sides), ObjectClass.CAR)
 
@@ -226,7 +237,7 @@ def suv() -> Mesh:
                     sill_z_m=0.42, belt=((0.0, 1.12), (0.5, 1.14), (1.0, 1.04)), tumblehome=0.14,
                     wheels_u=(0.17, 0.82), wheel_radius_m=0.37, glass_u=(0.08, 0.71), pillars_u=(0.5, 0.25),
                     corner_m=0.14)
-    ends = Ends(head_z=0.88, tail_z=1.02, plate_front_z=0.64, plate_rear_z=0.84, bumper_z=0.62)
+    ends = Ends(head_z=0.88, tail_z=1.02, plate_front_z=0.64, plate_rear_z=0.84, bumper_z=0.62, intake=(1.1, 0.14))
     sides = Sides(seams=((0.721, None), (0.5, None), (0.269, None)), handles_u=(0.535, 0.3))
     return merge(_car_body(spec, 0.71, ends, sides), ObjectClass.CAR)
 
@@ -238,7 +249,7 @@ def coupe() -> Mesh:
                                     (0.98, 0.64), (1.0, 0.48)),
                     sill_z_m=0.28, belt=((0.0, 0.86), (0.5, 0.9), (1.0, 0.8)), tumblehome=0.26,
                     wheels_u=(0.19, 0.81), wheel_radius_m=0.32, glass_u=(0.36, 0.7))
-    ends = Ends(head_z=0.6, tail_z=0.78, plate_front_z=0.46, plate_rear_z=0.58, bumper_z=0.44)
+    ends = Ends(head_z=0.6, tail_z=0.78, plate_front_z=0.46, plate_rear_z=0.58, bumper_z=0.44, intake=(1.0, 0.09))
     sides = Sides(seams=((0.716, None), (0.42, None)), handles_u=(0.455,))
     return merge(_car_body(spec, 0.69, ends, sides), ObjectClass.CAR)
 
@@ -255,7 +266,8 @@ def van() -> Mesh:
                                     (0.87, 1.22), (0.94, 1.08), (0.985, 0.88), (1.0, 0.6)),
                     sill_z_m=0.38, belt=((0.0, 1.1), (1.0, 1.1)), tumblehome=0.06, plan_taper=0.05,
                     wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86), corner_m=0.16)
-    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
+    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, head_size=(0.3, 0.2),
+                tail_size=(0.2, 0.3), lamp_y=0.8, intake=(1.2, 0.14))
     return merge(_car_body(spec, 0.84, ends, VAN_SIDES), ObjectClass.VAN)
 
 
@@ -266,7 +278,8 @@ def minibus() -> Mesh:
                     sill_z_m=0.38, belt=((0.0, 1.12), (1.0, 1.12)), tumblehome=0.06, plan_taper=0.05,
                     wheels_u=(0.17, 0.83), wheel_radius_m=0.34, glass_u=(0.74, 0.86),
                     extra_glass=((0.05, 0.7, 1.25, 1.85),), pillars_u=(0.28, 0.5), corner_m=0.16)
-    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, tail_size=(0.2, 0.3), lamp_y=0.8)
+    ends = Ends(head_z=0.9, tail_z=0.98, plate_front_z=0.6, plate_rear_z=0.72, head_size=(0.3, 0.2),
+                tail_size=(0.2, 0.3), lamp_y=0.8, intake=(1.2, 0.14))
     return merge(_car_body(spec, 0.84, ends, VAN_SIDES), ObjectClass.VAN)
 
 
@@ -277,8 +290,8 @@ def pickup() -> Mesh:
                                     (1.0, 0.62)),
                     sill_z_m=0.45, belt=((0.0, 1.08), (0.5, 1.16), (1.0, 1.1)), tumblehome=0.1, plan_taper=0.05,
                     wheels_u=(0.17, 0.8), wheel_radius_m=0.38, glass_u=(0.43, 0.71), pillars_u=(0.56,))
-    ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.82,
-                bumper_z=0.66)
+    ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.7,
+                bumper_z=0.66, intake=(1.1, 0.14))
     cover = cuboid(((0.03 - 0.5) * 5.4, -0.7, 1.1), ((0.39 - 0.5) * 5.4, 0.7, 1.12), "trim")  # black tonneau cover
     sides = Sides(seams=((0.71, None), (0.56, None), (0.43, None)), handles_u=(0.595, 0.465))
     return merge([*_car_body(spec, 0.71, ends, sides), cover], ObjectClass.CAR)

@@ -49,7 +49,10 @@ class BodySpec:
         sill_z_m: height of the underside between the wheels.
         belt: (u, z) beltline points: the glasshouse starts here.
         tumblehome: the roof's half-width is this much less than the body's, as a share.
-        plan_taper: share of half-width lost at the very ends (rounded plan), with exponent ``plan_power``.
+        plan_taper: share of half-width lost at the very ends (rounded plan corners): the plan is straight over the
+            middle (|2u - 1| <= ``plan_start``, the doors) and narrows towards each end as the ``plan_power`` of the
+            distance into the end zone, so the end faces turn into the sides over the last ~10 % of the length, as a
+            car's bumpers and wings do, instead of meeting them at a crease.
         wheels_u: the axles' u; wheel_radius_m; arch_clearance_m: the arch's radius beyond the tyre.
         glass_u: (rear, front) u range of the side glass; windscreen / rear window come from the slope.
         pillars_u: u centres of side pillars (B, C...) within the side glass; pillar_w_m their width.
@@ -63,8 +66,9 @@ class BodySpec:
     sill_z_m: float
     belt: tuple[tuple[float, float], ...]
     tumblehome: float = 0.22
-    plan_taper: float = 0.12
-    plan_power: float = 4.0
+    plan_taper: float = 0.25
+    plan_start: float = 0.5
+    plan_power: float = 2.0
     wheels_u: tuple[float, ...] = (0.18, 0.82)
     wheel_radius_m: float = 0.32
     arch_clearance_m: float = 0.05
@@ -95,6 +99,13 @@ def _bottom(u: np.ndarray, spec: BodySpec) -> np.ndarray:
         z = np.where(inside, np.maximum(z, arch), z)
     end = np.clip(1.0 - np.minimum(u, 1.0 - u) / 0.05, 0.0, 1.0)  # bumpers' undercut in the last 5%
     return z + end * 0.08
+
+
+def plan_half_width(u: np.ndarray, spec: BodySpec) -> np.ndarray:
+    """The body's half-width along u (plan view): straight where |2u - 1| <= ``plan_start``, then narrowing by
+    ``plan_taper`` x s^``plan_power`` with s running 0 -> 1 from there to each end."""
+    s = np.clip((np.abs(2.0 * np.asarray(u) - 1.0) - spec.plan_start) / (1.0 - spec.plan_start), 0.0, 1.0)
+    return 0.5 * spec.width_m * (1.0 - spec.plan_taper * s ** spec.plan_power)
 
 
 def _half_section(w: float, zb: float, zbelt: float, zt: float, w_roof: float, r: float) -> np.ndarray:
@@ -135,7 +146,7 @@ def loft(spec: BodySpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     top = _smooth(_interp(u, spec.top))
     belt = _smooth(np.minimum(_interp(u, spec.belt), top))
     bottom = _smooth(_bottom(u, spec), 1)
-    half = 0.5 * spec.width_m * (1.0 - spec.plan_taper * np.abs(2.0 * u - 1.0) ** spec.plan_power)
+    half = plan_half_width(u, spec)
     sections = []
     for i in range(len(u)):
         w_roof = half[i] * (1.0 - spec.tumblehome * np.clip((top[i] - belt[i]) / 0.45, 0.0, 1.0))
@@ -303,11 +314,32 @@ def surface_point(verts: np.ndarray, tris: np.ndarray, origin: np.ndarray, direc
 
 
 def decal(verts: np.ndarray, tris: np.ndarray, y: float, z: float, width: float, height: float, material: str,
-          end: str, lift_m: float = 0.006) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """A flat quad (two triangles of ``material``) laid onto the body's ``end`` ("front" or "rear") face: centred
-    where a ray along x meets the surface at (y, z), in the plane of the surface there (tilted with it, upright
-    otherwise), ``lift_m`` off it; ``width`` along y, ``height`` up the face. None where the ray misses."""
+          end: str, lift_m: float = 0.006, conform: tuple[int, int] | None = None
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A quad of ``material`` laid onto the body's ``end`` ("front" or "rear") face, ``width`` along y and
+    ``height`` up the face, ``lift_m`` off it; None where a ray misses.
+
+    Flat (``conform`` None): centred where a ray along x meets the surface at (y, z), in the plane of the surface
+    there (tilted with it, upright otherwise); a plate. Conforming (``conform`` = (columns, rows)): a grid of that
+    many points across the (y, z) rectangle, each where a ray along x meets the surface, lifted along the normal
+    there, so the quad follows the face round a rounded corner (lamps that wrap into the wings)."""
     sign = 1.0 if end == "front" else -1.0
+    if conform is not None:
+        cols, rows = conform
+        ys, zs = np.linspace(y - 0.5 * width, y + 0.5 * width, cols), np.linspace(z - 0.5 * height, z + 0.5 * height,
+                                                                                  rows)
+        grid = []
+        for zz in zs:
+            for yy in ys:
+                found = surface_point(verts, tris, np.array([sign * 1e3, yy, zz]), np.array([-sign, 0.0, 0.0]))
+                if found is None:
+                    return None
+                grid.append(found[0] + lift_m * found[1])
+        k = np.arange((rows - 1) * cols).reshape(rows - 1, cols)[:, :-1].reshape(-1)
+        quads = np.concatenate([np.stack([k, k + 1, k + cols + 1], -1), np.stack([k, k + cols + 1, k + cols], -1)])
+        if sign < 0:  # seen from behind, y runs the other way: keep the winding facing out
+            quads = quads[:, ::-1]
+        return np.asarray(grid), quads, np.full(len(quads), material_index(material), np.int32)
     origin = np.array([sign * 1e3, y, z])
     found = surface_point(verts, tris, origin, np.array([-sign, 0.0, 0.0]))
     if found is None:
