@@ -371,12 +371,24 @@ def _chassis_guards(x_front: float, x_rear: float, half_w: float, rear_axle_x: f
     return [*rails, *flaps]
 
 
+def _ladder_frame(x_rear: float, x_front: float, z_top: float, axles_x: tuple[float, ...]) -> list[Part]:
+    """What a rigid truck carries under its body: two frame rails (0.86 m apart outside, as truck ladder frames
+    are) from the box's rear end, where they meet the rear underrun bar, and an axle housing with its differential
+    at each rear axle. Seen from behind, the road shows between them under the box; a solid dark block the box's
+    width there, with lamps and a plate on its bar, read to the detector as the rear of a car."""
+    rails = mirrored(lambda y0, y1: cuboid((x_rear, y0, z_top - 0.3), (x_front, y1, z_top), "trim"), 0.28, 0.43)
+    axles = [part for x in axles_x for part in (cuboid((x - 0.08, -0.95, 0.44), (x + 0.08, 0.95, 0.56), "trim"),
+                                                 cuboid((x - 0.22, -0.18, 0.36), (x + 0.18, 0.18, 0.66), "trim"))]
+    return [*rails, *axles]
+
+
 def box_truck() -> Mesh:
-    """8.0 x 2.5 x 3.5 m rigid truck: a rounded cab with a big windscreen, a cargo box, six wheels."""
-    chassis = cuboid((-3.9, -0.9, 0.5), (2.0, 0.9, 0.95), "trim")
+    """8.0 x 2.5 x 3.5 m rigid truck: a rounded cab with a big windscreen, a cargo box on a ladder frame, six
+    wheels."""
     cargo = cuboid((-4.0, -1.25, 0.95), (1.85, 1.25, 3.5), "cargo")
     wheels = _wheels((4.0 - 2.1 + 0.55 * 2.1, -1.6, -2.8), 1.22, 0.5, 0.3)
-    return merge([*_cab(2.1, 2.4, 2.95, 4.0), chassis, cargo, *_cargo_details(-4.0, 1.85, 1.25, 0.95, 3.5),
+    frame = _ladder_frame(-4.0, 2.0, 0.95, (-1.6, -2.8))
+    return merge([*_cab(2.1, 2.4, 2.95, 4.0), *frame, cargo, *_cargo_details(-4.0, 1.85, 1.25, 0.95, 3.5),
                   *_truck_rear(-4.0, 0.7, 1.22), *wheels, *_chassis_guards(2.35, -1.0, 1.25, -2.8, 0.5)],
                  ObjectClass.TRUCK)
 
@@ -385,9 +397,9 @@ def semi_trailer() -> Mesh:
     """16 x 2.55 x 4.0 m tractor with a box semi-trailer: cab over engine, a gap, the trailer on three axles."""
     frame = cuboid((3.0, -0.85, 0.55), (6.9, 0.85, 1.0), "trim")
     trailer = cuboid((-8.0, -1.275, 1.25), (4.6, 1.275, 4.0), "cargo")
-    skirt = cuboid((-7.9, -1.0, 0.95), (4.6, 1.0, 1.25), "trim")
+    chassis = _ladder_frame(-8.0, 4.6, 1.25, (-5.2, -6.3, -7.4))
     wheels = _wheels((8.0 - 2.3 + 0.55 * 2.3, 4.0, 2.7, -5.2, -6.3, -7.4), 1.24, 0.52, 0.32)
-    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, skirt, *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0),
+    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, *chassis, *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0),
                   *_truck_rear(-8.0, 1.05, 1.25), *wheels, *_chassis_guards(2.1, -4.6, 1.275, -7.4, 0.52)],
                  ObjectClass.TRUCK)
 
