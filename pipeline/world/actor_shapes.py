@@ -90,7 +90,7 @@ class Ends:
     """Lamps, plates, grille and air intake on a body's end faces, as :func:`pipeline.world.loft.decal` quads
     (metres; z of centres above the ground; lamps centred at ``lamp_y`` of the half-width on each side). Lamps,
     grille and intake follow the face round its rounded corners (the lamps wrap into the wings, as real clusters
-    do); plates are flat. A car's face reads by its lamps, grille and intake: two wide clusters with a dark grille
+    do), and so does the front plate, standing proud of the intake; the rear plate is flat. A car's face reads by its lamps, grille and intake: two wide clusters with a dark grille
     between them and a dark intake below; thin lamps at the outer edges over a dark band read as a rear."""
 
     head_z: float
@@ -290,8 +290,8 @@ def pickup() -> Mesh:
                                     (1.0, 0.62)),
                     sill_z_m=0.45, belt=((0.0, 1.08), (0.5, 1.16), (1.0, 1.1)), tumblehome=0.1, plan_taper=0.05,
                     wheels_u=(0.17, 0.8), wheel_radius_m=0.38, glass_u=(0.43, 0.71), pillars_u=(0.56,))
-    ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, tail_size=(0.18, 0.25), lamp_y=0.7,
-                bumper_z=0.66, intake=(1.1, 0.14))
+    ends = Ends(head_z=0.92, tail_z=0.95, plate_front_z=0.64, plate_rear_z=0.8, head_size=(0.3, 0.15),
+                tail_size=(0.18, 0.25), lamp_y=0.78, bumper_z=0.66, intake=(1.1, 0.14))
     cover = cuboid(((0.03 - 0.5) * 5.4, -0.7, 1.1), ((0.39 - 0.5) * 5.4, 0.7, 1.12), "trim")  # black tonneau cover
     sides = Sides(seams=((0.71, None), (0.56, None), (0.43, None)), handles_u=(0.595, 0.465))
     return merge([*_car_body(spec, 0.71, ends, sides), cover], ObjectClass.CAR)
