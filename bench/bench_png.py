@@ -1,6 +1,6 @@
-"""Benchmark: the render stage's PNG writer (pipeline.core.png: fixed row filter + ISA-L deflate, level 1) against
-OpenCV's (zlib level 1, the same fixed filter, run-length strategy: the stage's writer until 2026-11), on the four
-images of rendered camera frames.
+"""Benchmark: the render stage's PNG writer (pipeline.core.png: fixed row filter + zlib deflate, level 1; ISA-L's
+deflate until 2026-11-27, dropped for writing different bytes in different processes) against OpenCV's (zlib level
+1, the same fixed filter, run-length strategy), on the four images of rendered camera frames.
 
 Renders --frames frames of the highway at noon (or reads the record --record DIR), encodes each image kind with
 both writers --repeat times on one thread, checks that OpenCV decodes both to the same samples, and prints ms per
@@ -63,7 +63,7 @@ def main() -> None:
         images = read_images(record)
     frames = len(images["rgb"])
     writers = {"OpenCV (zlib 1, RLE)": opencv_png,
-               "pipeline.core.png (ISA-L 1)": lambda image, kind: encode_png(image, PNG_FILTER[kind])}
+               "pipeline.core.png (zlib 1)": lambda image, kind: encode_png(image, PNG_FILTER[kind])}
     rows = []
     for name, write in writers.items():
         ms, kb = {}, {}

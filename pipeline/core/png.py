@@ -1,13 +1,12 @@
-"""Lossless PNG writing: one fixed row filter (numpy) and ISA-L's deflate (python-isal), level 1.
+"""Lossless PNG writing: one fixed row filter (numpy) and zlib's deflate (the standard library's), level 1.
 
-The render stage writes four PNGs per camera frame. With OpenCV's writer (zlib level 1, the same fixed filters,
-run-length strategy) that was a large share of a frame's CPU; this writer takes a fraction of that for the same
-pixels, in files slightly larger (``bench/bench_png.py``; docs/performance.md). Any PNG reader decodes them
-(the tests read them back with OpenCV and Pillow).
+The render stage writes four PNGs per camera frame. Any PNG reader decodes them (the tests read them back with
+OpenCV and Pillow); ``bench/bench_png.py`` times this writer against OpenCV's.
 
-Same image, same bytes: ISA-L picks its code by the processor's instruction sets, and gave byte-identical files for
-rendered frames on an AMD EPYC (AVX2) and an Intel Xeon (AVX-512) in 2026-11. The decoded samples never depend
-on it.
+Same image, same bytes: zlib's deflate is a function of its input, level and zlib version. ISA-L's deflate, which
+wrote these files before (about 5 times faster), is not: on one 160 x 120 instance image it wrote two different
+streams (both decoding to the same rows) in a Ray worker and in the local process of the same machine
+(tests/stages/test_ray_executor.py, on a fresh clone, 2026-11-27), which breaks "same config and seed, same bytes".
 
 PNG in brief (ISO/IEC 15948): the signature, an IHDR chunk (size, bit depth, colour type), IDAT chunks holding one
 zlib stream of the filtered rows (each row prefixed by its filter type), and IEND. 16-bit samples are big-endian.
@@ -21,12 +20,11 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-from isal import isal_zlib
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
 FILTERS = {"none": 0, "sub": 1, "up": 2}  # PNG filter types 0-2; Average and Paeth cost more than they save here
 COLOUR_TYPES = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> PNG colour type: grey, grey+alpha, RGB, RGBA
-LEVEL = 1  # ISA-L's levels are 0-3; 1 is faster than zlib's level 1 on rendered frames
+LEVEL = 1  # zlib's fastest level that compresses
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -67,7 +65,7 @@ def encode_png(image: np.ndarray, row_filter: str = "none", *, name: str = "imag
         raise ValueError(f"{name}: row filter must be one of {sorted(FILTERS)}, got {row_filter!r}")
     h, w = image.shape[:2]
     header = struct.pack(">IIBBBBB", w, h, 8 * image.dtype.itemsize, COLOUR_TYPES[channels], 0, 0, 0)
-    data = isal_zlib.compress(filter_rows(image, row_filter).data, LEVEL)
+    data = zlib.compress(filter_rows(image, row_filter).data, LEVEL)
     return SIGNATURE + _chunk(b"IHDR", header) + _chunk(b"IDAT", data) + _chunk(b"IEND", b"")
 
 

@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import sys
+import zlib
 from collections.abc import Callable, Iterator
 from importlib import metadata
 from pathlib import Path
@@ -73,7 +74,7 @@ def software_versions() -> dict[str, str | None]:
         "numpy": _version("numpy"),
         "pyarrow": _version("pyarrow"),
         "opencv": _version("opencv-python-headless") or _version("opencv-python"),  # post effects, image noise
-        "isal": _version("isal"),  # the bytes of the records' PNG files (pipeline.core.png)
+        "zlib": zlib.ZLIB_RUNTIME_VERSION,  # the bytes of the records' PNG files (pipeline.core.png)
         "numba": _version("numba"),  # compiles the render's per-pixel passes (pipeline.core.jit)
     }
 

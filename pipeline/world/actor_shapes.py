@@ -90,8 +90,9 @@ class Ends:
     """Lamps, plates, grille and air intake on a body's end faces, as :func:`pipeline.world.loft.decal` quads
     (metres; z of centres above the ground; lamps centred at ``lamp_y`` of the half-width on each side). Lamps,
     grille and intake follow the face round its rounded corners (the lamps wrap into the wings, as real clusters
-    do), and so does the front plate, standing proud of the intake; the rear plate is flat. A car's face reads by its lamps, grille and intake: two wide clusters with a dark grille
-    between them and a dark intake below; thin lamps at the outer edges over a dark band read as a rear."""
+    do), and so does the front plate, standing proud of the intake; the rear plate is flat. A car's face reads by
+    its lamps, grille and intake: two wide clusters with a dark grille between them and a dark intake below; thin
+    lamps at the outer edges over a dark band read as a rear."""
 
     head_z: float
     tail_z: float
