@@ -51,8 +51,8 @@ class BodySpec:
         tumblehome: the roof's half-width is this much less than the body's, as a share.
         plan_taper: share of half-width lost at the very ends (rounded plan corners): the plan is straight over the
             middle (|2u - 1| <= ``plan_start``, the doors) and narrows towards each end as the ``plan_power`` of the
-            distance into the end zone, so the end faces turn into the sides over the last ~10 % of the length, as a
-            car's bumpers and wings do, instead of meeting them at a crease.
+            distance into the end zone, so the end faces turn into the sides over the last quarter of the length (the
+            default plan_start 0.5), as a car's bumpers and wings do, instead of meeting them at a crease.
         wheels_u: the axles' u; wheel_radius_m; arch_clearance_m: the arch's radius beyond the tyre.
         glass_u: (rear, front) u range of the side glass; windscreen / rear window come from the slope.
         pillars_u: u centres of side pillars (B, C...) within the side glass; pillar_w_m their width.
