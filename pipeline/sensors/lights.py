@@ -194,13 +194,14 @@ def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT
 def vehicle_headlights(
     actors: Actors, cfg: HeadlightConfig, camera_xyz_m: np.ndarray, forward: np.ndarray | None = None
 ) -> SpotLights:
-    """Low beams of the ``cfg.max_other_vehicles`` motor vehicles whose beams come nearest the camera: one light
-    per vehicle at the middle of its front face, two lamps' worth (one for a motorcycle).
+    """Low beams of the ``cfg.max_other_vehicles`` motor vehicles with their lights on (:attr:`Actors.lights_on`:
+    not parked ones) whose beams come nearest the camera: one light per vehicle at the middle of its front face, two
+    lamps' worth (one for a motorcycle).
 
     With ``forward`` (3,) (the ego's heading), vehicles whose lamps are behind the camera are left out: the
     ego (not in the scene, so it casts no shadow) would block most of their light.
     """
-    lit = np.isin(actors.class_codes, [list(ObjectClass).index(c) for c in LIT_CLASSES])
+    lit = np.isin(actors.class_codes, [list(ObjectClass).index(c) for c in LIT_CLASSES]) & actors.lights_on
     if forward is not None and len(actors):
         yaw_all = actors.boxes.yaw_rad
         front = actors.boxes.center + 0.5 * actors.boxes.size[:, :1] * np.column_stack(

@@ -111,6 +111,9 @@ def shade(
     tail = glowing[(mat[glowing] == material_index("taillight")) & on_actor]
     out[tail[scene.actors.brake[hits.actor_index[tail]]]] += BRAKE_LIGHT_RGB
     if condition.lights_on:
+        # A vehicle's own lamps glow only where its lights are on (a parked vehicle's are off).
+        on_actor = on_actor.copy()
+        on_actor[on_actor] = scene.actors.lights_on[hits.actor_index[glowing[on_actor]]]
         for name, (rgb, scale, actors_only) in NIGHT_GLOWS.items():
             which = mat[glowing] == material_index(name)
             out[glowing[which & on_actor if actors_only else which]] += rgb * np.float32(getattr(condition, scale))

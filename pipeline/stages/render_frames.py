@@ -90,7 +90,7 @@ class SignalState:
 
 
 ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad", "color_r",
-                 "color_g", "color_b", "braking", "speed_mps")
+                 "color_g", "color_b", "braking", "speed_mps", "parked")
 
 
 class Trajectories:
@@ -124,7 +124,7 @@ def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int)
 def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:
     color = srgb8_to_linear(np.column_stack([cols["color_r"], cols["color_g"], cols["color_b"]]))
     return Actors(cols["track_id"], cols["cls"].tolist(), actor_boxes(cols), color, cols["braking"],
-                  actor_variants(cols["track_id"], seed))
+                  actor_variants(cols["track_id"], seed), lights_on=~cols["parked"].astype(bool))
 
 
 def _shard_type(dtype: str) -> pa.DataType:

@@ -45,6 +45,9 @@ class Actors:
         brake: (N,) bool, brake lights lit.
         variant: (N,) uint32 per-actor random number that picks the body family (:meth:`ActorMeshes.model_codes`);
             0 (the default) picks each class's first suitable family.
+        lights_on: (N,) bool, the vehicle's lamps (head and tail lamps, side markers, the plate lamp, its low beams)
+            are switched on where the condition turns vehicle lights on (dusk, night); all True by default. A parked
+            vehicle's are off.
     """
 
     track_id: np.ndarray
@@ -53,6 +56,7 @@ class Actors:
     color_rgb: np.ndarray
     brake: np.ndarray = field(default=None)  # type: ignore[assignment]
     variant: np.ndarray = field(default=None)  # type: ignore[assignment]
+    lights_on: np.ndarray = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         n = len(self.boxes)
@@ -61,10 +65,12 @@ class Actors:
         color = np.asarray(self.color_rgb, dtype=np.float32).reshape(-1, 3)
         brake = np.zeros(n, bool) if self.brake is None else np.asarray(self.brake, dtype=bool).reshape(-1)
         variant = np.zeros(n, np.uint32) if self.variant is None else np.asarray(self.variant, np.uint32).reshape(-1)
-        if not (len(track_id) == len(classes) == len(color) == len(brake) == len(variant) == n):
+        lights_on = np.ones(n, bool) if self.lights_on is None else np.asarray(self.lights_on, bool).reshape(-1)
+        if not (len(track_id) == len(classes) == len(color) == len(brake) == len(variant) == len(lights_on) == n):
             raise ValueError(
                 f"actor arrays differ in length: track_id {len(track_id)}, object_class {len(classes)}, "
-                f"boxes {n}, color_rgb {len(color)}, brake {len(brake)}, variant {len(variant)}"
+                f"boxes {n}, color_rgb {len(color)}, brake {len(brake)}, variant {len(variant)}, "
+                f"lights_on {len(lights_on)}"
             )
         if n and (track_id.min() <= 0 or len(np.unique(track_id)) != n):
             raise ValueError("track ids must be positive and unique (0 means static / nothing)")
@@ -75,6 +81,7 @@ class Actors:
         object.__setattr__(self, "color_rgb", color)
         object.__setattr__(self, "brake", brake)
         object.__setattr__(self, "variant", variant)
+        object.__setattr__(self, "lights_on", lights_on)
 
     def __len__(self) -> int:
         return len(self.track_id)

@@ -36,8 +36,8 @@ def box_meshes() -> ActorMeshes:
     return ActorMeshes({c: Mesh(CUBE_VERTICES, CUBE_TRIANGLES, paint, c.semantic) for c in ObjectClass})
 
 
-def make_actors(centers, sizes, yaws=None, classes=None, colors=None, brake=None) -> Actors:
-    """Actors with track ids 1..N (defaults: cars, yaw 0, grey)."""
+def make_actors(centers, sizes, yaws=None, classes=None, colors=None, brake=None, lights_on=None) -> Actors:
+    """Actors with track ids 1..N (defaults: cars, yaw 0, grey, lights on)."""
     centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
     n = len(centers)
     return Actors(
@@ -46,6 +46,7 @@ def make_actors(centers, sizes, yaws=None, classes=None, colors=None, brake=None
         Boxes3D(centers, np.asarray(sizes, dtype=np.float64).reshape(-1, 3), np.zeros(n) if yaws is None else yaws),
         np.full((n, 3), 0.5) if colors is None else colors,
         brake,
+        lights_on=lights_on,
     )
 
 

@@ -154,6 +154,38 @@ def test_oncoming_headlights_light_the_road_in_front_of_them(actors_factory):
     assert len(behind) == 0  # lamps behind the camera are left out
 
 
+def test_parked_vehicles_lamps_and_beams_are_off(actors_factory):
+    # Two cars facing the camera side by side, one with its lights on, one parked (lights off), and two seen from
+    # behind likewise: at night only the first of each pair glows (head lamps; tail lamps and the lit plate) and
+    # casts low beams.
+    night = get_condition("night")
+    actors = actors_factory([[20.0, -2.0, 0.75], [20.0, 2.0, 0.75], [20.0, -6.0, 0.75], [20.0, 6.0, 0.75]],
+                            [[4.5, 1.8, 1.5]] * 4, yaws=np.array([np.pi, np.pi, 0.0, 0.0]),
+                            lights_on=[True, False, True, False])
+    lights = vehicle_headlights(actors, night.headlights, np.array([0.0, 0.0, 1.4]), np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_allclose(np.sort(lights.position_m[:, 1]), [-6.0, -2.0])  # the two with their lights on
+    scene = FrameScene(StaticScene([]), actors)
+    geo = scene.geometry
+    for name in ("headlight", "taillight", "plate_rear"):
+        rays = []
+        for k in range(4):
+            tri = np.flatnonzero((geo.triangle_actor == k) & (geo.triangle_material == material_index(name)))
+            if not len(tri):
+                rays.append(None)
+                continue
+            centroid = geo.vertices[geo.triangles[tri]].mean(axis=1)
+            target = centroid[np.argmax(np.abs(centroid[:, 0] - 20.0))]  # on the face at the box's end
+            origin = target + [(-3.0 if target[0] < 20.0 else 3.0), 0.0, 0.0]
+            rays.append(np.concatenate([origin, (target - origin) / np.linalg.norm(target - origin)]))
+        pairs = [(0, 1), (2, 3)] if name == "headlight" else [(2, 3), (0, 1)]
+        k_on, k_off = pairs[0]
+        r = np.asarray([rays[k_on], rays[k_off]], np.float32)
+        hits = scene.cast_rays(r)
+        assert (hits.material == material_index(name)).all() and hits.actor_index.tolist() == [k_on, k_off]
+        lit, dark = shade(scene, r, hits, night)
+        assert lit.sum() > dark.sum() + 0.3, name  # the lamp's glow (or the plate lamp's light) is on one car only
+
+
 def test_lights_per_frame_are_bounded(actors_factory):
     night = get_condition("night")
     n = 60

@@ -177,6 +177,14 @@ def _set_nan(rel: str, column: str) -> None:
     write_parquet(table, Path(rel))
 
 
+def _drop_column(rel: str, column: str) -> None:
+    import pandas as pd
+
+    from pipeline.core.tables import write_parquet
+
+    write_parquet(pd.read_parquet(rel).drop(columns=[column]), Path(rel))
+
+
 RGB, INSTANCE, SWEEP = "rec/cameras/front/rgb/000010.png", "rec/cameras/front/instance/000010.png", \
     "rec/lidars/top/000010.parquet"
 # Corrupt inputs (issue 24, item 5): (id, how the input is damaged, argv, what the first error line must name).
@@ -199,6 +207,8 @@ CORRUPT = [
      [*EXPORT, "--format", "mcap", "--out", "m.mcap"], "rec/frames.parquet: field time_s is nan at frame"),
     ("NaN position in the trajectories into render", lambda: _set_nan("sim/trajectories.parquet", "x_m"),
      [*RENDER, "--out", "r"], "sim/trajectories.parquet: field x_m is nan at frame"),
+    ("trajectories without the parked column into render", lambda: _drop_column("sim/trajectories.parquet", "parked"),
+     [*RENDER, "--out", "r"], "sim/trajectories.parquet: no column parked"),
     ("flipped byte in a position of the trajectories into render",
      lambda: _flip_value_byte("sim/trajectories.parquet", "x_m"), [*RENDER, "--out", "r"],
      "sim/trajectories.parquet: corrupt (page checksum mismatch"),
