@@ -414,9 +414,51 @@ def bus() -> Mesh:
                     pillars_u=(0.12, 0.24, 0.36, 0.48, 0.6, 0.72, 0.84), pillar_w_m=0.12, corner_m=0.25,
                     arch_clearance_m=0.06,
                     n_stations=40)
-    ends = Ends(head_z=0.7, tail_z=0.95, plate_front_z=0.5, plate_rear_z=0.6, head_size=(0.3, 0.18), tail_size=(0.2,
-                0.4), lamp_y=0.78, grille=(0.9, 0.25))
-    return merge(_car_body(spec, 0.985, ends), ObjectClass.BUS)
+    ends = Ends(head_z=0.7, tail_z=1.05, plate_front_z=0.5, plate_rear_z=0.6, head_size=(0.3, 0.18),
+                tail_size=(0.22, 0.75), lamp_y=0.86, grille=(0.9, 0.25), bumper_z=0.42)
+    parts = _car_body(spec, 0.985, ends)
+    return merge([*parts, *_bus_ends(parts[0], 0.5 * 2.55), *_bus_doors(parts[0], spec)], ObjectClass.BUS)
+
+
+def _bus_doors(body: Part, spec: BodySpec) -> list[Part]:
+    """Two glazed double doors on the kerb (right, -y) side, from just above the sill to the top of the window band:
+    one ahead of the front axle, one in the middle, each split down its centre."""
+    verts, tris, _ = body
+    parts = []
+    for u0, u1 in ((0.875, 0.965), (0.49, 0.59)):
+        x0, x1 = (u0 - 0.5) * spec.length_m, (u1 - 0.5) * spec.length_m
+        column = np.column_stack([np.full(27, 0.5 * (x0 + x1)), np.linspace(spec.sill_z_m + 0.12, 2.72, 27)])
+        for width, material, lift_m in ((x1 - x0, "glass", 0.006), (0.04, "trim", 0.01)):
+            strip = side_strip(verts, tris, column, width, material, lift_m=lift_m)
+            if strip is None:
+                raise ValueError(f"bus door at u {u0}-{u1} misses the body's side")
+            v, t, m = strip
+            parts.append((v * [1.0, -1.0, 1.0], t[:, ::-1], m))  # laid on the left side, mirrored to the right
+    return parts
+
+
+def _bus_ends(body: Part, half_w: float) -> list[Part]:
+    """What a city bus shows at its ends besides lamps and plates: at the rear a window over the engine bay, the
+    engine's louvres below it and a route-number display above; at the front the windscreen (the body's glass band
+    wraps round the front corners only) and above it a destination display (a dark panel with amber LED lettering,
+    lit at night like the markers). Without them both ends were blank painted panels, and seen from behind, a bus
+    with two small lamps was missed by the detector."""
+    verts, tris, _ = body
+
+    def put(z, size, material, end, y=0.0, lift_m=0.006):
+        part = decal(verts, tris, y, z, size[0], size[1], material, end, lift_m=lift_m, conform=LAMP_GRID)
+        if part is None:
+            raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the bus's {end} face")
+        return part
+
+    width = 2.0 * half_w
+    rear = [put(2.37, (width - 0.3, 0.85), "glass", "rear"),
+            put(2.9, (0.5, 0.12), "trim", "rear"),
+            *[put(z, (0.55 * width, 0.05), "trim", "rear") for z in np.linspace(0.85, 1.45, 5)]]
+    front = [put(1.85, (width - 0.2, 1.6), "glass", "front"),
+             put(2.8, (width - 0.5, 0.24), "trim", "front"),
+             *[put(2.8, (w, 0.09), "marker_lamp", "front", y, 0.012) for y, w in ((-0.45, 0.5), (0.35, 0.8))]]
+    return [*rear, *front]
 
 
 # Body families per class, in a fixed order (an actor's variant picks one among those that suit its length).

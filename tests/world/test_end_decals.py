@@ -94,3 +94,36 @@ def test_the_front_plate_is_seen_in_front_of_the_intake(family):
                                                                                                origin, down)
             assert on_plate is not None and behind is not None
             assert on_plate[0][0] > behind[0][0] + 0.003, (y, z)
+
+
+def test_a_bus_shows_windows_lamps_louvres_and_displays_at_its_ends():
+    import open3d as o3d
+
+    from pipeline.world.actor_shapes import bus
+
+    mesh = bus()
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)),
+                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+
+    def seen(end: str, y: float, z: float) -> str:
+        sign = 1.0 if end == "front" else -1.0
+        hit = scene.cast_rays(o3d.core.Tensor(np.array([[sign * 20.0, y, z, -sign, 0.0, 0.0]], np.float32)))
+        return {material_index(n): n for n in ("paint", "glass", "trim", "taillight", "headlight", "marker_lamp",
+                                                "plate", "plate_rear")}.get(int(mesh.material[hit["primitive_ids"]
+                                                                                        .numpy()[0]]), "other")
+
+    half_w = 0.5 * 2.55
+    # The windscreen and the rear window on the centre line, the route displays above them, LED lettering on the front
+    # display standing out of it (not coplanar), the plates.
+    assert [seen("front", 0.0, z) for z in (1.3, 2.0, 2.5)] == ["glass"] * 3
+    assert [seen("rear", 0.0, z) for z in (2.1, 2.6)] == ["glass"] * 2
+    assert seen("front", -0.45, 2.8) == "marker_lamp" and seen("front", -0.12, 2.8) == "trim"
+    assert seen("rear", 0.0, 2.9) == "trim"
+    assert seen("front", 0.0, 0.5) == "plate" and seen("rear", 0.0, 0.6) == "plate_rear"
+    # The engine louvres: five dark slats on the painted rear, 0.15 m apart; tall tail lamps at both rear corners.
+    zs = np.linspace(0.8, 1.5, 141)
+    slats = np.array([seen("rear", 0.3, z) == "trim" for z in zs])
+    assert np.count_nonzero(np.diff(slats.astype(int)) == 1) == 5 and not slats.all()
+    for y in (-0.86 * half_w, 0.86 * half_w):
+        assert [seen("rear", y, z) for z in (0.8, 1.05, 1.3)] == ["taillight"] * 3
