@@ -394,15 +394,38 @@ def box_truck() -> Mesh:
                  ObjectClass.TRUCK)
 
 
-def semi_trailer() -> Mesh:
-    """16 x 2.55 x 4.0 m tractor with a box semi-trailer: cab over engine, a gap, the trailer on three axles."""
+def _articulated(trailer_material: str, sides: list[Part]) -> Mesh:
+    """16 x 2.55 x 4.0 m tractor with a semi-trailer: cab over engine with a roof fairing up to the trailer's height
+    (as long-haul tractors have), a gap, the trailer (its body of ``trailer_material``, with ``sides`` laid on it)
+    on three axles."""
     frame = cuboid((3.0, -0.85, 0.55), (6.9, 0.85, 1.0), "trim")
-    trailer = cuboid((-8.0, -1.275, 1.25), (4.6, 1.275, 4.0), "cargo")
+    fairing = prism_y([(5.75, 3.1), (7.3, 3.1), (6.05, 3.95), (5.75, 3.95)], -1.15, 1.15, "paint", "paint")
+    trailer = cuboid((-8.0, -1.275, 1.25), (4.6, 1.275, 4.0), trailer_material)
     chassis = _ladder_frame(-8.0, 4.6, 1.25, (-5.2, -6.3, -7.4))
     wheels = _wheels((8.0 - 2.3 + 0.55 * 2.3, 4.0, 2.7, -5.2, -6.3, -7.4), 1.24, 0.52, 0.32)
-    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, trailer, *chassis, *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0),
-                  *_truck_rear(-8.0, 1.05, 1.25), *wheels, *_chassis_guards(2.1, -4.6, 1.275, -7.4, 0.52)],
+    return merge([*_cab(2.3, 2.45, 3.2, 8.0), frame, fairing, trailer, *chassis,
+                  *_cargo_details(-8.0, 4.6, 1.275, 1.25, 4.0), *sides, *_truck_rear(-8.0, 1.05, 1.25), *wheels,
+                  *_chassis_guards(2.1, -4.6, 1.275, -7.4, 0.52)],
                  ObjectClass.TRUCK)
+
+
+def semi_trailer() -> Mesh:
+    """16 x 2.55 x 4.0 m tractor with a box semi-trailer (smooth aluminium-skinned panels)."""
+    return _articulated("cargo", [])
+
+
+def curtain_trailer() -> Mesh:
+    """16 x 2.55 x 4.0 m tractor with a curtainsider semi-trailer, the commonest European trailer: matte curtains
+    pulled tight by straps every 0.55 m, each with a metal buckle above the bottom rail."""
+    x_rear, x_front, half_w, z0, z1 = -8.0, 4.6, 1.275, 1.25, 4.0
+    xs = np.arange(x_rear + 0.4, x_front - 0.2, 0.55)
+    straps = [part for x in xs for part in mirrored(
+        lambda y0, y1, x=x: cuboid((x - 0.022, y0, z0 + 0.105), (x + 0.022, y1, z1 - 0.08), "trim"), half_w - 0.002,
+        half_w + 0.008)]  # (their inner faces inside the curtain, the buckles' inside the straps: none coplanar)
+    buckles = [part for x in xs for part in mirrored(
+        lambda y0, y1, x=x: cuboid((x - 0.03, y0, z0 + 0.19), (x + 0.03, y1, z0 + 0.33), "metal"), half_w + 0.004,
+        half_w + 0.014)]
+    return _articulated("tarpaulin", [*straps, *buckles])
 
 
 def bus() -> Mesh:
@@ -465,7 +488,7 @@ def _bus_ends(body: Part, half_w: float) -> list[Part]:
 FAMILIES: dict[ObjectClass, tuple[Callable[[], Mesh], ...]] = {
     ObjectClass.CAR: (sedan, hatchback, estate, suv, coupe, pickup),
     ObjectClass.VAN: (van, minibus),
-    ObjectClass.TRUCK: (box_truck, semi_trailer),
+    ObjectClass.TRUCK: (box_truck, semi_trailer, curtain_trailer),
     ObjectClass.BUS: (bus,),
     ObjectClass.MOTORCYCLE: MOTORCYCLES,
     ObjectClass.BICYCLE: BICYCLES,
@@ -474,5 +497,5 @@ FAMILIES: dict[ObjectClass, tuple[Callable[[], Mesh], ...]] = {
 # The length range (metres) each family suits; a family outside its range is chosen only when none suits.
 SUITS_LENGTH_M: dict[Callable[[], Mesh], tuple[float, float]] = {
     hatchback: (0.0, 4.4), sedan: (4.2, 99.0), estate: (4.4, 99.0), suv: (4.2, 99.0), coupe: (4.0, 4.9),
-    pickup: (4.9, 99.0), box_truck: (0.0, 11.0), semi_trailer: (11.0, 99.0),
+    pickup: (4.9, 99.0), box_truck: (0.0, 11.0), semi_trailer: (11.0, 99.0), curtain_trailer: (11.0, 99.0),
 }

@@ -237,7 +237,8 @@ def test_variants_pick_families_that_suit_the_length():
     np.testing.assert_array_equal(meshes.model_codes(actors), codes)
     trucks = Actors([1, 2], ["truck", "truck"], Boxes3D(np.zeros((2, 3)), [[16.0, 2.5, 4.0], [8.0, 2.5, 3.5]],
                                                          np.zeros(2)), np.zeros((2, 3)), variant=[5, 5])
-    assert [meshes.model_names[c] for c in meshes.model_codes(trucks)] == ["semi_trailer", "box_truck"]
+    # 16 m: the two articulated families suit it (variant 5 picks the second), 8 m: only the box truck.
+    assert [meshes.model_names[c] for c in meshes.model_codes(trucks)] == ["curtain_trailer", "box_truck"]
 
 
 def test_pedestrian_boxes_take_their_bodys_depth():
