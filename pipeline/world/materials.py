@@ -112,8 +112,8 @@ MATERIALS: dict[str, Material] = {
     "foliage_light": Material((0.11, 0.22, 0.06), reflectivity=0.42),
     "foliage_dark": Material((0.04, 0.11, 0.05), reflectivity=0.38),
     # Appended by the curtainsider semi-trailers (pipeline/world/actor_shapes.py): a PVC-coated polyester curtain,
-    # matte, a light blue-grey.
-    "tarpaulin": Material((0.50, 0.53, 0.58), specular=0.08, shininess=12.0, reflectivity=0.12),
+    # matte, a light blue-grey (bright in the LiDAR's near infrared, as light fabrics are).
+    "tarpaulin": Material((0.50, 0.53, 0.58), specular=0.08, shininess=12.0, reflectivity=0.5),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
