@@ -110,15 +110,39 @@ class Ends:
 LAMP_GRID = (8, 3)  # columns, rows of a conforming end decal (lamps, grille, intake)
 
 
-def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
+def _end_decal(body: Part, y: float, z: float, size: tuple[float, float], material: str, end: str,
+               conform: tuple[int, int] | None = LAMP_GRID, lift_m: float = 0.006) -> Part:
+    """:func:`pipeline.world.loft.decal` on the body's ``end`` face, ``size`` (width, height); a decal that misses the
+    face is an error in the family's numbers."""
     verts, tris, _ = body
+    part = decal(verts, tris, y, z, size[0], size[1], material, end, lift_m=lift_m, conform=conform)
+    if part is None:
+        raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the body's {end} face")
+    return part
+
+
+def _side_strip(body: Part, points_xz: np.ndarray, width: float, material: str = "trim",
+                lift_m: float = 0.004) -> Part:
+    """:func:`pipeline.world.loft.side_strip` on the body's left (+y) side; one that misses the side is an error in
+    the family's numbers."""
+    verts, tris, _ = body
+    strip = side_strip(verts, tris, points_xz, width, material, lift_m=lift_m)
+    if strip is None:
+        raise ValueError(f"side detail at x, z = {np.round(points_xz[0], 2).tolist()} misses the body's side")
+    return strip
+
+
+def _mirror_y(part: Part) -> Part:
+    """The part mirrored across the body's centre plane (y -> -y), its winding reversed so it still faces out."""
+    v, t, m = part
+    return v * [1.0, -1.0, 1.0], t[:, ::-1], m
+
+
+def _end_details(body: Part, half_w: float, ends: Ends) -> list[Part]:
     parts = []
 
     def put(y, z, size, material, end, conform=LAMP_GRID, lift_m=0.006):
-        part = decal(verts, tris, y, z, size[0], size[1], material, end, lift_m=lift_m, conform=conform)
-        if part is None:
-            raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the body's {end} face")
-        parts.append(part)
+        parts.append(_end_decal(body, y, z, size, material, end, conform, lift_m))
 
     lamp_y = ends.lamp_y * half_w
     for side in (1.0, -1.0):
@@ -162,10 +186,7 @@ def _side_details(body: Part, spec: BodySpec, sides: Sides) -> list[Part]:
     strips = []
 
     def put(points_xz, width):
-        strip = side_strip(verts, tris, points_xz, width, "trim")
-        if strip is None:
-            raise ValueError(f"side detail at x, z = {np.round(points_xz[0], 2).tolist()} misses the body's side")
-        strips.append(strip)
+        strips.append(_side_strip(body, points_xz, width))
 
     for u, z_low in sides.seams:
         x, top = (u - 0.5) * spec.length_m, float(np.interp(u, *belt)) - 0.015
@@ -179,8 +200,7 @@ def _side_details(body: Part, spec: BodySpec, sides: Sides) -> list[Part]:
         put(np.array([[x - 0.5 * HANDLE_SIZE_M[0], z], [x, z], [x + 0.5 * HANDLE_SIZE_M[0], z]]), HANDLE_SIZE_M[1])
     for u0, u1, z, height in sides.bands:
         put(np.column_stack([(np.linspace(u0, u1, 8) - 0.5) * spec.length_m, np.full(8, z)]), height)
-    mirrored = [(v * [1.0, -1.0, 1.0], t[:, ::-1], m) for v, t, m in strips]
-    return strips + mirrored
+    return strips + [_mirror_y(strip) for strip in strips]
 
 
 def _car_body(spec: BodySpec, mirror_u: float, ends: Ends, sides: Sides = Sides()) -> list[Part]:
@@ -446,17 +466,12 @@ def bus() -> Mesh:
 def _bus_doors(body: Part, spec: BodySpec) -> list[Part]:
     """Two glazed double doors on the kerb (right, -y) side, from just above the sill to the top of the window band:
     one ahead of the front axle, one in the middle, each split down its centre."""
-    verts, tris, _ = body
     parts = []
     for u0, u1 in ((0.875, 0.965), (0.49, 0.59)):
         x0, x1 = (u0 - 0.5) * spec.length_m, (u1 - 0.5) * spec.length_m
         column = np.column_stack([np.full(27, 0.5 * (x0 + x1)), np.linspace(spec.sill_z_m + 0.12, 2.72, 27)])
         for width, material, lift_m in ((x1 - x0, "glass", 0.006), (0.04, "trim", 0.01)):
-            strip = side_strip(verts, tris, column, width, material, lift_m=lift_m)
-            if strip is None:
-                raise ValueError(f"bus door at u {u0}-{u1} misses the body's side")
-            v, t, m = strip
-            parts.append((v * [1.0, -1.0, 1.0], t[:, ::-1], m))  # laid on the left side, mirrored to the right
+            parts.append(_mirror_y(_side_strip(body, column, width, material, lift_m)))  # laid on the left side
     return parts
 
 
@@ -466,13 +481,8 @@ def _bus_ends(body: Part, half_w: float) -> list[Part]:
     wraps round the front corners only) and above it a destination display (a dark panel with amber LED lettering,
     lit at night like the markers). Without them both ends were blank painted panels, and seen from behind, a bus
     with two small lamps was missed by the detector."""
-    verts, tris, _ = body
-
     def put(z, size, material, end, y=0.0, lift_m=0.006):
-        part = decal(verts, tris, y, z, size[0], size[1], material, end, lift_m=lift_m, conform=LAMP_GRID)
-        if part is None:
-            raise ValueError(f"{material} decal at y={y:.2f}, z={z:.2f} misses the bus's {end} face")
-        return part
+        return _end_decal(body, y, z, size, material, end, lift_m=lift_m)
 
     width = 2.0 * half_w
     rear = [put(2.37, (width - 0.3, 0.85), "glass", "rear"),

@@ -9,6 +9,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.world.actor_shapes import FAMILIES, cuboid
 from pipeline.world.loft import BodySpec, decal, plan_half_width, surface_point
 from pipeline.world.materials import material_index
+from tests.world.mesh_rays import MeshRays
 
 
 def _cylinder_z(radius: float = 1.0, n: int = 361) -> tuple[np.ndarray, np.ndarray]:
@@ -97,21 +98,13 @@ def test_the_front_plate_is_seen_in_front_of_the_intake(family):
 
 
 def test_a_bus_shows_windows_lamps_louvres_and_displays_at_its_ends():
-    import open3d as o3d
-
     from pipeline.world.actor_shapes import bus
 
-    mesh = bus()
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)),
-                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    rays = MeshRays(bus())
 
     def seen(end: str, y: float, z: float) -> str:
         sign = 1.0 if end == "front" else -1.0
-        hit = scene.cast_rays(o3d.core.Tensor(np.array([[sign * 20.0, y, z, -sign, 0.0, 0.0]], np.float32)))
-        return {material_index(n): n for n in ("paint", "glass", "trim", "taillight", "headlight", "marker_lamp",
-                                                "plate", "plate_rear")}.get(int(mesh.material[hit["primitive_ids"]
-                                                                                        .numpy()[0]]), "other")
+        return rays.first((sign * 20.0, y, z), (-sign, 0.0, 0.0))[0]
 
     half_w = 0.5 * 2.55
     # The windscreen and the rear window on the centre line, the route displays above them, LED lettering on the front

@@ -9,6 +9,7 @@ import pytest
 from pipeline.world.actor_shapes import box_truck, curtain_trailer, semi_trailer
 from pipeline.world.loft import surface_point
 from pipeline.world.materials import material_index
+from tests.world.mesh_rays import MeshRays
 
 
 @pytest.mark.parametrize(("family", "x_rear", "z"), [(box_truck, -4.0, 0.8), (semi_trailer, -8.0, 1.12),
@@ -35,37 +36,22 @@ def test_the_frame_rails_meet_the_underrun_bar(family, x_rear, z):
 
 
 
-def _first_material(mesh, origin, direction) -> tuple[str, float]:
-    """The material's name and the x of the first hit along the ray (open3d's Embree), ("", nan) for none."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)),
-                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
-    hit = scene.cast_rays(o3d.core.Tensor(np.array([[*origin, *direction]], np.float32)))
-    t = float(hit["t_hit"].numpy()[0])
-    if not np.isfinite(t):
-        return "", float("nan")
-    names = {material_index(n): n for n in ("trim", "tarpaulin", "metal", "paint", "cargo")}
-    return names.get(int(mesh.material[hit["primitive_ids"].numpy()[0]]), "other"), origin[0] + t * direction[0]
-
-
 def test_a_curtainsiders_straps_cross_its_curtain_every_055_m():
-    mesh = curtain_trailer()
+    rays = MeshRays(curtain_trailer())
     xs = np.linspace(-7.6, -7.6 + 4 * 0.55, 81)  # four strap spacings from the first strap, along the right side
-    at_mid = [_first_material(mesh, (x, -5.0, 2.6), (0.0, 1.0, 0.0))[0] for x in xs]
+    at_mid = [rays.first((x, -5.0, 2.6), (0.0, 1.0, 0.0))[0] for x in xs]
     assert set(at_mid) == {"trim", "tarpaulin"}
     starts = [x for x, a, b in zip(xs[1:], at_mid, at_mid[1:], strict=False) if a == "tarpaulin" and b == "trim"]
     assert len(starts) == 4
     np.testing.assert_allclose(np.diff(starts), 0.55, atol=2 * (xs[1] - xs[0]))
-    assert _first_material(mesh, (-7.6, -5.0, 1.5), (0.0, 1.0, 0.0))[0] == "metal"  # the buckle over the bottom rail
+    assert rays.first((-7.6, -5.0, 1.5), (0.0, 1.0, 0.0))[0] == "metal"  # the buckle over the bottom rail
 
 
 @pytest.mark.parametrize("family", [semi_trailer, curtain_trailer])
 def test_a_tractors_roof_fairing_fills_the_step_up_to_the_trailer(family):
     """From ahead, at heights between the cab's roof (3.2 m) and the trailer's top (4.0 m), rays meet the painted
     fairing over the cab, not the trailer's front 1.2 m further back."""
-    mesh = family()
+    rays = MeshRays(family())
     for z in (3.3, 3.6, 3.9):
-        name, x = _first_material(mesh, (20.0, 0.0, z), (-1.0, 0.0, 0.0))
-        assert name == "paint" and x > 5.7, (z, name, x)
+        name, point = rays.first((20.0, 0.0, z), (-1.0, 0.0, 0.0))
+        assert name == "paint" and point[0] > 5.7, (z, name, point)
