@@ -19,6 +19,11 @@ gives the same image. Effects that need randomness are skipped when no generator
   held back.
 - Bloom: light above a threshold, blurred (at quarter resolution) and added back. Lens flare: ghosts of the
   brightest sources mirrored through the image centre.
+- Point-spread function: no real camera's pixel is a perfect box. The lens, the sensor's optical low-pass filter and
+  the demosaicing of its colour filter array spread a point over neighbouring pixels; a Gaussian of ``sigma`` pixels
+  (the camera's ``psf_sigma_px``) stands for all three, sampled at integer offsets out to 3 sigma and normalised,
+  applied along rows then columns with mirrored borders. Its MTF is exp(-2 pi^2 sigma^2 f^2): at sigma 0.65 a
+  contrast of 50 % at 0.29 cycles per pixel and an edge rising from 10 to 90 % over 1.7 pixels.
 """
 
 from __future__ import annotations
@@ -200,6 +205,44 @@ def motion_blur(image: np.ndarray, flow: np.ndarray, samples: int | None = None)
     return out / np.float32(samples)
 
 
+def psf_taps(sigma_px: float) -> np.ndarray:
+    """(2r + 1,) float32 weights of a Gaussian of ``sigma_px`` sampled at the offsets -r..r, r = ceil(3 sigma) (at
+    least 1), summing to 1."""
+    if sigma_px <= 0:
+        raise ValueError(f"sigma_px must be > 0, got {sigma_px}")
+    r = max(int(np.ceil(3.0 * sigma_px)), 1)
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    w = np.exp(-0.5 * (x / sigma_px) ** 2)
+    return (w / w.sum()).astype(np.float32)
+
+
+def point_spread(image: np.ndarray, sigma_px: float) -> np.ndarray:
+    """``image`` (H, W, C) float32 blurred by the optics' Gaussian point-spread function (:func:`psf_taps`),
+    separably, borders mirrored (``np.pad``'s reflect: the edge pixel is not repeated). numpy's element-wise
+    products and sums in a fixed tap order round each operation once, so the bytes do not depend on the processor
+    (OpenCV's filters take SIMD paths of their own). ``sigma_px`` 0: the image as it is."""
+    if sigma_px == 0:
+        return image
+    taps = psf_taps(sigma_px)
+    r = len(taps) // 2
+    out = np.asarray(image, np.float32)
+    for axis in (0, 1):
+        n = out.shape[axis]
+        if n <= r:
+            raise ValueError(f"image of {out.shape[:2]} pixels is too small for a point-spread function of sigma "
+                             f"{sigma_px} px ({r} pixels each side)")
+        pad = [(0, 0)] * out.ndim
+        pad[axis] = (r, r)
+        padded = np.pad(out, pad, mode="reflect")
+        acc = np.zeros_like(out)
+        for k, weight in enumerate(taps):  # loop over the few taps; pixels vectorised
+            window = [slice(None)] * out.ndim
+            window[axis] = slice(k, k + n)
+            acc += weight * padded[tuple(window)]
+        out = acc
+    return out
+
+
 def bloom(image: np.ndarray, threshold: float, strength: float, sigma_px: float) -> np.ndarray:
     """Add the blurred excess above ``threshold`` (glow of lamps, headlights, the sun's reflections)."""
     if strength == 0:
@@ -306,13 +349,15 @@ def apply_post(
     flow: np.ndarray | None = None,
     sky_level: float = 0.0,
     gain: float = 1.0,
+    psf_sigma_px: float = 0.0,
 ) -> np.ndarray:
     """All post effects of a condition on an (H, W, 3) float32 linear image (see the module docstring).
 
     ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``sky_level`` the
     mean sky radiance after exposure (sets the brightness of rain streaks); ``gain`` the metering's gain on top of
     the condition's exposure (:func:`auto_exposure_gain`): the image is scaled by it first; the sensor noise stays
-    the condition's (its figures describe the image processor's output, denoised at high gain).
+    the condition's (its figures describe the image processor's output, denoised at high gain); ``psf_sigma_px``
+    the camera's point-spread function (:func:`point_spread`), applied with the other optics, before the sensor.
     """
     out = np.asarray(image, np.float32)
     if gain != 1.0:
@@ -326,6 +371,7 @@ def apply_post(
     out = lens_flare(out, lens.lens_flare, 2.0 * lens.bloom_threshold)
     if rain is not None and rng is not None:
         out = rain_drops(out, rain.drops, rng)
+    out = point_spread(out, psf_sigma_px)
     out = vignette(out, lens.vignetting)
     out = wide_dynamic_range(out, lens.wdr_gamma)
     if rng is not None:

@@ -131,7 +131,7 @@ def render_camera(
     radiance = radiance.reshape(h, w, 3)
     gain = auto_exposure_gain(radiance) if indirect else 1.0  # a realistic camera meters its frame
     image = apply_post(radiance, condition.lens, condition.noise, condition.rain, rng, flow=flow,
-                       sky_level=_sky_level(condition), gain=gain)
+                       sky_level=_sky_level(condition), gain=gain, psf_sigma_px=camera.config.psf_sigma_px)
     return CameraFrame(
         rgb=to_srgb8(image, "filmic" if indirect else "soft"),
         instance_id=hits.instance_id.reshape(h, w),

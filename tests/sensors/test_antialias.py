@@ -85,6 +85,7 @@ def test_the_rig_file_sets_the_sampling():
     rig, _ = load_config(RigConfig, "default", "rigs")
     camera = build_sensors(rig)[0][0].config
     assert (camera.samples_per_pixel, camera.samples_everywhere, camera.quality) == (4, False, "realistic")
+    assert camera.psf_sigma_px == 0.65
     spec = rig.cameras[0].model_copy(update={"samples_per_pixel": 2, "samples_everywhere": True, "quality": "fast"})
     camera = build_sensors(rig.model_copy(update={"cameras": [spec]}))[0][0].config
     assert (camera.samples_per_pixel, camera.samples_everywhere, camera.quality) == (2, True, "fast")

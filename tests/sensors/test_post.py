@@ -1,4 +1,5 @@
-"""Post effects: vignetting factor, shot + read noise statistics, seeded rain, motion blur, bloom."""
+"""Post effects: vignetting factor, shot + read noise statistics, seeded rain, motion blur, bloom, the optics'
+point-spread function."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from pipeline.sensors.post import (
     bloom,
     motion_blur,
     motion_flow,
+    point_spread,
+    psf_taps,
     rain_streaks,
     sensor_noise,
     standard_normal,
@@ -183,3 +186,79 @@ def test_post_applies_the_lens_wdr_before_the_noise():
     plain = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), noise, None, np.random.default_rng(3))
     lifted = apply_post(image, lens, noise, None, np.random.default_rng(3))
     np.testing.assert_allclose(lifted - 0.125, plain - 0.5 / 16, atol=1e-6)  # lifted, then the same noise
+
+
+@pytest.mark.parametrize("sigma", [0.4, 0.65, 1.3])
+def test_point_spread_is_scipys_gaussian_filter_with_mirrored_borders(sigma):
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(7)
+    image = rng.random((37, 53, 3), dtype=np.float32) * 4.0
+    radius = len(psf_taps(sigma)) // 2
+    # scipy's "mirror" is numpy's "reflect" (the edge pixel not repeated); truncate so both stop at the same tap.
+    expected = gaussian_filter(image.astype(np.float64), (sigma, sigma, 0), mode="mirror", truncate=radius / sigma)
+    np.testing.assert_allclose(point_spread(image, sigma), expected, rtol=0, atol=2e-6)
+
+
+def test_point_spread_of_a_point_is_the_sampled_gaussian_and_keeps_the_light():
+    image = np.zeros((21, 21, 3), np.float32)
+    image[10, 10] = (1.0, 2.0, 4.0)
+    out = point_spread(image, 0.65)
+    taps = psf_taps(0.65)
+    assert len(taps) == 5 and taps.sum() == pytest.approx(1.0, abs=1e-6)
+    # Closed form: the tap at offset k is exp(-k^2 / (2 sigma^2)) over the sum of all five.
+    norm = sum(np.exp(-0.5 * (k / 0.65) ** 2) for k in range(-2, 3))
+    assert taps[3] == pytest.approx(np.exp(-0.5 / 0.65 ** 2) / norm, rel=1e-6)
+    np.testing.assert_allclose(out[8:13, 8:13, 0], np.outer(taps, taps), rtol=1e-5)
+    np.testing.assert_allclose(out.sum(axis=(0, 1)), (1.0, 2.0, 4.0), rtol=1e-5)
+    assert np.count_nonzero(out[..., 0]) == 25  # nothing beyond 3 sigma
+    # An edge: 10-90 % rise over 2 x 1.2816 sigma (1.7 px at 0.65), the figure the docs give.
+    edge = np.zeros((5, 40, 1), np.float32)
+    edge[:, 20:] = 1.0
+    profile = point_spread(edge, 0.65)[2, :, 0]
+    assert profile[17] < 0.1 and profile[22] > 0.9 and 0.1 < profile[19] < profile[20] < 0.9
+
+
+def test_point_spread_off_changes_nothing_and_bad_sigmas_fail():
+    image = np.random.default_rng(2).random((12, 9, 3), dtype=np.float32)
+    assert point_spread(image, 0.0) is image
+    with pytest.raises(ValueError, match="sigma_px must be > 0"):
+        psf_taps(-0.5)
+    with pytest.raises(ValueError, match="too small"):
+        point_spread(image[:2], 0.65)
+
+
+def test_post_applies_the_cameras_point_spread_function():
+    image = np.zeros((40, 40, 3), np.float32)
+    image[:, 20:] = 1.0
+    lens = LensConfig(vignetting=0.0, bloom_strength=0.0)
+    sharp = apply_post(image, lens, SensorNoiseConfig(), None, None)
+    soft = apply_post(image, lens, SensorNoiseConfig(), None, None, psf_sigma_px=0.65)
+    np.testing.assert_array_equal(sharp, image)
+    np.testing.assert_allclose(soft, point_spread(image, 0.65))
+
+
+def test_the_point_spread_function_softens_the_image_and_leaves_the_labels(box_meshes, actors_factory, wall):
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from pipeline.core.geometry import Transform
+    from pipeline.sensors.camera import Camera
+    from pipeline.sensors.render import render_camera
+    from pipeline.world.scene import FrameScene, StaticScene
+    from tests.sensors.conftest import camera_config
+
+    actors = actors_factory([[15.0, 1.0, 0.0]], [[4.0, 2.0, 1.5]], yaws=[0.35], colors=[[0.9, 0.05, 0.05]])
+    scene = FrameScene(StaticScene([wall(40.0)]), actors, box_meshes)
+    sharp, soft = (render_camera(scene, Camera(camera_config(width_px=200, height_px=150, quality="fast",
+                                                              psf_sigma_px=sigma)), Transform.identity())
+                   for sigma in (0.0, 0.65))
+    for name in ("instance_id", "semantic", "depth_m"):
+        np.testing.assert_array_equal(getattr(sharp, name), getattr(soft, name))
+    np.testing.assert_array_equal(sharp.labels.box_tight, soft.labels.box_tight)
+    diff = np.abs(sharp.rgb.astype(int) - soft.rgb.astype(int)).max(axis=2)
+    assert diff.max() >= 20  # the box's silhouette against the wall
+    # Where the sharp image varies by at most 2 levels over the 5 x 5 pixels the function reaches, so does the soft.
+    rgb = sharp.rgb.astype(int)
+    spread = (maximum_filter(rgb, size=(5, 5, 1)) - minimum_filter(rgb, size=(5, 5, 1))).max(axis=2)
+    flat = spread <= 2
+    assert flat.sum() > 0.5 * diff.size and diff[flat].max() <= 2

@@ -39,6 +39,9 @@ class CameraConfig(_Model):
     samples_everywhere: bool = Field(False, description="take the samples at every pixel (shadow edges too)")
     quality: Literal["fast", "realistic"] = Field(
         "realistic", description="realistic: sky occlusion and mirror reflections traced; fast: neither (quicker)")
+    psf_sigma_px: float = Field(
+        0.0, ge=0.0, le=5.0, description="the optics' point-spread function (lens, the sensor's low-pass filter and "
+        "demosaicing): a Gaussian of this standard deviation in pixels on the linear image; 0 = perfect optics")
     mount: MountPose
 
     @model_validator(mode="after")
