@@ -139,6 +139,20 @@ def test_a_stopped_render_leaves_no_process_and_resumes_to_the_same_bytes(run_21
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]  # no lock, work folder or temporary left
 
 
+def _stopped(proc: subprocess.Popen, timeout_s: float = 10.0) -> bool:
+    """Wait until ``proc`` is stopped (state T in /proc/PID/stat); False if it exited first."""
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            state = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
+            return False
+        if state in ("T", "t"):
+            return True
+        time.sleep(0.001)
+    return False
+
+
 def _stopped_mid_export(args: list[str], cwd: Path) -> subprocess.Popen:
     """An export frozen (SIGSTOP) while its temporary output exists; tries again when the export was too quick."""
     for _ in range(5):
@@ -147,8 +161,12 @@ def _stopped_mid_export(args: list[str], cwd: Path) -> subprocess.Popen:
             time.sleep(0.001)  # the export writes for about 0.1 s
         if proc.poll() is None:
             proc.send_signal(signal.SIGSTOP)
-            if proc.poll() is None and any(p.name.startswith(".runs.mcap.tmp-") for p in cwd.iterdir()):
+            # A signal is delivered asynchronously: on a busy machine the export may still finish and rename its
+            # output between the kill and the look at the folder, so look only once the kernel shows it stopped.
+            if _stopped(proc) and any(p.name.startswith(".runs.mcap.tmp-") for p in cwd.iterdir()):
                 return proc
+            if proc.poll() is None:  # stopped with its output already in place: let it finish
+                proc.send_signal(signal.SIGCONT)
         proc.wait()
         for path in cwd.iterdir():  # it finished: start over
             path.unlink()
