@@ -79,6 +79,15 @@ def _grown_rows(a, size):
     return out
 
 
+@kernel("boolean(float64, float64, float64, float64, float64, float64, float64, float64, float64)")
+def _off_sphere(v0, v1, v2, v3, d0, d1, d2, dd, r):
+    """Whether a ray surely misses the sphere of radius r about an actor's centre c (which holds its grown unit
+    box): the sphere lies behind the origin (along < -r |d|) or off the line (distance^2 > r^2). v = c - o, v3
+    its squared length, d the ray's direction, dd its squared length. The cheap first test: most pairs fail it."""
+    along = v0 * d0 + v1 * d1 + v2 * d2
+    return (along * along > r * r * dd and along < 0) or (v3 - r * r) * dd > along * along
+
+
 @kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
         "float64[:, :, ::1], float64[:, ::1], float64[::1])")
 def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
@@ -119,9 +128,7 @@ def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
                 v[3, b] = v[0, b] * v[0, b] + v[1, b] * v[1, b] + v[2, b] * v[2, b]
         dd = d0 * d0 + d1 * d1 + d2 * d2  # not always 1: e.g. shadow rays towards a lamp, t_max = 1
         for b in range(nb):
-            # The sphere: behind the origin (along < -r |d|), or off the line (distance^2 > r^2).
-            along = v[0, b] * d0 + v[1, b] * d1 + v[2, b] * d2
-            if (along * along > r[b] * r[b] * dd and along < 0) or (v[3, b] - r[b] * r[b]) * dd > along * along:
+            if _off_sphere(v[0, b], v[1, b], v[2, b], v[3, b], d0, d1, d2, dd, r[b]):
                 continue
             a = actors[b]
             _unit_ray(inv_linear[a], v[0, b], v[1, b], v[2, b], d0, d1, d2, local)
@@ -138,6 +145,68 @@ def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
             count += 1
     pair_row, pair_actor, pair_rays = pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
     return pair_row, pair_actor, pair_rays
+
+
+@kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
+        "float64[:, :, ::1], float64[:, ::1], float64[::1], int64[::1], int64[::1], int64[::1])")
+def listed_actor_pairs(rays, rows, actors, inv_linear, centre, radius, row_cell, cell_start, cell_item):
+    """:func:`actor_pairs` where each ray is tested only against the actors listed for its cell: ray ``rows[j]``
+    against ``actors[cell_item[k]]`` for k in ``cell_start[c]:cell_start[c + 1]``, c = ``row_cell[j]``
+    (:func:`cell_lists`; ascending within a cell). The same tests in the same arithmetic, so the pairs are those
+    of :func:`actor_pairs` whose actor is listed for the ray's cell, in the same order (by row, then as in
+    ``actors``). For rays whose origins differ (shadow and occlusion rays): no sharing of c - o between rays."""
+    local = np.empty(6, np.float32)
+    count = 0
+    pair_row = np.empty(rows.size, np.int64)
+    pair_actor = np.empty(rows.size, np.int64)
+    pair_rays = np.empty((rows.size, 6), np.float32)
+    for j in range(rows.size):
+        i = rows[j]
+        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
+        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        c = row_cell[j]
+        for k in range(cell_start[c], cell_start[c + 1]):
+            a = actors[cell_item[k]]
+            v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
+            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
+                continue
+            _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
+            if not _meets_unit_box(local):
+                continue
+            if count == pair_row.size:
+                size = max(2 * count, 16)
+                pair_row, pair_actor, pair_rays = (_grown(pair_row, size), _grown(pair_actor, size),
+                                                   _grown_rows(pair_rays, size))
+            pair_row[count] = j
+            pair_actor[count] = a
+            for m in range(6):
+                pair_rays[count, m] = local[m]
+            count += 1
+    return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
+
+
+@kernel("Tuple((int64[::1], int64[::1]))(int64, int64, int64[:, ::1])")
+def cell_lists(rows, cols, spans):
+    """Which items cover each cell of a ``rows`` x ``cols`` grid, as compressed rows: item b covers the cells
+    [i0, i1) x [j0, j1) of its ``spans[b]`` = (i0, i1, j0, j1) (clipped to the grid here; an empty span covers
+    none). Returns ``cell_start`` (rows * cols + 1,) int64 and ``cell_item`` int64: the items of cell i * cols + j
+    are ``cell_item[cell_start[c]:cell_start[c + 1]]``, ascending."""
+    start = np.zeros(rows * cols + 1, np.int64)
+    for b in range(spans.shape[0]):
+        for i in range(max(spans[b, 0], 0), min(spans[b, 1], rows)):
+            for j in range(max(spans[b, 2], 0), min(spans[b, 3], cols)):
+                start[i * cols + j + 1] += 1
+    for c in range(rows * cols):
+        start[c + 1] += start[c]
+    item = np.empty(start[rows * cols], np.int64)
+    fill = start[:-1].copy()
+    for b in range(spans.shape[0]):
+        for i in range(max(spans[b, 0], 0), min(spans[b, 1], rows)):
+            for j in range(max(spans[b, 2], 0), min(spans[b, 3], cols)):
+                item[fill[i * cols + j]] = b
+                fill[i * cols + j] += 1
+    return start, item
 
 
 @kernel("Tuple((float32[::1], uint32[::1], float32[:, ::1], int32[::1]))(int64, int64[::1], int64[::1], "
