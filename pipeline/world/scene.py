@@ -40,8 +40,14 @@ import open3d as o3d
 
 from pipeline.core.jit import as_input, as_view_input, fma32, kernel
 from pipeline.world import smooth_normals
-from pipeline.world.actor_casts import (BOX_MARGIN, actor_pairs, cell_lists, listed_actor_pairs, nearest_actor_hits,
-                                        unit_frame_rays)
+from pipeline.world.actor_casts import (
+    BOX_MARGIN,
+    actor_pairs,
+    cell_lists,
+    listed_actor_pairs,
+    nearest_actor_hits,
+    unit_frame_rays,
+)
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
