@@ -512,8 +512,9 @@ class FrameScene:
         actors (:func:`listed_actor_pairs`). The pairs left out could not block the segment, so what
         :meth:`occluded_rays` returns is unchanged; sky occlusion rays (1.5 m) test a few actors each instead of
         every placed one (docs/performance.md)."""
-        origin = np.take(rays, sub, axis=0)[:, :2].astype(np.float64)
-        length = np.sqrt(np.einsum("ij,ij->i", rays[sub, 3:], rays[sub, 3:], dtype=np.float64))
+        picked = np.take(rays, sub, axis=0)
+        origin = picked[:, :2].astype(np.float64)
+        length = np.sqrt(np.einsum("ij,ij->i", picked[:, 3:], picked[:, 3:], dtype=np.float64))
         reach = t_max_m * float(length.max()) * (1.0 + 1e-6) + CHUNK_PAD_M
         p_lo, p_hi = origin.min(axis=0), origin.max(axis=0)
         cell = max(REACH_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + REACH_CELL_M) / SHADOW_MAX_CELLS)))
