@@ -1,6 +1,11 @@
 """The whole DVC pipeline on a tiny params file, in a temporary clone: every stage's outputs exist, and a
 second ``dvc repro`` does nothing.
 
+The stages run the clone's own code (``PYTHONPATH`` puts the clone before the editable install), as
+``make demo`` in a fresh clone does: Python's bytecode and numba's kernel cache are written into the clone's
+``pipeline/**/__pycache__/`` while the stages run, inside the stages' dependencies, and must not make DVC
+see those dependencies as changed (``.dvcignore``).
+
 Run-level splits need two runs (one trains, one tests), so the tiny experiment has one scenario, two
 seeds and two conditions, two frames per run and condition, and a detector trained for a few steps.
 """
@@ -29,7 +34,8 @@ TINY_PARAMS = {
 
 def _run(args: list[str], cwd: Path) -> str:
     path = f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"
-    env = {**os.environ, "DVC_NO_ANALYTICS": "1", "PATH": path}
+    env = {**os.environ, "DVC_NO_ANALYTICS": "1", "PATH": path, "PYTHONPATH": str(cwd)}
+    env.pop("NUMBA_CACHE_DIR", None)  # numba caches beside the modules, as on a user's machine
     proc = subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, f"{' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}"
     return proc.stdout + proc.stderr
@@ -61,6 +67,18 @@ def test_every_stage_wrote_its_outputs(clone):
                  "data/detections/test.json", "data/eval/metrics.json", "reports/report.md",
                  "reports/examples.png", "reports/metrics.json", "metrics/simulate/highway-2.json"]:
         assert (clone / path).exists(), path
+
+
+def test_the_stages_ran_the_clones_code_and_cached_kernels_beside_it(clone):
+    """What the next test relies on: the stages' own caches were written inside their dependencies."""
+    cached = [p.relative_to(clone).as_posix() for p in (clone / "pipeline").rglob("__pycache__/*.nbi")]
+    assert any(p.startswith("pipeline/core/") for p in cached), cached
+    assert any(p.startswith("pipeline/sensors/") for p in cached), cached
+
+
+def test_dvc_status_is_clean_after_repro(clone):
+    out = _run([str(Path(sys.executable).parent / "dvc"), "status"], cwd=clone)
+    assert "Data and pipelines are up to date" in out, out
 
 
 def test_a_second_repro_does_nothing(clone):
