@@ -1,0 +1,121 @@
+"""The reference driver (pipeline/envs/driver.py): IDM and MOBIL in closed form, and an episode in the real env."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from pipeline.envs.driver import IdmParams, MobilParams, Neighbour, ReferenceAgent, ReferenceDriver, idm_accel, mobil
+from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+
+IDM = IdmParams()
+
+
+def test_free_road_acceleration_is_the_free_term():
+    for v in (0.0, 10.0, 20.0, IDM.desired_speed_mps):
+        assert idm_accel(v, IDM) == pytest.approx(IDM.max_accel_mps2 * (1 - (v / IDM.desired_speed_mps) ** 4))
+    assert idm_accel(IDM.desired_speed_mps, IDM) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_equilibrium_gap_gives_zero_acceleration():
+    v = 20.0
+    s_star = IDM.min_gap_m + v * IDM.time_headway_s
+    gap = s_star / math.sqrt(1 - (v / IDM.desired_speed_mps) ** 4)
+    assert idm_accel(v, IDM, gap, v) == pytest.approx(0.0, abs=1e-12)
+    assert idm_accel(v, IDM, 0.9 * gap, v) < 0 < idm_accel(v, IDM, 1.1 * gap, v)
+
+
+def test_closing_in_brakes_harder_and_an_overlap_cannot_be_undone():
+    assert idm_accel(20.0, IDM, 30.0, 10.0) < idm_accel(20.0, IDM, 30.0, 20.0) < idm_accel(20.0, IDM, 30.0, 30.0)
+    assert idm_accel(20.0, IDM, 0.0, 20.0) == -math.inf
+
+
+def _slow_leader(**extra: Neighbour) -> dict[str, Neighbour]:
+    return {"leader": Neighbour(ds_m=20.0, speed_mps=15.0, length_m=4.5), **extra}
+
+
+def test_mobil_leaves_a_slow_leader_for_a_free_left_lane():
+    choice = mobil(25.0, 4.5, _slow_leader(), +1, IDM, MobilParams())
+    assert choice.safe and choice.change
+    # the gain is the free-road acceleration less the car-following one, less the keep-right bias
+    gap = 20.0 - 4.5
+    gain = idm_accel(25.0, IDM) - idm_accel(25.0, IDM, gap, 15.0)
+    assert choice.incentive == pytest.approx(gain - MobilParams().keep_right_bias_mps2)
+
+
+def test_mobil_refuses_to_cut_in_front_of_a_close_fast_follower():
+    fast_behind = Neighbour(ds_m=-6.0, speed_mps=33.0, length_m=4.5)
+    choice = mobil(25.0, 4.5, _slow_leader(left_follower=fast_behind), +1, IDM, MobilParams())
+    after = idm_accel(33.0, IDM, 6.0 - 4.5, 25.0)
+    assert after < -MobilParams().safe_decel_mps2
+    assert not choice.safe and not choice.change
+
+
+def test_mobil_keeps_right_when_nothing_is_gained():
+    params = MobilParams()
+    right = mobil(25.0, 4.5, {}, -1, IDM, params)
+    left = mobil(25.0, 4.5, {}, +1, IDM, params)
+    assert right.incentive == pytest.approx(params.keep_right_bias_mps2) and right.change
+    assert left.incentive == pytest.approx(-params.keep_right_bias_mps2) and not left.change
+
+
+def test_politeness_counts_the_old_followers_gain():
+    # Behind the ego a follower is held up: leaving its lane frees it; with politeness the incentive grows.
+    follower = Neighbour(ds_m=-12.0, speed_mps=25.0, length_m=4.5)
+    lonely = mobil(25.0, 4.5, {"follower": follower}, +1, IDM, MobilParams(politeness=0.0))
+    polite = mobil(25.0, 4.5, {"follower": follower}, +1, IDM, MobilParams(politeness=1.0))
+    assert polite.incentive > lonely.incentive
+
+
+def _obs(speed: float, offset: float = 0.0, **slots: tuple[float, float, float]) -> dict[str, np.ndarray]:
+    rows = np.zeros((len(NEIGHBOUR_SLOTS), len(NEIGHBOUR_FIELDS)), np.float32)
+    for slot, (ds, dv, length) in slots.items():
+        rows[NEIGHBOUR_SLOTS.index(slot)] = (1.0, ds, 0.0, dv, length, 1.8)
+    return {"ego": np.array([speed, 0.0, 1.0, offset, 0.0, 1000.0], np.float32), "neighbours": rows}
+
+
+def test_the_driver_follows_with_idm_and_steers_to_the_chosen_lane():
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    obs = _obs(25.0, leader=(20.0, -10.0, 4.5))
+    driver.reset(obs)
+    lon, lat = driver.accelerations(obs, 3.5, lambda side: side == +1)  # only a left lane
+    assert lon == pytest.approx(idm_accel(25.0, IDM, 20.0 - 4.5, 15.0))
+    assert driver.target_offset_m == pytest.approx(3.5) and lat == pytest.approx(3.5)
+    # No drivable lane: it stays and brakes behind the leader.
+    stay = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    stay.reset(obs)
+    assert stay.accelerations(obs, 3.5, lambda side: False)[1] == 0.0
+    assert stay.target_offset_m == 0.0
+
+
+def test_parameters_are_checked_naming_the_field():
+    with pytest.raises(ValueError, match="desired_speed_mps"):
+        IdmParams(desired_speed_mps=0.0)
+    with pytest.raises(ValueError, match="politeness"):
+        MobilParams(politeness=float("nan"))
+    with pytest.raises(ValueError, match="dt_s"):
+        ReferenceDriver(dt_s=0.0)
+
+
+@pytest.mark.slow
+def test_the_reference_agent_drives_the_highway_without_collision():
+    import pipeline.envs  # noqa: F401  (registers the envs)
+
+    env = gym.make("roadsynth/Highway-v0", time_limit_s=20.0)
+    try:
+        obs, _ = env.reset(seed=3)
+        agent = ReferenceAgent(env)
+        agent.reset(obs)
+        speeds = []
+        while True:
+            obs, _, terminated, truncated, info = env.step(agent.act(obs))
+            speeds.append(float(obs["ego"][0]))
+            if terminated or truncated:
+                break
+        assert truncated and not terminated, info["reason"]  # a collision or leaving the road terminates
+        assert np.mean(speeds) > 15.0  # it drives, at highway speed
+    finally:
+        env.close()
