@@ -1,0 +1,262 @@
+"""A small multi-object tracker for perceived road users, in the ego's lane frame (issue 42's perception loop).
+
+It turns per-frame detections (a position in the ego's lane frame, from a detector's box and the LiDAR points in
+it, with the image box when there is one) into tracks with a velocity, and the tracks into the feature rows an
+agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.features`).
+
+- **State** per track: x = (ds, dd, vs, vd), the object's centre relative to the ego's centre along the lane (ds,
+  forward) and across it (dd, to the left), and its velocity relative to the ego's. Constant-velocity Kalman filter:
+  F = [[I, dt I], [0, I]]; process noise from white-noise acceleration of spectral density ``accel_psd`` (m^2/s^3),
+  Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]] (it also absorbs the ego's own acceleration, since the state is
+  relative); a measurement is the position, H = [I 0], with standard deviations growing with range (a LiDAR
+  median over a box: ``sigma_m`` + ``sigma_per_m`` x range, along and across alike).
+- **Association**, each frame: predicted tracks against detections by the Hungarian method
+  (:func:`scipy.optimize.linear_sum_assignment`) on a cost that is the smaller of 1 - IoU of the image boxes (where
+  both have one) and the squared Mahalanobis distance of the position over the gate (chi-square, 2 degrees of
+  freedom, ``gate_probability``); a pair inside neither gate cannot be matched.
+- **Births and deaths**: an unmatched detection starts a tentative track (velocity 0, with the uncertainty of
+  ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at its first miss
+  before that; a confirmed track coasts on its prediction through up to ``max_misses`` consecutive misses and is
+  dropped at the next. Only confirmed tracks are reported, so a detection that appears once never becomes one.
+
+Deterministic: track ids count up from 1 in the order tracks are born (detections in input order), and ties in
+the assignment resolve as scipy's solver does for a given matrix.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+
+UNMATCHABLE = 1e6  # cost of a pair outside both gates (the solver needs finite costs)
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """The tracker's parameters (see the module docstring)."""
+
+    dt_s: float = 0.1
+    accel_psd: float = 4.0
+    sigma_m: float = 0.3
+    sigma_per_m: float = 0.02
+    birth_speed_std_mps: float = 15.0
+    gate_probability: float = 0.99
+    iou_gate: float = 0.1
+    confirm_hits: int = 3
+    max_misses: int = 5
+
+    def __post_init__(self) -> None:
+        for name in ("dt_s", "accel_psd", "sigma_m", "birth_speed_std_mps"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"TrackerParams.{name}: expected a finite number > 0, got {value!r}")
+        if not (math.isfinite(self.sigma_per_m) and self.sigma_per_m >= 0):
+            raise ValueError(f"TrackerParams.sigma_per_m: expected a finite number >= 0, got {self.sigma_per_m!r}")
+        if not 0 < self.gate_probability < 1:
+            raise ValueError(f"TrackerParams.gate_probability: expected a number in (0, 1), got "
+                             f"{self.gate_probability!r}")
+        if not 0 < self.iou_gate <= 1:
+            raise ValueError(f"TrackerParams.iou_gate: expected a number in (0, 1], got {self.iou_gate!r}")
+        for name in ("confirm_hits", "max_misses"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < (1 if name == "confirm_hits" else 0):
+                raise ValueError(f"TrackerParams.{name}: expected an integer >= "
+                                 f"{1 if name == 'confirm_hits' else 0}, got {value!r}")
+
+    @property
+    def gate(self) -> float:
+        """The squared Mahalanobis distance inside which a position may match (chi-square, 2 dof)."""
+        return -2.0 * math.log(1.0 - self.gate_probability)
+
+
+@dataclass(frozen=True)
+class Detections:
+    """One frame's detections, K of them.
+
+    Attributes:
+        position_m: (K, 2) float64 (ds, dd) of each object's centre in the ego's lane frame.
+        box_px: (K, 4) float64 image boxes x1, y1, x2, y2; NaN rows where a detection has none.
+        class_id: (K,) int64 category ids.
+        size_m: (K, 2) float64 (length, width) of each object (its class's typical size when not measured).
+    """
+
+    position_m: np.ndarray
+    box_px: np.ndarray
+    class_id: np.ndarray
+    size_m: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Detections:
+        return cls(np.zeros((0, 2)), np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros((0, 2)))
+
+    def __post_init__(self) -> None:
+        k = len(self.position_m)
+        for name, shape in (("position_m", (k, 2)), ("box_px", (k, 4)), ("class_id", (k,)), ("size_m", (k, 2))):
+            if np.shape(getattr(self, name)) != shape:
+                raise ValueError(f"Detections.{name}: expected shape {shape}, got {np.shape(getattr(self, name))}")
+        if not np.isfinite(self.position_m).all():
+            raise ValueError("Detections.position_m: expected finite positions (drop detections without a range)")
+
+
+@dataclass
+class Track:
+    """One track: Kalman state ``x`` (4,) = (ds, dd, vs, vd) and covariance ``p`` (4, 4), the last image box,
+    class and size, and its hit and miss counts."""
+
+    track_id: int
+    x: np.ndarray
+    p: np.ndarray
+    box_px: np.ndarray
+    class_id: int
+    size_m: np.ndarray
+    hits: int = 1
+    misses: int = 0
+    confirmed: bool = False
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(A, B) IoU of (A, 4) and (B, 4) x1, y1, x2, y2 boxes; NaN boxes give 0."""
+    a = np.asarray(a, np.float64)[:, None, :]
+    b = np.asarray(b, np.float64)[None, :, :]
+    w = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
+    h = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
+    inter = w * h
+    union = ((a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1]) + (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+             - inter)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        iou = np.where(union > 0, inter / union, 0.0)
+    return np.nan_to_num(iou, nan=0.0)
+
+
+@dataclass
+class Tracker:
+    """Tracks road users from frame to frame (see the module docstring). Call :meth:`update` once per frame with
+    that frame's :class:`Detections`; it returns the confirmed tracks."""
+
+    params: TrackerParams = field(default_factory=TrackerParams)
+    tracks: list[Track] = field(default_factory=list)
+    next_id: int = 1
+
+    def reset(self) -> None:
+        self.tracks, self.next_id = [], 1
+
+    def _matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        dt, q = self.params.dt_s, self.params.accel_psd
+        f = np.eye(4)
+        f[0, 2] = f[1, 3] = dt
+        i2 = np.eye(2)
+        qm = q * np.block([[dt ** 3 / 3 * i2, dt ** 2 / 2 * i2], [dt ** 2 / 2 * i2, dt * i2]])
+        return f, qm
+
+    def _measurement_cov(self, position: np.ndarray) -> np.ndarray:
+        sigma = self.params.sigma_m + self.params.sigma_per_m * float(np.hypot(*position))
+        return np.eye(2) * sigma ** 2
+
+    def predict(self) -> None:
+        """Move every track one step ahead."""
+        f, q = self._matrices()
+        for t in self.tracks:
+            t.x = f @ t.x
+            t.p = f @ t.p @ f.T + q
+
+    def _costs(self, det: Detections) -> np.ndarray:
+        costs = np.full((len(self.tracks), len(det.position_m)), UNMATCHABLE)
+        if not len(self.tracks) or not len(det.position_m):
+            return costs
+        ious = box_iou(np.array([t.box_px for t in self.tracks]), det.box_px)
+        gate = self.params.gate
+        for i, t in enumerate(self.tracks):
+            for j, z in enumerate(det.position_m):
+                s = t.p[:2, :2] + self._measurement_cov(z)
+                r = z - t.x[:2]
+                d2 = float(r @ np.linalg.solve(s, r))
+                options = []
+                if d2 < gate:
+                    options.append(d2 / gate)
+                if ious[i, j] >= self.params.iou_gate:
+                    options.append(1.0 - ious[i, j])
+                if options:
+                    costs[i, j] = min(options)
+        return costs
+
+    def update(self, det: Detections) -> list[Track]:
+        """Predict, associate, correct, and manage births and deaths; returns the confirmed tracks (by id)."""
+        from scipy.optimize import linear_sum_assignment
+
+        self.predict()
+        costs = self._costs(det)
+        matched_tracks, matched_dets = set(), set()
+        if costs.size:
+            rows, cols = linear_sum_assignment(costs)
+            for i, j in zip(rows, cols, strict=True):
+                if costs[i, j] < UNMATCHABLE:
+                    self._correct(self.tracks[i], det, j)
+                    matched_tracks.add(i)
+                    matched_dets.add(j)
+        kept = []
+        for i, t in enumerate(self.tracks):
+            if i not in matched_tracks:
+                t.misses += 1
+                if not t.confirmed or t.misses > self.params.max_misses:
+                    continue
+            kept.append(t)
+        for j in range(len(det.position_m)):
+            if j not in matched_dets:
+                kept.append(self._birth(det, j))
+        self.tracks = kept
+        return sorted((t for t in self.tracks if t.confirmed), key=lambda t: t.track_id)
+
+    def _correct(self, t: Track, det: Detections, j: int) -> None:
+        z = det.position_m[j]
+        h = np.zeros((2, 4))
+        h[0, 0] = h[1, 1] = 1.0
+        s = h @ t.p @ h.T + self._measurement_cov(z)
+        k = t.p @ h.T @ np.linalg.inv(s)
+        t.x = t.x + k @ (z - h @ t.x)
+        t.p = (np.eye(4) - k @ h) @ t.p
+        t.box_px, t.class_id, t.size_m = det.box_px[j].copy(), int(det.class_id[j]), det.size_m[j].copy()
+        t.hits += 1
+        t.misses = 0
+        if t.hits >= self.params.confirm_hits:
+            t.confirmed = True
+
+    def _birth(self, det: Detections, j: int) -> Track:
+        z = det.position_m[j]
+        p = np.zeros((4, 4))
+        p[:2, :2] = self._measurement_cov(z)
+        p[2, 2] = p[3, 3] = self.params.birth_speed_std_mps ** 2
+        track = Track(self.next_id, np.array([z[0], z[1], 0.0, 0.0]), p, det.box_px[j].copy(),
+                      int(det.class_id[j]), det.size_m[j].copy(), confirmed=self.params.confirm_hits <= 1)
+        self.next_id += 1
+        return track
+
+
+def track_neighbour_rows(tracks: list[Track], ego_lateral_offset_m: float, lane_width_m: float,
+                   range_m: float) -> np.ndarray:
+    """(6, 6) float32 rows in NEIGHBOUR_SLOTS x NEIGHBOUR_FIELDS order from tracks, as the ground-truth observation
+    gives them: each track's lane relative to the ego's is round((ego offset + dd) / lane width) (0 same lane, +1
+    left, -1 right), the nearest ahead (ds > 0) and behind of each lane fill the slots; ds, dd and the velocity
+    along the lane (dv) come from the track's state, length and width from its detection. Tracks beyond
+    ``range_m`` or two lanes away are left out; absent rows are zeros."""
+    if not lane_width_m > 0:
+        raise ValueError(f"lane_width_m: expected a number > 0, got {lane_width_m!r}")
+    rows = np.zeros((len(NEIGHBOUR_SLOTS), len(NEIGHBOUR_FIELDS)), np.float64)
+    best: dict[str, tuple[float, Track]] = {}
+    for t in tracks:
+        ds, dd = float(t.x[0]), float(t.x[1])
+        if abs(ds) > range_m:
+            continue
+        lane = round((ego_lateral_offset_m + dd) / lane_width_m)
+        if abs(lane) > 1:
+            continue
+        side = {1: "left_", 0: "", -1: "right_"}[lane]
+        slot = side + ("leader" if ds > 0 else "follower")
+        if slot not in best or abs(ds) < best[slot][0]:
+            best[slot] = (abs(ds), t)
+    for slot, (_, t) in best.items():
+        rows[NEIGHBOUR_SLOTS.index(slot)] = (1.0, t.x[0], t.x[1], t.x[2], t.size_m[0], t.size_m[1])
+    return rows.astype(np.float32)

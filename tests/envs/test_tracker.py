@@ -1,0 +1,127 @@
+"""The perception tracker (pipeline/envs/tracker.py) on closed-form cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+from pipeline.envs.tracker import Detections, Tracker, TrackerParams, box_iou, track_neighbour_rows
+
+DT = 0.1
+
+
+def _dets(*positions: tuple[float, float], boxes=None) -> Detections:
+    k = len(positions)
+    return Detections(np.array(positions, np.float64).reshape(k, 2),
+                      np.full((k, 4), np.nan) if boxes is None else np.array(boxes, np.float64),
+                      np.full(k, 3, np.int64), np.tile([4.5, 1.8], (k, 1)))
+
+
+def test_a_constant_velocity_object_is_confirmed_and_its_velocity_found():
+    tracker = Tracker(TrackerParams(dt_s=DT))
+    out = []
+    for k in range(40):
+        out.append(tracker.update(_dets((30.0 - 2.0 * DT * k, 1.0 + 0.5 * DT * k))))
+    assert [len(o) for o in out[:3]] == [0, 0, 1]  # confirmed at its third hit
+    (track,) = out[-1]
+    assert track.track_id == 1
+    assert track.x[:2] == pytest.approx([30.0 - 2.0 * DT * 39, 1.0 + 0.5 * DT * 39], abs=0.02)
+    assert track.x[2:] == pytest.approx([-2.0, 0.5], abs=0.05)
+
+
+def test_a_missed_frame_is_coasted_and_too_many_drop_the_track():
+    params = TrackerParams(dt_s=DT, max_misses=3)
+    tracker = Tracker(params)
+    for k in range(20):
+        tracker.update(_dets((20.0 + 1.0 * DT * k, 0.0)))
+    (coasting,) = tracker.update(Detections.empty())  # missed: predicted one step on
+    assert coasting.track_id == 1 and coasting.misses == 1
+    assert coasting.x[0] == pytest.approx(20.0 + 1.0 * DT * 20, abs=0.02)
+    (again,) = tracker.update(_dets((20.0 + 1.0 * DT * 21, 0.0)))
+    assert again.track_id == 1 and again.misses == 0  # the same track takes the object back
+    for _ in range(params.max_misses):
+        assert len(tracker.update(Detections.empty())) == 1
+    assert tracker.update(Detections.empty()) == []  # one miss more than max_misses
+
+
+def test_two_crossing_objects_keep_their_identities():
+    """Two objects 0.6 m apart along the road (less than the measurement's spread there) swap sides at 4 m/s
+    across: their paths cross at k = 20, where only the velocities tell them apart."""
+    tracker = Tracker(TrackerParams(dt_s=DT))
+    history = {}
+    for k in range(41):
+        a = (25.0, -4.0 + 4.0 * DT * k)  # moves left
+        b = (25.6, 4.0 - 4.0 * DT * k)  # moves right
+        order = [a, b] if k % 2 == 0 else [b, a]  # detections come in no fixed order
+        for t in tracker.update(_dets(*order)):
+            history.setdefault(t.track_id, []).append((k, t.x[0], t.x[1]))
+    assert sorted(history) == [1, 2]
+    for rows in history.values():
+        ds = np.array([r[1] for r in rows])
+        assert np.ptp(ds) < 0.3  # each id stays on its own object (25 m or 25.6 m along the road)
+        lateral = [r[2] for r in rows]
+        assert abs(lateral[-1] - lateral[0]) > 6.0  # and followed it across
+
+
+def test_a_false_detection_never_becomes_a_track():
+    tracker = Tracker(TrackerParams(dt_s=DT))
+    outputs = [tracker.update(_dets((40.0, 0.0))), *[tracker.update(Detections.empty()) for _ in range(5)]]
+    assert all(o == [] for o in outputs)
+    assert tracker.tracks == []
+
+
+def test_image_boxes_associate_when_positions_jump():
+    """A range that jumps (the LiDAR median on another surface) still matches through the image box's IoU."""
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+    box = [100.0, 100.0, 160.0, 140.0]
+    (first,) = tracker.update(_dets((30.0, 0.0), boxes=[box]))
+    (second,) = tracker.update(_dets((45.0, 0.0), boxes=[[102.0, 100.0, 162.0, 140.0]]))
+    assert second.track_id == first.track_id
+    tracker2 = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+    tracker2.update(_dets((30.0, 0.0)))
+    coasting, new = tracker2.update(_dets((45.0, 0.0)))  # without boxes: a new track beside the coasting one
+    assert (coasting.track_id, coasting.misses, new.track_id, new.misses) == (1, 1, 2, 0)
+
+
+def test_the_same_detections_give_the_same_tracks():
+    rng = np.random.default_rng(0)
+    frames = [_dets(*[(float(x), float(y)) for x, y in rng.uniform(-20, 60, (rng.integers(0, 5), 2))])
+              for _ in range(30)]
+
+    def run():
+        tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=2))
+        return [[(t.track_id, *t.x.tolist()) for t in tracker.update(f)] for f in frames]
+
+    assert run() == run()
+
+
+def test_box_iou_closed_form():
+    iou = box_iou(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 15, 10], [20, 20, 30, 30], [np.nan] * 4]))
+    assert iou.tolist() == [[pytest.approx(50 / 150), 0.0, 0.0]]
+
+
+def test_tracks_fill_the_neighbour_slots_as_the_ground_truth_does():
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+    # same lane ahead at 20 m and 35 m, left lane ahead at 10 m, right lane behind at -8 m, two lanes left: left out
+    tracks = tracker.update(_dets((20.0, 0.2), (35.0, 0.0), (10.0, 3.4), (-8.0, -3.6), (15.0, 7.0)))
+    rows = track_neighbour_rows(tracks, ego_lateral_offset_m=0.1, lane_width_m=3.5, range_m=100.0)
+    col = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
+    row = {slot: rows[k] for k, slot in enumerate(NEIGHBOUR_SLOTS)}
+    assert row["leader"][col["ds_m"]] == pytest.approx(20.0)
+    assert row["left_leader"][col["ds_m"]] == pytest.approx(10.0)
+    assert row["right_follower"][col["ds_m"]] == pytest.approx(-8.0)
+    for slot in ("right_leader", "left_follower", "follower"):
+        assert not row[slot].any()
+    assert row["leader"][col["present"]] == 1.0 and row["leader"][col["length_m"]] == pytest.approx(4.5)
+    with pytest.raises(ValueError, match="lane_width_m"):
+        track_neighbour_rows(tracks, 0.0, 0.0, 100.0)
+
+
+def test_parameters_and_inputs_are_checked():
+    with pytest.raises(ValueError, match="confirm_hits"):
+        TrackerParams(confirm_hits=0)
+    with pytest.raises(ValueError, match="gate_probability"):
+        TrackerParams(gate_probability=1.0)
+    with pytest.raises(ValueError, match="position_m"):
+        _dets((float("nan"), 0.0))
