@@ -1,0 +1,192 @@
+"""Perception in the loop: what a detector sees in the rendered camera frame, ranged by the LiDAR, tracked.
+
+:class:`Perception` runs a detector (anything with ``predict(list of RGB images) -> list of Detections``, as
+:class:`pipeline.detect.onnx.OnnxDetector` and our baseline :class:`pipeline.detect.infer.Detector` have) on the
+camera frame, and gives each detection a range and a bearing from the LiDAR points that project into its box: the
+median of their positions in the ego frame (x forward, y left, origin at the ego's box centre), NaN where no point
+falls in the box. The tracker gets each object's centre: the surfaces the LiDAR sees lie in front of it, so the
+median is moved half the class's typical length further along the line of sight (:func:`centre_from_surface`).
+:class:`PerceivedFeatures` wraps an environment rendering ``sensors=["camera", "lidar"]``: it adds
+the detections to the observation and replaces the ground-truth neighbour slots with those of the
+:mod:`pipeline.envs.tracker`'s tracks, so an agent written for features runs on perceived features unchanged; the
+ground truth moves to ``info["ground_truth"]``.
+
+Observation entries added: ``detections`` (K, 6) float32 [x1, y1, x2, y2, score, category id] sorted by score,
+``detections_mask`` (K,) int8, ``detection_range_m`` and ``detection_bearing_rad`` (K,) float32 (ego frame; 0 where
+``detection_ranged`` (K,) int8 is 0: no LiDAR point fell in the box, or no detection). Only detections of the
+categories in ``categories`` (default: COCO's car, bus, truck, motorcycle, bicycle) are kept, and only ranged ones
+are tracked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from pipeline.envs.tracker import Detections, Tracker, TrackerParams, track_neighbour_rows
+
+ROAD_USER_CATEGORIES = (2, 3, 4, 6, 8)  # COCO: bicycle, car, motorcycle, bus, truck
+# Typical (length, width) by COCO category, for tracks whose size the camera does not measure.
+TYPICAL_SIZE_M = {2: (1.8, 0.6), 3: (4.5, 1.8), 4: (2.1, 0.8), 6: (12.0, 2.55), 8: (8.0, 2.5)}
+
+
+@dataclass(frozen=True)
+class PerceivedFrame:
+    """One frame's detections with their ranges (K of them, by descending score).
+
+    Attributes:
+        boxes_px: (K, 4) float64 x1, y1, x2, y2.
+        scores: (K,) float64.
+        category_ids: (K,) int64.
+        position_m: (K, 2) float64 median (x, y) of the LiDAR points in the box, ego frame; NaN where none.
+        points: (K,) int64 how many LiDAR points fell in each box.
+    """
+
+    boxes_px: np.ndarray
+    scores: np.ndarray
+    category_ids: np.ndarray
+    position_m: np.ndarray
+    points: np.ndarray
+
+    @property
+    def range_m(self) -> np.ndarray:
+        return np.hypot(self.position_m[:, 0], self.position_m[:, 1])
+
+    @property
+    def bearing_rad(self) -> np.ndarray:
+        return np.arctan2(self.position_m[:, 1], self.position_m[:, 0])
+
+
+class Perception:
+    """A detector on the camera frame, ranged by the LiDAR (see the module docstring).
+
+    Args:
+        detector: an object with ``predict(list of (H, W, 3) uint8 RGB) -> list of Detections`` (boxes, scores,
+            category_ids).
+        camera: the rig's :class:`pipeline.sensors.camera.Camera` the frames come from.
+        lidar_mount: the LiDAR's pose in the ego frame (:attr:`pipeline.sensors.lidar.Lidar.mount`).
+        categories: the COCO category ids kept (others are dropped, counted in :attr:`dropped`).
+    """
+
+    def __init__(self, detector, camera, lidar_mount, categories=ROAD_USER_CATEGORIES) -> None:
+        from pipeline.core.geometry import Transform
+
+        self.detector, self.camera = detector, camera
+        self.lidar_mount = lidar_mount
+        self.ego_to_camera = camera.camera_to_world(Transform.identity()).inverse()
+        self.categories = np.array(sorted(categories), np.int64)
+        self.dropped = 0
+
+    def __call__(self, rgb: np.ndarray, lidar_xyz: np.ndarray, lidar_mask: np.ndarray) -> PerceivedFrame:
+        """Detect in ``rgb`` and range each box with the (N, 3) LiDAR-frame points where ``lidar_mask``."""
+        det = self.detector.predict([rgb])[0]
+        boxes = np.asarray(det.boxes, np.float64).reshape(-1, 4)
+        scores = np.asarray(det.scores, np.float64).reshape(-1)
+        cats = np.asarray(det.category_ids, np.int64).reshape(-1)
+        finite = np.isfinite(boxes).all(axis=1) & np.isfinite(scores)
+        keep = finite & np.isin(cats, self.categories)
+        self.dropped += int((~keep).sum())
+        order = np.argsort(-scores[keep], kind="stable")
+        boxes, scores, cats = boxes[keep][order], scores[keep][order], cats[keep][order]
+        points_ego = self.lidar_mount.apply(np.asarray(lidar_xyz, np.float64)[np.asarray(lidar_mask) > 0])
+        uv, in_front = self.camera.project(self.ego_to_camera.apply(points_ego))
+        position = np.full((len(boxes), 2), np.nan)
+        counts = np.zeros(len(boxes), np.int64)
+        for k, (x1, y1, x2, y2) in enumerate(boxes):  # one vectorised test per detection (tens of them)
+            inside = in_front & (uv[:, 0] >= x1) & (uv[:, 0] < x2) & (uv[:, 1] >= y1) & (uv[:, 1] < y2)
+            counts[k] = int(inside.sum())
+            if counts[k]:
+                position[k] = np.median(points_ego[inside, :2], axis=0)
+        return PerceivedFrame(boxes, scores, cats, position, counts)
+
+
+def centre_from_surface(position_m: np.ndarray, length_m: np.ndarray) -> np.ndarray:
+    """(K, 2) estimated object centres from the (K, 2) median of the LiDAR points on the surfaces that face the
+    sensor: half the object's (typical) length further along the line of sight, since on a road the vehicles around
+    the ego mostly show it their front or back."""
+    position_m = np.asarray(position_m, np.float64).reshape(-1, 2)
+    norm = np.maximum(np.hypot(position_m[:, 0], position_m[:, 1]), 1e-6)
+    return position_m + (0.5 * np.asarray(length_m, np.float64) / norm)[:, None] * position_m
+
+
+def lane_frame(position_m: np.ndarray, heading_rel_rad: float) -> np.ndarray:
+    """(K, 2) ego-frame (x forward, y left) offsets -> (K, 2) (ds along the lane, dd to its left), for an ego whose
+    heading is ``heading_rel_rad`` from the lane's (CCW)."""
+    c, s = np.cos(heading_rel_rad), np.sin(heading_rel_rad)
+    x, y = position_m[:, 0], position_m[:, 1]
+    return np.column_stack([c * x - s * y, s * x + c * y])
+
+
+class PerceivedFeatures(gym.Wrapper):
+    """Neighbour features from perception instead of ground truth (see the module docstring).
+
+    Args:
+        env: a roadsynth env made with ``sensors`` including "camera" and "lidar".
+        detector: as :class:`Perception`'s.
+        tracker: the tracker's parameters (``dt_s`` is set to the env's step).
+        max_detections: K, the rows of the ``detections`` observation.
+    """
+
+    def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
+                 max_detections: int = 32) -> None:
+        super().__init__(env)
+        inner = env.unwrapped
+        live = getattr(inner, "sensors", None)
+        if live is None or not live.cameras or not live.lidars:
+            raise ValueError('PerceivedFeatures needs an env made with sensors=["camera", "lidar"]')
+        if not isinstance(max_detections, int) or max_detections < 1:
+            raise ValueError(f"max_detections: expected an integer >= 1, got {max_detections!r}")
+        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount)
+        params = tracker if tracker is not None else TrackerParams()
+        self.tracker = Tracker(TrackerParams(**{**params.__dict__, "dt_s": inner.sim.step_length_s}))
+        self.k = max_detections
+        k = max_detections
+        self.observation_space = spaces.Dict({
+            **env.observation_space.spaces,
+            "detections": spaces.Box(-np.inf, np.inf, (k, 6), np.float32),
+            "detections_mask": spaces.MultiBinary(k),
+            "detection_range_m": spaces.Box(-np.inf, np.inf, (k,), np.float32),
+            "detection_bearing_rad": spaces.Box(-np.pi, np.pi, (k,), np.float32),
+            "detection_ranged": spaces.MultiBinary(k),
+        })
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.tracker.reset()
+        return self._perceive(obs, info)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        obs, info = self._perceive(obs, info)
+        return obs, reward, terminated, truncated, info
+
+    def _perceive(self, obs: dict, info: dict) -> tuple[dict, dict]:
+        frame = self.perception(obs["camera"], obs["lidar"][:, :3], obs["lidar_mask"])
+        ranged = np.isfinite(frame.position_m).all(axis=1)
+        heading = float(obs["ego"][4])
+        sizes = np.array([TYPICAL_SIZE_M.get(int(c), (4.5, 1.8)) for c in frame.category_ids[ranged]],
+                         np.float64).reshape(-1, 2)
+        centres = centre_from_surface(frame.position_m[ranged], sizes[:, 0])
+        tracks = self.tracker.update(Detections(lane_frame(centres, heading),
+                                                frame.boxes_px[ranged], frame.category_ids[ranged], sizes))
+        inner = self.env.unwrapped
+        space = inner.observation_space["neighbours"]
+        rows = track_neighbour_rows(tracks, float(obs["ego"][3]), inner.lane_width_m(), float(space.high[0, 1]))
+        out = dict(obs)
+        info = {**info, "ground_truth": {"neighbours": obs["neighbours"]}, "tracks": len(tracks)}
+        out["neighbours"] = np.clip(rows, space.low, space.high).astype(np.float32)
+        n = min(len(frame.scores), self.k)
+        detections = np.zeros((self.k, 6), np.float32)
+        detections[:n] = np.column_stack([frame.boxes_px, frame.scores, frame.category_ids])[:n]
+        out["detections"] = detections
+        out["detections_mask"] = (np.arange(self.k) < n).astype(np.int8)
+        rng, bearing = np.zeros(self.k, np.float32), np.zeros(self.k, np.float32)
+        ranged_k = np.zeros(self.k, np.int8)
+        ranged_k[:n] = ranged[:n]
+        rng[:n] = np.where(ranged[:n], frame.range_m[:n], 0.0)
+        bearing[:n] = np.where(ranged[:n], frame.bearing_rad[:n], 0.0)
+        out["detection_range_m"], out["detection_bearing_rad"], out["detection_ranged"] = rng, bearing, ranged_k
+        return out, info

@@ -1,0 +1,159 @@
+"""Perception in the loop (pipeline/envs/perception.py): LiDAR ranging of detector boxes in closed form, and the
+PerceivedFeatures wrapper on a real highway env with a detector that reports the frame's ground-truth boxes."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import pipeline.envs  # noqa: F401  (registers the envs)
+from pipeline.core.config import RigConfig, load_config
+from pipeline.core.geometry import Transform
+from pipeline.detect.infer import Detections as ImageDetections
+from pipeline.envs.perception import PerceivedFeatures, Perception, centre_from_surface, lane_frame
+from pipeline.stages.rig import build_sensors
+
+SMALL_RIG = """
+name: small
+cameras:
+  - name: front
+    width_px: 320
+    height_px: 240
+    hfov_deg: 60.0
+    samples_per_pixel: 1
+    quality: fast
+    mount: {xyz_m: [0.6, 0.0, 0.65], rpy_rad: [0.0, 0.0, 0.0]}
+lidars:
+  - name: top
+    channels: 32
+    upper_fov_deg: 2.0
+    lower_fov_deg: -24.9
+    horizontal_resolution_deg: 0.4
+    range_m: 120.0
+    rotation_hz: 10.0
+    attenuation_per_m: 0.004
+    range_noise_std_m: 0.02
+    dropout: 0.0
+    mount: {xyz_m: [0.0, 0.0, 1.05], rpy_rad: [0.0, 0.0, 0.0]}
+"""
+
+
+class FixedBoxes:
+    """A detector that reports the same boxes for every image."""
+
+    def __init__(self, boxes, scores, categories) -> None:
+        self.out = ImageDetections(np.array(boxes, float).reshape(-1, 4), np.array(scores, float),
+                                   np.array(categories, np.int64))
+
+    def predict(self, rgbs):
+        return [self.out for _ in rgbs]
+
+
+@pytest.fixture(scope="module")
+def rig_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rig") / "small.yaml"
+    path.write_text(SMALL_RIG)
+    return path
+
+
+def test_lane_frame_and_surface_to_centre_in_closed_form():
+    p = np.array([[10.0, 0.0], [0.0, 5.0]])
+    assert lane_frame(p, 0.0) == pytest.approx(p)
+    # the ego turned 90 deg left of its lane: its x axis points to the lane's left
+    assert lane_frame(p, math.pi / 2) == pytest.approx(np.array([[0.0, 10.0], [-5.0, 0.0]]))
+    assert centre_from_surface(np.array([[30.0, 40.0]]), np.array([10.0])) == pytest.approx(np.array([[33.0, 44.0]]))
+
+
+def test_a_box_is_ranged_by_the_median_of_the_lidar_points_inside_it(rig_path):
+    rig = load_config(RigConfig, rig_path, "rigs")[0]
+    cameras, lidars = build_sensors(rig)
+    camera, lidar = cameras[0], lidars[0]
+    # a patch of points 20 m ahead and 1 m to the left of the ego's centre, 0.5-1.5 m above the road
+    ys, zs = np.meshgrid(np.linspace(0.6, 1.4, 9), np.linspace(0.5, 1.5, 5))
+    patch_ego = np.column_stack([np.full(ys.size, 20.0), ys.ravel(), zs.ravel()])
+    uv, _ = camera.project(camera.camera_to_world(Transform.identity()).inverse().apply(patch_ego))
+    (x1, y1), (x2, y2) = uv.min(axis=0) - 1, uv.max(axis=0) + 1
+    far_ego = np.array([[60.0, -10.0, 1.0]])  # a point seen elsewhere in the image
+    points_lidar = lidar.mount.inverse().apply(np.vstack([patch_ego, far_ego])).astype(np.float32)
+    mask = np.ones(len(points_lidar), np.int8)
+    detector = FixedBoxes([[x1, y1, x2, y2], [0, 0, 5, 5], [x1, y1, x2, y2], [np.nan, 0, 1, 1]],
+                          [0.6, 0.9, 0.99, 0.8], [3, 6, 1, 3])  # a car, an empty bus box, a person, a broken box
+    perception = Perception(detector, camera, lidar.mount)
+    frame = perception(np.zeros((240, 320, 3), np.uint8), points_lidar, mask)
+    assert frame.category_ids.tolist() == [6, 3]  # by score; the person and the NaN box dropped, and counted
+    assert perception.dropped == 2
+    assert frame.points.tolist() == [0, len(patch_ego)]
+    assert np.isnan(frame.position_m[0]).all()
+    assert frame.position_m[1] == pytest.approx([20.0, 1.0], abs=1e-6)
+    assert frame.range_m[1] == pytest.approx(math.hypot(20.0, 1.0), abs=1e-6)
+    assert frame.bearing_rad[1] == pytest.approx(math.atan2(1.0, 20.0), abs=1e-9)
+
+
+class GroundTruthBoxes:
+    """A detector that sees exactly the frame's labelled vehicles (tight boxes of >= 50 visible pixels)."""
+
+    def __init__(self, env) -> None:
+        self.env = env
+
+    def predict(self, rgbs):
+        labels = self.env.unwrapped._truth["labels"].to_pandas()
+        cam = labels[(labels.sensor == "front") & labels.visible & (labels.visible_px >= 50)]
+        return [ImageDetections(cam[["x1", "y1", "x2", "y2"]].to_numpy(float), np.ones(len(cam)),
+                                cam.category_id.to_numpy(np.int64))]
+
+
+def _episode(rig_path, seed: int = 2, steps: int = 25):
+    env = gym.make("roadsynth/Highway-v0", vehicles=100, warmup_s=30.0, time_limit_s=3.0,
+                   sensors=["camera", "lidar"], rig=rig_path)
+    wrapped = PerceivedFeatures(env, GroundTruthBoxes(env))
+    try:
+        obs, info = wrapped.reset(seed=seed)
+        out = [(obs, info)]
+        for _ in range(steps):
+            obs, _, terminated, truncated, info = wrapped.step(np.zeros(2, np.float32))
+            out.append((obs, info))
+            if terminated or truncated:
+                break
+        return wrapped.observation_space, out
+    finally:
+        wrapped.close()
+
+
+@pytest.mark.slow
+def test_perceived_features_track_what_the_camera_sees(rig_path):
+    space, steps = _episode(rig_path)
+    obs, info = steps[-1]
+    assert space.contains(obs)
+    gt, perceived = info["ground_truth"]["neighbours"], obs["neighbours"]
+    seen = [k for k in range(3) if perceived[k, 0]]  # leaders: the front camera sees only ahead
+    assert seen, "no leader was tracked"
+    for k in seen:
+        assert gt[k, 0] == 1.0
+        assert perceived[k, 1] == pytest.approx(gt[k, 1], abs=1.5)  # ds, centre to centre
+        assert perceived[k, 2] == pytest.approx(gt[k, 2], abs=0.8)  # dd
+        assert perceived[k, 3] == pytest.approx(gt[k, 3], abs=1.5)  # dv
+    assert not perceived[3:, 0].any()  # followers are behind the camera
+    assert obs["detections_mask"].sum() >= len(seen)
+    ranged = obs["detection_ranged"].astype(bool)
+    assert (obs["detection_range_m"][ranged] > 0).all() and (obs["detection_range_m"][~ranged] == 0).all()
+
+
+@pytest.mark.slow
+def test_a_perceived_episode_repeats_with_its_seed(rig_path):
+    first = _episode(rig_path, steps=8)[1]
+    second = _episode(rig_path, steps=8)[1]
+    for (a, _), (b, _) in zip(first, second, strict=True):
+        assert np.array_equal(a["neighbours"], b["neighbours"])
+        assert np.array_equal(a["detections"], b["detections"])
+
+
+def test_an_env_without_camera_and_lidar_is_refused():
+    env = gym.make("roadsynth/Highway-v0", vehicles=20, warmup_s=5.0)
+    try:
+        with pytest.raises(ValueError, match="camera"):
+            PerceivedFeatures(env, FixedBoxes([], [], []))
+    finally:
+        env.close()
