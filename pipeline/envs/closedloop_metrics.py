@@ -1,0 +1,142 @@
+"""Closed-loop driving metrics from an episode's per-step log, and their comparison over seeds.
+
+An :class:`EpisodeLog` holds, per step, the ego's speed and acceleration, the ground-truth leader (present, gap
+bumper to bumper, closing speed) whatever the agent saw, whether the agent's own observation had a leader, and the
+range of the ground-truth leader when it was first tracked. The metrics (:func:`episode_metrics`):
+
+- ``collisions_per_100km``: collisions (0 or 1: a collision ends the episode) per 100 km driven;
+- ``min_ttc_s``: the smallest time to collision with the ground-truth leader, gap / closing speed over the steps
+  where the ego closes in (``inf`` when it never does), and ``share_ttc_below_1_5s``, the share of steps with a TTC
+  under 1.5 s (the usual threshold of a critical encounter: Vogel 2003, "A comparison of headway and time to
+  collision as safety indicators", Accident Analysis & Prevention 35);
+- ``hard_brakes``: events of deceleration beyond 4 m/s^2 (``HARD_BRAKE_MPS2``; one event per run of steps);
+- ``first_tracked_range_m``: the median over leaders of the ground-truth gap at which the agent's observation
+  first held each new leader (perceived runs; with ground truth, the range it appears in the observation);
+- ``mean_speed_mps`` and ``progress_m``.
+
+:func:`compare` pairs perceived and ground-truth episodes of the same seeds: for each metric the mean of each and
+the mean of their differences with a percentile bootstrap confidence interval over seeds (Efron & Tibshirani 1993),
+resampled by a generator of fixed seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+HARD_BRAKE_MPS2 = -4.0
+TTC_CRITICAL_S = 1.5
+METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
+           "mean_speed_mps", "progress_m")
+
+
+@dataclass
+class EpisodeLog:
+    """Per-step values of one episode, appended by :meth:`add` (lists, one entry a step)."""
+
+    dt_s: float
+    speed_mps: list[float]
+    accel_mps2: list[float]
+    leader_gap_m: list[float]  # NaN: no ground-truth leader
+    leader_closing_mps: list[float]  # ego speed - leader speed; NaN without a leader
+    leader_id: list[str]  # "" without a leader
+    leader_seen: list[bool]  # the agent's observation had a leader this step
+    collided: bool = False
+
+    @classmethod
+    def empty(cls, dt_s: float) -> EpisodeLog:
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s: expected a finite number > 0, got {dt_s!r}")
+        return cls(dt_s, [], [], [], [], [], [])
+
+    def add(self, speed_mps: float, accel_mps2: float, leader_id: str, leader_gap_m: float,
+            leader_closing_mps: float, leader_seen: bool) -> None:
+        self.speed_mps.append(float(speed_mps))
+        self.accel_mps2.append(float(accel_mps2))
+        self.leader_id.append(leader_id)
+        self.leader_gap_m.append(float(leader_gap_m) if leader_id else math.nan)
+        self.leader_closing_mps.append(float(leader_closing_mps) if leader_id else math.nan)
+        self.leader_seen.append(bool(leader_seen))
+
+
+def _events(flags: np.ndarray) -> int:
+    """Runs of True in a boolean sequence."""
+    flags = np.asarray(flags, bool)
+    return int(np.count_nonzero(flags[1:] & ~flags[:-1]) + (1 if len(flags) and flags[0] else 0))
+
+
+def episode_metrics(log: EpisodeLog) -> dict[str, float]:
+    """The metrics of one episode (see the module docstring); NaN where undefined (e.g. no leader ever)."""
+    speed = np.asarray(log.speed_mps, np.float64)
+    progress = float(np.sum(speed) * log.dt_s)
+    gap = np.asarray(log.leader_gap_m, np.float64)
+    closing = np.asarray(log.leader_closing_mps, np.float64)
+    closing_in = np.isfinite(gap) & (closing > 0)
+    ttc = np.full(len(gap), np.inf)
+    ttc[closing_in] = np.maximum(gap[closing_in], 0.0) / closing[closing_in]
+    first_ranges, seen = [], set()
+    for lid, saw, g in zip(log.leader_id, log.leader_seen, gap, strict=True):
+        if lid and saw and lid not in seen:  # the first step the agent held this ground-truth leader
+            seen.add(lid)
+            first_ranges.append(g)
+    km = progress / 1000.0
+    return {
+        "collisions_per_100km": (100.0 * int(log.collided) / km) if km > 0 else (math.inf if log.collided else 0.0),
+        "min_ttc_s": float(ttc.min()) if len(ttc) else math.inf,
+        "share_ttc_below_1_5s": float(np.mean(ttc < TTC_CRITICAL_S)) if len(ttc) else 0.0,
+        "hard_brakes": float(_events(np.asarray(log.accel_mps2) < HARD_BRAKE_MPS2)),
+        "first_tracked_range_m": float(np.median(first_ranges)) if first_ranges else math.nan,
+        "mean_speed_mps": float(speed.mean()) if len(speed) else math.nan,
+        "progress_m": progress,
+    }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One metric over paired seeds: the means of the perceived and ground-truth runs, and their mean difference
+    (perceived - ground truth) with its bootstrap confidence interval."""
+
+    metric: str
+    perceived: float
+    ground_truth: float
+    difference: float
+    ci_low: float
+    ci_high: float
+    seeds: int
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        return asdict(self)
+
+
+def _finite_mean(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if len(finite) else math.nan
+
+
+def compare(perceived: list[dict[str, float]], ground_truth: list[dict[str, float]], *, resamples: int = 2000,
+            level: float = 0.95, seed: int = 0) -> list[Comparison]:
+    """Per metric, perceived vs ground truth over paired episodes (same seeds, same order). Pairs where either
+    value is not finite (an infinite TTC, no leader) are left out of that metric's difference."""
+    if len(perceived) != len(ground_truth):
+        raise ValueError(f"compare: {len(perceived)} perceived and {len(ground_truth)} ground-truth episodes; "
+                         "expected one of each per seed")
+    if not 0 < level < 1:
+        raise ValueError(f"level: expected a number in (0, 1), got {level!r}")
+    rng = np.random.default_rng([seed, 42])
+    out = []
+    for name in METRICS:
+        p = np.array([m[name] for m in perceived], np.float64)
+        g = np.array([m[name] for m in ground_truth], np.float64)
+        both = np.isfinite(p) & np.isfinite(g)
+        d = p[both] - g[both]
+        if len(d):
+            idx = rng.integers(0, len(d), (resamples, len(d)))
+            means = d[idx].mean(axis=1)
+            low, high = np.quantile(means, [(1 - level) / 2, 1 - (1 - level) / 2])
+            diff = float(d.mean())
+        else:
+            low = high = diff = math.nan
+        out.append(Comparison(name, _finite_mean(p), _finite_mean(g), diff, float(low), float(high), len(d)))
+    return out

@@ -1,0 +1,70 @@
+"""Closed-loop metrics (pipeline/envs/closedloop_metrics.py) on hand-made episode logs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.envs.closedloop_metrics import EpisodeLog, compare, episode_metrics
+
+
+def _log(speeds, accels=None, leader=None, dt=0.5, collided=False):
+    log = EpisodeLog.empty(dt)
+    for k, v in enumerate(speeds):
+        lid, gap, closing, seen = leader[k] if leader else ("", math.nan, math.nan, False)
+        log.add(v, 0.0 if accels is None else accels[k], lid, gap, closing, seen)
+    log.collided = collided
+    return log
+
+
+def test_speed_progress_and_collisions_per_100km():
+    m = episode_metrics(_log([20.0] * 100, dt=0.5, collided=True))  # 1000 m
+    assert m["progress_m"] == pytest.approx(1000.0)
+    assert m["mean_speed_mps"] == pytest.approx(20.0)
+    assert m["collisions_per_100km"] == pytest.approx(100.0)
+    assert episode_metrics(_log([20.0] * 100))["collisions_per_100km"] == 0.0
+
+
+def test_time_to_collision_only_while_closing_in():
+    leader = [("a", 30.0, 10.0, True), ("a", 20.0, 10.0, True), ("a", 12.0, 10.0, True), ("a", 12.0, -1.0, True)]
+    m = episode_metrics(_log([20.0] * 4, leader=leader))
+    assert m["min_ttc_s"] == pytest.approx(1.2)
+    assert m["share_ttc_below_1_5s"] == pytest.approx(0.25)  # 3.0 s, 2.0 s, 1.2 s, opening
+    assert episode_metrics(_log([20.0] * 4))["min_ttc_s"] == math.inf
+
+
+def test_hard_brakes_count_events_not_steps():
+    accels = [0, -5, -5, -1, -4.5, 0, -3.9, -4.01]
+    assert episode_metrics(_log([10.0] * 8, accels))["hard_brakes"] == 3.0
+
+
+def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
+    leader = [("a", 80.0, 0.0, False), ("a", 70.0, 0.0, False), ("a", 60.0, 0.0, True), ("a", 50.0, 0.0, True),
+              ("b", 90.0, 0.0, False), ("b", 40.0, 0.0, True), ("", math.nan, math.nan, False)]
+    assert episode_metrics(_log([10.0] * 7, leader=leader))["first_tracked_range_m"] == pytest.approx(50.0)
+    assert math.isnan(episode_metrics(_log([10.0] * 3))["first_tracked_range_m"])
+
+
+def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
+    gt = [{"collisions_per_100km": 0.0, "min_ttc_s": 3.0, "share_ttc_below_1_5s": 0.0, "hard_brakes": 0.0,
+           "first_tracked_range_m": 80.0, "mean_speed_mps": 25.0, "progress_m": 750.0} for _ in range(5)]
+    perceived = [{**m, "first_tracked_range_m": 80.0 - d, "min_ttc_s": math.inf if d == 30 else 2.0}
+                 for m, d in zip(gt, (10, 20, 30, 40, 50), strict=True)]
+    rows = {c.metric: c for c in compare(perceived, gt, resamples=4000)}
+    r = rows["first_tracked_range_m"]
+    assert (r.perceived, r.ground_truth, r.difference, r.seeds) == (50.0, 80.0, -30.0, 5)
+    assert -50.0 <= r.ci_low < -30.0 < r.ci_high <= -10.0
+    assert rows["min_ttc_s"].seeds == 4  # the infinite TTC leaves its pair out
+    same = rows["mean_speed_mps"]
+    assert same.difference == 0.0 and same.ci_low == same.ci_high == 0.0
+    assert compare(perceived, gt, resamples=100) == compare(perceived, gt, resamples=100)  # fixed seed
+    with pytest.raises(ValueError, match="one of each per seed"):
+        compare(perceived[:2], gt)
+
+
+def test_a_bad_step_length_is_refused():
+    with pytest.raises(ValueError, match="dt_s"):
+        EpisodeLog.empty(0.0)
+    assert np.isnan(episode_metrics(EpisodeLog.empty(0.1))["mean_speed_mps"])
