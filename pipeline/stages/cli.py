@@ -32,6 +32,8 @@ STAGE_MODULES: dict[str, str] = {
     "train": "pipeline.stages.train",
     "detect": "pipeline.stages.detect",
     "experiment": "pipeline.stages.experiment",
+    # The closed-loop evaluation drives the environment, the layer above the stages: loaded by name like them.
+    "closedloop": "pipeline.envs.closedloop",
 }
 
 

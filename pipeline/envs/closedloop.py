@@ -1,0 +1,228 @@
+"""``roadsynth closedloop``: drive the same traffic on ground truth and on perception, and compare (issue 42).
+
+For every (scenario, seed, condition) of a :class:`pipeline.core.config.closedloop.ClosedLoopConfig`, the agent
+(the reference IDM + MOBIL driver, :mod:`pipeline.envs.driver`) drives one episode on the ground-truth features
+and one on the features of :class:`pipeline.envs.perception.PerceivedFeatures` (the detector on the rendered
+camera, ranged by the LiDAR, tracked), with the same seed, hence the same network, demand and warm-up. Each step
+logs the ego's speed and acceleration and the ground-truth leader (:mod:`pipeline.envs.closedloop_metrics`).
+Writes, into ``--out`` (atomically): ``metrics.json`` (every episode's metrics, and per condition and per
+(scenario, condition) the perceived - ground-truth differences with bootstrap intervals over seeds),
+``report.md``, a plot per condition (``plots/CONDITION.png``) and ``meta.json``; with ``--record``, each episode as
+a simulated run under ``episodes/`` (``roadsynth render`` and ``export`` read it; Foxglove through the MCAP export).
+
+This module is the command's: it sits in ``pipeline/envs/`` because it drives the environment (the layer above
+the stages); the CLI loads it by name like the stage modules.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.core.config import load_config
+from pipeline.core.config.closedloop import ClosedLoopConfig
+from pipeline.envs.closedloop_metrics import METRICS, EpisodeLog, compare, episode_metrics
+from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+
+log = logging.getLogger(__name__)
+
+HELP = "drive each episode on ground truth and on perception; compare safety and progress per condition"
+INPUT_ARGS = ("config",)
+INTERRUPT_HINT = "the output is as it was; rerun to start again"
+MODES = ("ground_truth", "perceived")
+_LEADER = NEIGHBOUR_SLOTS.index("leader")
+_COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("config", help="a closed-loop config NAME (configs/closedloop/) or YAML PATH")
+    parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
+    parser.add_argument("--record", action="store_true", help="also record every episode as a simulated run")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def load_detector(spec: str, config_file: Path):
+    """The detector of a config's ``detector`` value (``onnx:PATH`` or ``baseline:DIR``), PATH relative to the
+    config file; a missing file is an error naming the config file and the field."""
+    kind, _, path = spec.partition(":")
+    target = Path(path) if Path(path).is_absolute() else (config_file.parent / path)
+    if not target.exists():
+        raise ValueError(f"{config_file}: detector: {target} does not exist")
+    if kind == "onnx":
+        from pipeline.detect.onnx import OnnxDetector
+
+        return OnnxDetector(target, batch_size=1)
+    from pipeline.detect.infer import Detector
+
+    return Detector.load(target)
+
+
+def _leader(env, neighbours: np.ndarray) -> tuple[str, float, float]:
+    """The ground-truth leader: (SUMO id, bumper-to-bumper gap, closing speed), ("", nan, nan) without one."""
+    inner = env.unwrapped
+    row = neighbours[_LEADER]
+    if row[_COL["present"]] < 0.5:
+        return "", float("nan"), float("nan")
+    found = inner._sumo.vehicle.getLeader(inner.ego_id, float(inner.options.neighbour_range_m))
+    gap = float(row[_COL["ds_m"]]) - 0.5 * (float(row[_COL["length_m"]]) + inner.ego_length_m())
+    return (found[0] if found else "?"), gap, -float(row[_COL["dv_mps"]])
+
+
+def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: str, detector=None,
+                record: Path | None = None) -> tuple[EpisodeLog, str]:
+    """One episode of the reference agent: on ground-truth features (``detector`` None) or on perceived ones.
+    Returns its log and how it ended (the env's ``reason``)."""
+    import gymnasium as gym
+
+    import pipeline.envs  # noqa: F401  (registers the envs)
+    from pipeline.envs.driver import ReferenceAgent
+    from pipeline.envs.perception import PerceivedFeatures
+
+    kwargs = {"scenario": scenario, "time_limit_s": config.episode_s, "vehicles": config.vehicles,
+              "warmup_s": config.warmup_s, "record": record}
+    if detector is None:
+        env = gym.make("roadsynth/Scenario-v0", **kwargs)
+    else:
+        env = PerceivedFeatures(gym.make("roadsynth/Scenario-v0", sensors=["camera", "lidar"], rig=config.rig,
+                                         condition=condition, **kwargs), detector,
+                                max_detections=config.max_detections)
+    try:
+        obs, info = env.reset(seed=seed)
+        agent = ReferenceAgent(env)
+        agent.reset(obs)
+        episode = EpisodeLog.empty(env.unwrapped.sim.step_length_s)
+        while True:
+            obs, _, terminated, truncated, info = env.step(agent.act(obs))
+            truth = info["ground_truth"]["neighbours"] if detector is not None else obs["neighbours"]
+            lid, gap, closing = _leader(env, truth) if not (terminated or truncated) else ("", np.nan, np.nan)
+            episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
+                        bool(obs["neighbours"][_LEADER, _COL["present"]] > 0.5))
+            if terminated or truncated:
+                episode.collided = info.get("reason") == "collision"
+                return episode, str(info.get("reason"))
+    finally:
+        env.close()
+
+
+def closedloop(config: ClosedLoopConfig, config_file: Path, out: Path, *, record: bool = False,
+               progress: bool = True) -> dict:
+    """Run every episode twice and write the outputs into ``out`` (see the module docstring); returns metrics."""
+    from tqdm import tqdm
+
+    from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+
+    detector = load_detector(config.detector, config_file)
+    episodes = [(s, n, c) for s in config.scenarios for n in config.seeds for c in config.conditions]
+    rows = []
+    with atomic_output_dir(out) as tmp:
+        bar = tqdm(total=2 * len(episodes), disable=not progress, desc="closed-loop episodes", unit="episode")
+        for scenario, seed, condition in episodes:
+            for mode in MODES:
+                name = f"{Path(scenario).stem}-{seed}-{Path(condition).stem}-{mode}"
+                episode, reason = run_episode(config, scenario, seed, condition,
+                                              detector if mode == "perceived" else None,
+                                              tmp / "episodes" / name if record else None)
+                rows.append({"scenario": Path(scenario).stem, "seed": seed, "condition": Path(condition).stem,
+                             "mode": mode, "end": reason, "steps": len(episode.speed_mps),
+                             "metrics": episode_metrics(episode)})
+                bar.update()
+        bar.close()
+        comparisons = _comparisons(rows)
+        metrics = {"episodes": rows, "comparisons": comparisons, "metric_names": list(METRICS)}
+        write_json(tmp / "metrics.json", _finite(metrics))
+        (tmp / "report.md").write_text(_report(config, rows, comparisons))
+        _plots(comparisons, tmp / "plots")
+        write_meta(tmp, stage="closedloop", config=config.model_dump(), seed=None)
+    return metrics
+
+
+def _comparisons(rows: list[dict]) -> dict[str, list[dict]]:
+    """Perceived vs ground truth per condition (all scenarios) and per scenario/condition."""
+    groups: dict[str, list[tuple[dict, dict]]] = {}
+    for r in rows:
+        if r["mode"] != "perceived":
+            continue
+        gt = next(g for g in rows if g["mode"] == "ground_truth" and
+                  (g["scenario"], g["seed"], g["condition"]) == (r["scenario"], r["seed"], r["condition"]))
+        for key in (r["condition"], f"{r['scenario']}/{r['condition']}"):
+            groups.setdefault(key, []).append((r["metrics"], gt["metrics"]))
+    return {key: [c.as_dict() for c in compare([p for p, _ in pairs], [g for _, g in pairs])]
+            for key, pairs in groups.items()}
+
+
+def _finite(value):
+    """JSON-safe: non-finite floats as None (metrics.json is strict JSON)."""
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _fmt(value: float) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.3g}"
+
+
+def _report(config: ClosedLoopConfig, rows: list[dict], comparisons: dict[str, list[dict]]) -> str:
+    lines = [f"# Closed loop: {config.name}", "", config.description, "",
+             f"Agent: {config.agent} (IDM + MOBIL). Detector: `{config.detector}`. Episodes of {config.episode_s:g} s "
+             f"after the warm-up; seeds {', '.join(map(str, config.seeds))}. Each episode driven twice with the same "
+             "seed: on ground-truth features and on perceived ones (docs/closedloop.md). Differences are perceived "
+             "minus ground truth, with a 95 % bootstrap interval over seeds.", ""]
+    ends = {}
+    for r in rows:
+        ends.setdefault((r["mode"], r["end"]), 0)
+        ends[(r["mode"], r["end"])] += 1
+    lines += ["Episode ends: " + ", ".join(f"{mode} {end}: {n}" for (mode, end), n in sorted(ends.items())), ""]
+    for key, table in comparisons.items():
+        lines += [f"## {key}", "", "| metric | perceived | ground truth | difference | 95 % interval | seeds |",
+                  "|---|---|---|---|---|---|"]
+        for c in table:
+            lines.append(f"| {c['metric']} | {_fmt(c['perceived'])} | {_fmt(c['ground_truth'])} | "
+                         f"{_fmt(c['difference'])} | [{_fmt(c['ci_low'])}, {_fmt(c['ci_high'])}] | {c['seeds']} |")
+        if "/" not in key:
+            lines += ["", f"![{key}](plots/{key}.png)"]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _plots(comparisons: dict[str, list[dict]], folder: Path) -> None:
+    """One bar chart per condition: each metric's perceived and ground-truth means."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for key, table in comparisons.items():
+        if "/" in key:
+            continue
+        fig, axes = plt.subplots(1, len(table), figsize=(2.2 * len(table), 2.6))
+        for ax, c in zip(np.atleast_1d(axes), table, strict=True):
+            values = [v if v is not None and np.isfinite(v) else 0.0 for v in (c["perceived"], c["ground_truth"])]
+            ax.bar([0, 1], values, color=["#c0504d", "#4f81bd"])
+            ax.set_ylim(min(0.0, *values) * 1.15, max(max(values) * 1.15, 1e-3))
+            ax.set_xticks([0, 1], ["perc.", "GT"])
+            ax.set_title(c["metric"].replace("_", " "), fontsize=7)
+            ax.tick_params(labelsize=7)
+        fig.suptitle(f"{key}: perceived vs ground truth", fontsize=9)
+        fig.tight_layout()
+        fig.savefig(folder / f"{key}.png", dpi=110, metadata={"Software": "roadsynth closedloop"})
+        plt.close(fig)
+
+
+def main(args: argparse.Namespace) -> int:
+    config, path = load_config(ClosedLoopConfig, args.config, "closedloop")
+    metrics = closedloop(config, path, args.out, record=args.record, progress=not args.no_progress)
+    for key, table in metrics["comparisons"].items():
+        if "/" not in key:
+            brief = {c["metric"]: c["difference"] for c in table}
+            log.info("%s: perceived - ground truth %s", key, json.dumps(_finite(brief)))
+    log.info("wrote %s", args.out)
+    return 0

@@ -1,0 +1,92 @@
+"""``roadsynth closedloop`` end to end on a tiny config: a real highway, the reference agent, a constant ONNX
+detector the test builds (one car box in every frame), a small rig."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import pytest
+import yaml
+
+import pipeline.envs  # noqa: F401  (registers the envs)
+from pipeline.envs.driver import ReferenceAgent
+from pipeline.stages.cli import main as cli_main
+from tests.detect.test_onnx_heads import constant_model, yolox_output
+from tests.envs.test_perception import SMALL_RIG
+
+pytestmark = pytest.mark.slow
+TINY = {"name": "tiny", "scenarios": ["highway"], "seeds": [1, 2], "conditions": ["morning"], "episode_s": 1.5,
+        "vehicles": 60, "warmup_s": 20.0, "rig": "small.yaml", "detector": "onnx:car.onnx"}
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("closedloop")
+    (root / "small.yaml").write_text(SMALL_RIG)
+    constant_model(root / "car.onnx", yolox_output())
+    config = root / "tiny.yaml"
+    config.write_text(yaml.safe_dump({**TINY, "rig": str(root / "small.yaml")}))
+    out = root / "out"
+    assert cli_main(["closedloop", str(config), "--out", str(out), "--record", "--no-progress"]) == 0
+    return root, out
+
+
+def test_it_writes_every_episode_the_comparisons_a_report_and_plots(run):
+    _, out = run
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert sorted((e["seed"], e["mode"]) for e in metrics["episodes"]) == [
+        (1, "ground_truth"), (1, "perceived"), (2, "ground_truth"), (2, "perceived")]
+    assert all(e["steps"] == 15 and e["end"] == "time_limit" for e in metrics["episodes"])
+    assert sorted(metrics["comparisons"]) == ["highway/morning", "morning"]
+    assert [c["metric"] for c in metrics["comparisons"]["morning"]] == metrics["metric_names"]
+    speed = next(c for c in metrics["comparisons"]["morning"] if c["metric"] == "mean_speed_mps")
+    assert speed["seeds"] == 2 and speed["ground_truth"] > 0
+    report = (out / "report.md").read_text()
+    assert "| mean_speed_mps |" in report and "plots/morning.png" in report
+    assert (out / "plots" / "morning.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((out / "meta.json").read_text())["stage"] == "closedloop"
+
+
+def test_the_ground_truth_run_is_the_agents_episode_in_the_plain_env(run, tmp_path):
+    """The same agent in the environment without perception, same seed: the same trajectories, byte for byte."""
+    _, out = run
+    env = gym.make("roadsynth/Scenario-v0", scenario="highway", vehicles=60, warmup_s=20.0, time_limit_s=1.5,
+                   record=tmp_path / "plain")
+    try:
+        obs, _ = env.reset(seed=1)
+        agent = ReferenceAgent(env)
+        agent.reset(obs)
+        while True:
+            obs, _, terminated, truncated, _ = env.step(agent.act(obs))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    recorded = out / "episodes" / "highway-1-morning-ground_truth" / "episode-0000" / "trajectories.parquet"
+    plain = tmp_path / "plain" / "episode-0000" / "trajectories.parquet"
+    assert recorded.read_bytes() == plain.read_bytes()
+
+
+def test_the_perceived_run_saw_what_the_detector_reported(run):
+    _, out = run
+    perceived = out / "episodes" / "highway-1-morning-perceived" / "episode-0000" / "trajectories.parquet"
+    assert perceived.exists()
+
+
+def test_a_missing_detector_is_named_with_the_config_file(tmp_path, capsys):
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump({**TINY, "detector": "onnx:nowhere.onnx"}))
+    assert cli_main(["closedloop", str(config), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert str(config) in err and "detector" in err and "nowhere.onnx" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_bad_config_value_is_refused(tmp_path, capsys):
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump({**TINY, "detector": "yolo:x"}))
+    assert cli_main(["closedloop", str(config), "--out", str(tmp_path / "o")]) == 2
+    assert "onnx:PATH" in capsys.readouterr().err
+    config.write_text(yaml.safe_dump({**TINY, "agent": "ppo"}))
+    assert cli_main(["closedloop", str(config), "--out", str(tmp_path / "o")]) == 2
