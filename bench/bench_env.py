@@ -12,12 +12,18 @@ processes, default all cores) with the same rig and condition. Prints the env's 
 reset, which builds the static world) and render's frames/s (the whole stage: static world, workers, PNG and
 Parquet writing); issue 27 aims at env >= 80% of render.
 
+Perception (--perception MODEL.onnx or a model folder): the same camera + LiDAR env, default rig, noon, without and
+with perception in the loop (``perception=MODEL``: the detector on every frame, LiDAR ranging, the tracker;
+docs/closedloop.md), --perception-steps steps each after an untimed reset; prints the cost perception adds per
+step (issue 42 aims at <= 15 % with YOLOX-nano on the CPU).
+
 highway-env (if installed; it is not a roadsynth dependency): steps/s of highway-v0 and highway-fast-v0 with their
 default config and a constant IDLE action (resets untimed). One of their steps is a 1 s policy step (15 or 5
 simulation steps); one of ours is 0.1 s, so the table also gives simulated seconds per second.
 
     python bench/bench_env.py [--scenario highway] [--vehicles 200] [--steps 300] [--repeat 3] [--seed 1]
         [--nearby-k 0] [--sensor-steps 20] [--render-workers N] [--highway-env-steps 100]
+        [--perception MODEL.onnx] [--perception-steps 10]
 """
 
 from __future__ import annotations
@@ -96,6 +102,24 @@ def render_frames_per_s(sim_dir: Path, out: Path, workers: int) -> tuple[float, 
     return summary["frames"] / (time.perf_counter() - start), summary["frames"]
 
 
+def camera_steps_per_s(args, perception: str | None) -> float:
+    """Steps/s of the camera + LiDAR env (default rig, noon), with perception in the loop when given."""
+    env = gym.make("roadsynth/Scenario-v0", scenario=args.scenario, vehicles=args.vehicles,
+                   time_limit_s=args.perception_steps * 0.1 + 10.0, sensors=["camera", "lidar"],
+                   perception=perception)
+    action = np.zeros(2, dtype=np.float32)
+    try:
+        env.reset(seed=args.seed)
+        start = time.perf_counter()
+        for _ in range(args.perception_steps):
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                raise RuntimeError("the episode ended during the perception bench; use fewer --perception-steps")
+        return args.perception_steps / (time.perf_counter() - start)
+    finally:
+        env.close()
+
+
 def highway_env_steps_per_s(env_id: str, steps: int) -> float | None:
     try:
         import highway_env  # noqa: F401  (registers highway-v0, highway-fast-v0)
@@ -129,6 +153,8 @@ def main() -> None:
     parser.add_argument("--render-workers", type=int, default=os.cpu_count() or 1,
                         help="the render stage's processes (default: all cores, as `roadsynth render`)")
     parser.add_argument("--highway-env-steps", type=int, default=100, help="steps of each highway-env env (0: skip)")
+    parser.add_argument("--perception", help="an ONNX detector or model folder: time perception in the loop")
+    parser.add_argument("--perception-steps", type=int, default=10, help="camera steps timed with and without it")
     args = parser.parse_args()
 
     env = gym.make("roadsynth/Scenario-v0", scenario=args.scenario, vehicles=args.vehicles,
@@ -163,6 +189,16 @@ def main() -> None:
         print(f"{'RoadsynthEnv (camera + LiDAR) steps':<40}{sensors:>10.2f}{sensors / render_fps:>11.2f}")
         print(f"{'  the same with its reset':<40}{sensors_reset:>10.2f}{sensors_reset / render_fps:>11.2f}")
         print("target: env >= 0.80 x render")
+
+    if args.perception:
+        plain = camera_steps_per_s(args, None)
+        perceived = camera_steps_per_s(args, args.perception)
+        print(f"\ncamera + LiDAR env (default rig, noon), {args.perception_steps} steps each, perception "
+              f"{args.perception}, load average {os.getloadavg()[0]:.1f}")
+        print(f"{'loop':<40}{'steps/s':>10}{'ms/step':>10}")
+        print(f"{'camera + LiDAR':<40}{plain:>10.2f}{1000 / plain:>10.0f}")
+        print(f"{'camera + LiDAR + perception':<40}{perceived:>10.2f}{1000 / perceived:>10.0f}")
+        print(f"perception adds {100 * (plain / perceived - 1):.1f} % per step (target <= 15 %)")
 
     if args.highway_env_steps > 0:
         rows = [(name, highway_env_steps_per_s(name, args.highway_env_steps), 1.0)

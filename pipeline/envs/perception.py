@@ -190,3 +190,41 @@ class PerceivedFeatures(gym.Wrapper):
         bearing[:n] = np.where(ranged[:n], frame.bearing_rad[:n], 0.0)
         out["detection_range_m"], out["detection_bearing_rad"], out["detection_ranged"] = rng, bearing, ranged_k
         return out, info
+
+
+def detector_from(spec):
+    """A detector from ``spec``: an ``.onnx`` file (:class:`pipeline.detect.onnx.OnnxDetector`, any model ``roadsynth
+    detect --onnx`` runs), a model folder ``roadsynth train`` wrote (:class:`pipeline.detect.infer.Detector`), or an
+    object that has ``predict`` already."""
+    if hasattr(spec, "predict"):
+        return spec
+    from pathlib import Path
+
+    path = Path(spec)
+    if path.is_dir():
+        from pipeline.detect.infer import Detector
+
+        return Detector.load(path)
+    if path.suffix == ".onnx" and path.is_file():
+        from pipeline.detect.onnx import OnnxDetector
+
+        return OnnxDetector(path, batch_size=1)
+    raise ValueError(f"perception: {spec!r} is neither an ONNX file, a model folder `roadsynth train` wrote, nor a "
+                     "detector object with predict()")
+
+
+def make_env(scenario=None, *, perception=None, max_detections: int = 32, tracker: TrackerParams | None = None,
+             sensors=None, **kwargs) -> gym.Env:
+    """The registered envs' entry point: a :class:`pipeline.envs.RoadsynthEnv`, wrapped in
+    :class:`PerceivedFeatures` when ``perception`` names a detector (see :func:`detector_from`; the camera and LiDAR
+    are then rendered whatever ``sensors`` says)."""
+    from pipeline.envs.env import RoadsynthEnv
+
+    if scenario is None:
+        raise TypeError("roadsynth/Scenario-v0 needs scenario=NAME (configs/scenarios/) or a YAML PATH")
+    if perception is None:
+        return RoadsynthEnv(scenario, sensors=sensors, **kwargs)
+    detector = detector_from(perception)
+    sensors = tuple(dict.fromkeys([*(sensors or ()), "camera", "lidar"]))
+    return PerceivedFeatures(RoadsynthEnv(scenario, sensors=sensors, **kwargs), detector, tracker=tracker,
+                             max_detections=max_detections)

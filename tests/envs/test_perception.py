@@ -157,3 +157,38 @@ def test_an_env_without_camera_and_lidar_is_refused():
             PerceivedFeatures(env, FixedBoxes([], [], []))
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_perception_as_an_env_option_in_a_two_process_vector_env(rig_path, tmp_path):
+    """gym.make(..., perception=MODEL.onnx) in each of two processes: same seeds, same perceived observations as in
+    this process."""
+    from tests.detect.test_onnx_heads import constant_model, yolox_output
+
+    model = tmp_path / "car.onnx"
+    constant_model(model, yolox_output())
+    kwargs = {"vehicles": 60, "warmup_s": 20.0, "time_limit_s": 1.0, "rig": str(rig_path), "perception": str(model)}
+    vec = gym.vector.AsyncVectorEnv([lambda: gym.make("roadsynth/Highway-v0", **kwargs)] * 2)
+    try:
+        obs, _ = vec.reset(seed=[4, 5])
+        for _ in range(3):
+            obs, *_ = vec.step(np.zeros((2, 2), np.float32))
+    finally:
+        vec.close()
+    single = gym.make("roadsynth/Highway-v0", **kwargs)
+    try:
+        assert any(isinstance(e, PerceivedFeatures) for e in _chain(single))
+        one, _ = single.reset(seed=5)
+        for _ in range(3):
+            one, *_ = single.step(np.zeros(2, np.float32))
+    finally:
+        single.close()
+    assert np.array_equal(obs["detections"][1], one["detections"])
+    assert np.array_equal(obs["neighbours"][1], one["neighbours"])
+    assert obs["detections_mask"][1].sum() == 1  # the constant model's one car
+
+
+def _chain(env):
+    while hasattr(env, "env"):
+        yield env
+        env = env.env
