@@ -35,6 +35,7 @@ INPUT_ARGS = ("config",)
 INTERRUPT_HINT = "the output is as it was; rerun to start again"
 MODES = ("ground_truth", "perceived")
 _LEADER = NEIGHBOUR_SLOTS.index("leader")
+_AHEAD = [NEIGHBOUR_SLOTS.index(s) for s in ("left_leader", "leader", "right_leader")]  # what a front camera sees
 _COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
 
 
@@ -101,6 +102,8 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
             lid, gap, closing = _leader(env, truth) if not (terminated or truncated) else ("", np.nan, np.nan)
             episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
                         bool(obs["neighbours"][_LEADER, _COL["present"]] > 0.5))
+            columns = [_COL["present"], _COL["ds_m"], _COL["dv_mps"]]
+            episode.add_slots(truth[_AHEAD][:, columns], obs["neighbours"][_AHEAD][:, columns])
             if terminated or truncated:
                 episode.collided = info.get("reason") == "collision"
                 return episode, str(info.get("reason"))

@@ -12,7 +12,12 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
 - ``hard_brakes``: events of deceleration beyond 4 m/s^2 (``HARD_BRAKE_MPS2``; one event per run of steps);
 - ``first_tracked_range_m``: the median over leaders of the ground-truth gap at which the agent's observation
   first held each new leader (perceived runs; with ground truth, the range it appears in the observation);
-- ``mean_speed_mps`` and ``progress_m``.
+- ``mean_speed_mps`` and ``progress_m``;
+- the perception's own errors on the three leader slots (the front camera's view; :meth:`EpisodeLog.add_slots`):
+  ``slot_missed_share`` (slots the ground truth fills and the observation leaves empty, over those it fills),
+  ``slot_false_share`` (filled in the observation, empty in the ground truth, over those filled in the
+  observation), and over slots filled in both the median absolute errors ``slot_ds_error_m`` and
+  ``slot_dv_error_mps`` (0 and 0 for a ground-truth run, whose observation is the ground truth).
 
 :func:`compare` pairs perceived and ground-truth episodes of the same seeds: for each metric the mean of each and
 the mean of their differences with a percentile bootstrap confidence interval over seeds (Efron & Tibshirani 1993),
@@ -29,7 +34,8 @@ import numpy as np
 HARD_BRAKE_MPS2 = -4.0
 TTC_CRITICAL_S = 1.5
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
-           "mean_speed_mps", "progress_m")
+           "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
+           "slot_dv_error_mps")
 
 
 @dataclass
@@ -44,12 +50,17 @@ class EpisodeLog:
     leader_id: list[str]  # "" without a leader
     leader_seen: list[bool]  # the agent's observation had a leader this step
     collided: bool = False
+    slots: list[np.ndarray] | None = None  # per step (S, 2, 3): [truth, observed] x (present, ds, dv) per slot
 
     @classmethod
     def empty(cls, dt_s: float) -> EpisodeLog:
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s: expected a finite number > 0, got {dt_s!r}")
-        return cls(dt_s, [], [], [], [], [], [])
+        return cls(dt_s, [], [], [], [], [], [], slots=[])
+
+    def add_slots(self, truth: np.ndarray, observed: np.ndarray) -> None:
+        """One step's (S, 3) (present, ds, dv) of the compared neighbour slots: ground truth and observation."""
+        self.slots.append(np.stack([np.asarray(truth, np.float64), np.asarray(observed, np.float64)]).swapaxes(0, 1))
 
     def add(self, speed_mps: float, accel_mps2: float, leader_id: str, leader_gap_m: float,
             leader_closing_mps: float, leader_seen: bool) -> None:
@@ -82,6 +93,10 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
             seen.add(lid)
             first_ranges.append(g)
     km = progress / 1000.0
+    slots = np.concatenate(log.slots) if log.slots else np.zeros((0, 2, 3))
+    truth, seen = slots[:, 0, 0] > 0.5, slots[:, 1, 0] > 0.5
+    both = truth & seen
+    errors = np.abs(slots[both, 1, 1:] - slots[both, 0, 1:])
     return {
         "collisions_per_100km": (100.0 * int(log.collided) / km) if km > 0 else (math.inf if log.collided else 0.0),
         "min_ttc_s": float(ttc.min()) if len(ttc) else math.inf,
@@ -90,6 +105,10 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
         "first_tracked_range_m": float(np.median(first_ranges)) if first_ranges else math.nan,
         "mean_speed_mps": float(speed.mean()) if len(speed) else math.nan,
         "progress_m": progress,
+        "slot_missed_share": float(np.mean(~seen[truth])) if truth.any() else math.nan,
+        "slot_false_share": float(np.mean(~truth[seen])) if seen.any() else math.nan,
+        "slot_ds_error_m": float(np.median(errors[:, 0])) if len(errors) else math.nan,
+        "slot_dv_error_mps": float(np.median(errors[:, 1])) if len(errors) else math.nan,
     }
 
 

@@ -49,7 +49,8 @@ def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
 
 def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
     gt = [{"collisions_per_100km": 0.0, "min_ttc_s": 3.0, "share_ttc_below_1_5s": 0.0, "hard_brakes": 0.0,
-           "first_tracked_range_m": 80.0, "mean_speed_mps": 25.0, "progress_m": 750.0} for _ in range(5)]
+           "first_tracked_range_m": 80.0, "mean_speed_mps": 25.0, "progress_m": 750.0, "slot_missed_share": 0.0,
+           "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0} for _ in range(5)]
     perceived = [{**m, "first_tracked_range_m": 80.0 - d, "min_ttc_s": math.inf if d == 30 else 2.0}
                  for m, d in zip(gt, (10, 20, 30, 40, 50), strict=True)]
     rows = {c.metric: c for c in compare(perceived, gt, resamples=4000)}
@@ -68,3 +69,15 @@ def test_a_bad_step_length_is_refused():
     with pytest.raises(ValueError, match="dt_s"):
         EpisodeLog.empty(0.0)
     assert np.isnan(episode_metrics(EpisodeLog.empty(0.1))["mean_speed_mps"])
+
+
+def test_perception_errors_on_the_slots():
+    log = _log([10.0] * 3)
+    # slots: (present, ds, dv) for truth and observation
+    log.add_slots(np.array([[1, 20, 0], [1, 40, -2], [0, 0, 0]]), np.array([[1, 21, 0.5], [0, 0, 0], [1, 30, 0]]))
+    log.add_slots(np.array([[1, 20, 0], [0, 0, 0], [0, 0, 0]]), np.array([[1, 19, -0.5], [0, 0, 0], [0, 0, 0]]))
+    m = episode_metrics(log)
+    assert m["slot_missed_share"] == pytest.approx(1 / 3)  # 3 truth slots, 1 not observed
+    assert m["slot_false_share"] == pytest.approx(1 / 3)  # 3 observed slots, 1 not in the truth
+    assert m["slot_ds_error_m"] == pytest.approx(1.0) and m["slot_dv_error_mps"] == pytest.approx(0.5)
+    assert math.isnan(episode_metrics(_log([10.0]))["slot_ds_error_m"])
