@@ -32,17 +32,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.envs.checks import check_number
 from pipeline.envs.features import EGO_FIELDS, NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
 
 _EGO = {name: k for k, name in enumerate(EGO_FIELDS)}
 _COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
 _SLOT = {name: k for k, name in enumerate(NEIGHBOUR_SLOTS)}
-
-
-def _positive(name: str, value: float, *, allow_zero: bool = False) -> None:
-    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-    if not ok:
-        raise ValueError(f"{name}: expected a finite number {'>= 0' if allow_zero else '> 0'}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -58,9 +53,9 @@ class IdmParams:
 
     def __post_init__(self) -> None:
         for name in ("desired_speed_mps", "max_accel_mps2", "comfortable_decel_mps2", "delta"):
-            _positive(f"IdmParams.{name}", getattr(self, name))
+            check_number("IdmParams", name, getattr(self, name))
         for name in ("time_headway_s", "min_gap_m"):
-            _positive(f"IdmParams.{name}", getattr(self, name), allow_zero=True)
+            check_number("IdmParams", name, getattr(self, name), allow_low=True)
 
 
 @dataclass(frozen=True)
@@ -73,11 +68,10 @@ class MobilParams:
     keep_right_bias_mps2: float = 0.2
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.politeness) and 0.0 <= self.politeness <= 1.0):
-            raise ValueError(f"MobilParams.politeness: expected a number in [0, 1], got {self.politeness!r}")
-        _positive("MobilParams.safe_decel_mps2", self.safe_decel_mps2)
+        check_number("MobilParams", "politeness", self.politeness, allow_low=True, high=1.0)
+        check_number("MobilParams", "safe_decel_mps2", self.safe_decel_mps2)
         for name in ("threshold_mps2", "keep_right_bias_mps2"):
-            _positive(f"MobilParams.{name}", getattr(self, name), allow_zero=True)
+            check_number("MobilParams", name, getattr(self, name), allow_low=True)
 
 
 def idm_accel(speed_mps: float, params: IdmParams, gap_m: float | None = None,
@@ -196,9 +190,9 @@ class ReferenceDriver:
 
     def __post_init__(self) -> None:
         for name in ("ego_length_m", "dt_s", "k_lat", "d_lat"):
-            _positive(f"ReferenceDriver.{name}", getattr(self, name))
+            check_number("ReferenceDriver", name, getattr(self, name))
         for name in ("cooldown_s", "settled_m"):
-            _positive(f"ReferenceDriver.{name}", getattr(self, name), allow_zero=True)
+            check_number("ReferenceDriver", name, getattr(self, name), allow_low=True)
 
     def reset(self, obs: dict[str, np.ndarray]) -> None:
         self.target_offset_m = 0.0

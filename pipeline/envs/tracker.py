@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pipeline.envs.checks import check_number
 from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
 
 UNMATCHABLE = 1e6  # cost of a pair outside both gates (the solver needs finite costs)
@@ -51,21 +52,14 @@ class TrackerParams:
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "accel_psd", "sigma_m", "birth_speed_std_mps"):
+            check_number("TrackerParams", name, getattr(self, name))
+        check_number("TrackerParams", "sigma_per_m", self.sigma_per_m, allow_low=True)
+        check_number("TrackerParams", "gate_probability", self.gate_probability, high=1.0, allow_high=False)
+        check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
+        for name, least in (("confirm_hits", 1), ("max_misses", 0)):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"TrackerParams.{name}: expected a finite number > 0, got {value!r}")
-        if not (math.isfinite(self.sigma_per_m) and self.sigma_per_m >= 0):
-            raise ValueError(f"TrackerParams.sigma_per_m: expected a finite number >= 0, got {self.sigma_per_m!r}")
-        if not 0 < self.gate_probability < 1:
-            raise ValueError(f"TrackerParams.gate_probability: expected a number in (0, 1), got "
-                             f"{self.gate_probability!r}")
-        if not 0 < self.iou_gate <= 1:
-            raise ValueError(f"TrackerParams.iou_gate: expected a number in (0, 1], got {self.iou_gate!r}")
-        for name in ("confirm_hits", "max_misses"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < (1 if name == "confirm_hits" else 0):
-                raise ValueError(f"TrackerParams.{name}: expected an integer >= "
-                                 f"{1 if name == 'confirm_hits' else 0}, got {value!r}")
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise ValueError(f"TrackerParams.{name}: expected an integer >= {least}, got {value!r}")
 
     @property
     def gate(self) -> float:
