@@ -86,11 +86,13 @@ def frozen_heap() -> Iterator[None]:
 
 
 def die_with_parent() -> None:
-    """Initializer of a stage's worker processes: leave Ctrl-C to the main process (which stops the
-    pool and reports), and die when the worker's parent dies, even by ``kill -9``, instead of waiting forever for
-    work that will not come. On Linux the kernel kills it (PR_SET_PDEATHSIG; with a forkserver the parent is the
-    server, which exits with the main process); elsewhere a thread watches the parent's pid."""
+    """Initializer of a stage's worker processes: leave Ctrl-C and SIGTERM to the main process (which stops the
+    pool and reports; a worker sent SIGTERM itself just ends), and die when the worker's parent dies, even by
+    ``kill -9``, instead of waiting forever for work that will not come. On Linux the kernel kills it
+    (PR_SET_PDEATHSIG; with a forkserver the parent is the server, which exits with the main process); elsewhere a
+    thread watches the parent's pid."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not the CLI's handler, which a forked worker inherits
     parent = os.getppid()
     if sys.platform.startswith("linux"):
         libc = ctypes.CDLL(None, use_errno=True)

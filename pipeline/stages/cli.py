@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
 from importlib import metadata
 from pathlib import Path
@@ -94,17 +95,47 @@ def _outputs(module, args: argparse.Namespace) -> list[OutputSpec]:
     return module.outputs(args) if hasattr(module, "outputs") else [OutputSpec(args.out)]
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``timeout``, ``docker stop``, a scheduler): handled like Ctrl-C, so that every clean-up that runs
+    for Ctrl-C (temporaries removed, worker processes stopped, locks released) runs for it too."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated
+
+
+def _stopped(exc: KeyboardInterrupt) -> tuple[str, int]:
+    """How a run stopped by a signal ends: the word and the exit status (128 + the signal, as a shell reports)."""
+    return ("terminated", 128 + signal.SIGTERM) if isinstance(exc, Terminated) else ("interrupted", 130)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
     if command is None and "--version" in argv:  # without importing every stage to list them
         print(f"roadsynth {_version()}")
         return 0
+    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
+    try:
+        return _main(argv, command)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _main(argv: list[str], command: str | None) -> int:
     try:  # importing a stage's modules takes seconds: Ctrl-C may come now
         args = build_parser(command if command in STAGE_MODULES else None).parse_args(argv)
-    except KeyboardInterrupt:
-        print(f"roadsynth {command or ''}: interrupted; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        word, status = _stopped(exc)
+        print(f"roadsynth {command or ''}: {word}; nothing was written", file=sys.stderr)
+        return status
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
     )
@@ -113,10 +144,11 @@ def main(argv: list[str] | None = None) -> int:
         with claimed_outputs(_outputs(module, args), stage=args.command, inputs=_inputs(module, args),
                              overwrite=args.overwrite):
             return int(module.main(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         hint = getattr(module, "INTERRUPT_HINT", "the output is as it was")
-        print(f"roadsynth {args.command}: interrupted; {hint}", file=sys.stderr)
-        return 130
+        word, status = _stopped(exc)
+        print(f"roadsynth {args.command}: {word}; {hint}", file=sys.stderr)
+        return status
     except (ValueError, OSError, RuntimeError) as exc:
         # Input and run errors: the message names the file, the field and what was expected;
         # -v shows the traceback.

@@ -112,7 +112,7 @@ def reference_export(reference_record, tmp_path_factory) -> Path:
     return cwd
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["ctrl-c", "kill-9"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["ctrl-c", "sigterm", "kill-9"])
 def test_a_stopped_render_leaves_no_process_and_resumes_to_the_same_bytes(run_21_frames, rig_file, reference_record,
                                                                           tmp_path, sig):
     args = _render_args(run_21_frames, rig_file)
@@ -124,9 +124,10 @@ def test_a_stopped_render_leaves_no_process_and_resumes_to_the_same_bytes(run_21
     proc.send_signal(sig)
     err = proc.communicate(timeout=120)[1]
     assert _none_alive(workers), "a worker outlived the render"
-    if sig == signal.SIGINT:
-        assert proc.returncode == 130
-        assert "interrupted" in err and "rerun the same command to resume" in err
+    if sig in (signal.SIGINT, signal.SIGTERM):  # SIGTERM (timeout, docker stop) is handled like Ctrl-C
+        word, status = ("interrupted", 130) if sig == signal.SIGINT else ("terminated", 143)
+        assert proc.returncode == status
+        assert word in err and "rerun the same command to resume" in err
         assert "Traceback" not in err
         assert not (tmp_path / ".rec.lock").exists()
     else:
@@ -173,7 +174,7 @@ def _stopped_mid_export(args: list[str], cwd: Path) -> subprocess.Popen:
     pytest.fail("could not stop the export while it wrote")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["ctrl-c", "kill-9"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["ctrl-c", "sigterm", "kill-9"])
 def test_a_stopped_export_leaves_nothing_and_reruns_to_the_same_bytes(reference_record, reference_export, tmp_path,
                                                                       sig):
     args = _export_args(reference_record)
@@ -182,8 +183,9 @@ def test_a_stopped_export_leaves_nothing_and_reruns_to_the_same_bytes(reference_
     proc.send_signal(signal.SIGCONT)
     err = proc.communicate(timeout=120)[1]
     assert not (tmp_path / "runs.mcap").exists()
-    if sig == signal.SIGINT:
-        assert proc.returncode == 130 and "interrupted" in err and "Traceback" not in err
+    if sig in (signal.SIGINT, signal.SIGTERM):
+        word, status = ("interrupted", 130) if sig == signal.SIGINT else ("terminated", 143)
+        assert proc.returncode == status and word in err and "Traceback" not in err
         assert list(tmp_path.iterdir()) == []  # its temporaries and locks removed
     else:
         assert proc.returncode == -signal.SIGKILL
