@@ -41,6 +41,7 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 
 $(VENV)/.installed-dev: pyproject.toml $(VENV)/.installed
 	$(BIN)/python -m pip install --quiet -e '.[dev,ray]'
+	$(BIN)/python -m pip install --quiet --no-deps 'trackeval>=1.3,<2'  # not an extra: see pyproject.toml
 	touch $@
 
 # Open3D needs the system library libusb-1.0.

@@ -11,20 +11,26 @@ import logging
 from pathlib import Path
 
 from pipeline.core.digests import path_sha256
-from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_meta
+from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_json, write_meta
 
 INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
 log = logging.getLogger(__name__)
+TASKS = ("detection", "tracking")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from evaluation.api import METRICS
     from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD
 
-    parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory")
+    parser.add_argument("--task", choices=TASKS, default="detection",
+                        help="what is scored: detections (default) or tracks (--task tracking: MOTChallenge files, "
+                        "HOTA, MOTA, IDF1 by TrackEval)")
+    parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory "
+                        "(tracking: a MOT gt.txt, a sequence folder or a folder of sequences)")
     parser.add_argument("--detections", type=Path, required=True,
-                        help="COCO results JSON, or a KITTI label directory with a 16th column (score)")
+                        help="COCO results JSON, or a KITTI label directory with a 16th column (score) (tracking: "
+                        "MOT tracker results, a <sequence>.txt per sequence or one file)")
     parser.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
     parser.add_argument("--iou", type=float_list, nargs="+", action=Flatten, default=list(DEFAULT_IOU_THRESHOLDS),
                         metavar="T", help="IoU thresholds of the precision/recall table, separated by spaces or "
@@ -43,7 +49,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
 
 
+def main_tracking(args: argparse.Namespace) -> int:
+    """--task tracking: TrackEval's HOTA, CLEAR and identity metrics (evaluation.tracking) into metrics.json."""
+    from evaluation.tracking import evaluate_tracking, markdown_summary
+
+    metrics = evaluate_tracking(args.gt, args.detections)
+    config = {"task": "tracking", "gt": str(args.gt), "detections": str(args.detections),
+              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}
+    with atomic_output_dir(args.out) as tmp:
+        write_json(tmp / "metrics.json", metrics)
+        (tmp / "report.md").write_text(markdown_summary(metrics))
+        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    c = metrics["combined"]
+    log.info("HOTA %.4f MOTA %.4f IDF1 %.4f (%d sequence(s))", c["HOTA"], c["MOTA"], c["IDF1"],
+             len(metrics["sequences"]))
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
+    if getattr(args, "task", "detection") == "tracking":
+        return main_tracking(args)
     from evaluation import evaluate, parse_metrics
 
     metrics = parse_metrics(args.metrics)
