@@ -190,6 +190,8 @@ def register_format(name: str, module: str) -> None:
 
 for _name in ("coco", "kitti", "yolo", "mcap", "rosbag2"):
     register_format(_name, f"exporters.{_name}")
+register_format("mot", "exporters.mot")
+register_format("kitti-tracking", "exporters.kitti_tracking")
 
 
 def formats() -> list[str]:

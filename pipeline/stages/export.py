@@ -16,7 +16,7 @@ from pipeline.core.outputs import OutputSpec, json_file, mcap_file
 from pipeline.stages.common import command_line, config_hash, int_at_least, software_versions
 
 INPUT_ARGS = ("dataset",)
-HELP = "export dataset records to COCO, KITTI, YOLO, MCAP (Foxglove) or rosbag2"
+HELP = "export dataset records to COCO, KITTI, KITTI tracking, MOTChallenge, YOLO, MCAP (Foxglove) or rosbag2"
 log = logging.getLogger(__name__)
 
 
@@ -41,8 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="objects more occluded than F become ignore regions (default: %(default)s)")
     parser.add_argument("--compression", choices=[c.value for c in Compression],
                         help=f"MCAP/rosbag2 chunk compression (default: {Compression.ZSTD.value})")
-    parser.add_argument("--camera", help="KITTI: the camera exported as image_2 (default: the first)")
-    parser.add_argument("--lidar", help="KITTI: the LiDAR exported as velodyne (default: the first)")
+    parser.add_argument("--camera", help="KITTI, KITTI tracking, MOT: the camera exported as image_2 / the sequence "
+                        "(default: the first)")
+    parser.add_argument("--lidar", help="KITTI, KITTI tracking: the LiDAR exported as velodyne (default: the first)")
     parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -89,8 +90,9 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 
 # Options that only some formats read: given for another format, they would be ignored without a word.
-_FORMAT_OPTIONS = {"camera": ("kitti",), "lidar": ("kitti",), "compression": ("mcap", "rosbag2"),
-                   "copy_images": ("coco", "kitti", "yolo")}
+_FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "mot"), "lidar": ("kitti", "kitti-tracking"),
+                   "compression": ("mcap", "rosbag2"),
+                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot")}
 
 
 def _check_applicable(args: argparse.Namespace) -> None:

@@ -15,7 +15,7 @@ from exporters.splits import SplitError, SplitSpec
 from pipeline.core.record import RecordError
 from tests.conftest import tree_hashes
 
-FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2"]
+FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking"]
 
 
 def _out(base: Path, fmt: str) -> Path:
@@ -94,7 +94,7 @@ def test_same_record_twice_is_an_error(tmp_path, morning):
 
 def test_registry_lists_known_formats():
     assert formats() == FORMATS
-    with pytest.raises(KeyError, match="known formats: coco, kitti, yolo, mcap, rosbag2"):
+    with pytest.raises(KeyError, match="known formats: coco, kitti, yolo, mcap, rosbag2, mot, kitti-tracking"):
         get_exporter("voc")
     from exporters.base import register_format
 
