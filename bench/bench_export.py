@@ -41,6 +41,7 @@ from tests.exporters.synthetic_record import build_record
 
 # The uncompressed log of each format comes before its compressed ones (their raw MB/s needs its size).
 CASES = [("coco", Compression.ZSTD), ("kitti", Compression.ZSTD), ("yolo", Compression.ZSTD),
+         ("mot", Compression.ZSTD), ("kitti-tracking", Compression.ZSTD),
          ("mcap", Compression.NONE), ("mcap", Compression.ZSTD), ("mcap", Compression.LZ4),
          ("rosbag2", Compression.NONE), ("rosbag2", Compression.ZSTD)]
 LOGS = {"mcap", "rosbag2"}
@@ -63,6 +64,7 @@ def main() -> None:
     parser.add_argument("--ground-points", type=int, default=100_000,
                         help="LiDAR points per sweep of the synthetic record (64 ch: ~100k)")
     parser.add_argument("--default-malloc", action="store_true", help="leave the allocator as it is (no mallopt)")
+    parser.add_argument("--formats", help="comma-separated formats to export (default: all of them)")
     args = parser.parse_args()
     if not args.default_malloc:
         print(f"allocator thresholds raised as by roadsynth export: {keep_freed_memory()}")
@@ -79,10 +81,11 @@ def main() -> None:
         frames = len(DatasetRecord(record).frames)
         in_mb = sum(p.stat().st_size for p in record.rglob("*") if p.is_file()) / 1e6
         print(f"input: {kind}; {frames} frames, {in_mb:.1f} MB")
-        print(f"{'format':<10} {'compr.':<6} {'s':>7} {'cpu s':>7} {'MB out':>8} {'MB/s':>8} {'raw MB/s':>9} "
+        print(f"{'format':<14} {'compr.':<6} {'s':>7} {'cpu s':>7} {'MB out':>8} {'MB/s':>8} {'raw MB/s':>9} "
               f"{'files':>6} {'files/s':>9} {'frames/s':>9}")
         raw_mb: dict[str, float] = {}
-        for fmt, compression in CASES:
+        chosen = set(args.formats.split(",")) if args.formats else {fmt for fmt, _ in CASES}
+        for fmt, compression in [case for case in CASES if case[0] in chosen]:
             best, cpu, size, files = float("inf"), float("inf"), 0, 0
             for i in range(args.repeats):
                 out = tmp / f"{fmt}-{compression.value}-{i}" / ("out.mcap" if fmt == "mcap" else "out")
@@ -96,7 +99,7 @@ def main() -> None:
             if fmt in LOGS and compression is Compression.NONE:
                 raw_mb[fmt] = mb
             raw = f"{raw_mb[fmt] / best:9.1f}" if fmt in LOGS and compression is not Compression.NONE else f"{'':9}"
-            print(f"{fmt:<10} {compression.value:<6} {best:7.3f} {cpu:7.3f} {mb:8.1f} {mb / best:8.1f} {raw} "
+            print(f"{fmt:<14} {compression.value:<6} {best:7.3f} {cpu:7.3f} {mb:8.1f} {mb / best:8.1f} {raw} "
                   f"{files:6d} {files / best:9.0f} {frames / best:9.1f}")
 
 
