@@ -188,7 +188,7 @@ def register_format(name: str, module: str) -> None:
     _FORMATS[name] = module
 
 
-for _name in ("coco", "kitti", "yolo", "mcap", "rosbag2"):
+for _name in ("coco", "kitti", "yolo", "mcap", "rosbag2", "nuscenes"):
     register_format(_name, f"exporters.{_name}")
 register_format("mot", "exporters.mot")
 register_format("kitti-tracking", "exporters.kitti_tracking")
