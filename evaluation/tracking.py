@@ -36,6 +36,7 @@ log = logging.getLogger(__name__)
 DEFAULT_CLASSES = (1, 3, 4, 5)
 """MOT classes evaluated by default: pedestrian, car, bicycle, motorbike (those roadsynth's MOT export writes)."""
 IOU_THRESHOLD = 0.5
+COUNTS = {"CLR_TP", "CLR_FN", "CLR_FP", "IDSW", "Frag", "MT", "PT", "ML"}
 MAIN_METRICS = ("HOTA", "DetA", "AssA", "DetRe", "DetPr", "AssRe", "AssPr", "LocA", "MOTA", "MOTP", "IDF1", "IDR",
                 "IDP", "CLR_TP", "CLR_FN", "CLR_FP", "IDSW", "Frag", "MT", "PT", "ML")
 
@@ -134,9 +135,10 @@ def markdown_summary(metrics: dict[str, Any]) -> str:
     """report.md: the main metrics per sequence and combined, as a Markdown table."""
     rows = [("combined", metrics["combined"]), *metrics["sequences"].items()]
     head = "| sequence | " + " | ".join(MAIN_METRICS) + " |\n|---|" + "---:|" * len(MAIN_METRICS) + "\n"
-    body = "".join(f"| {name} | " + " | ".join(_fmt(values[k]) for k in MAIN_METRICS) + " |\n" for name, values in rows)
+    body = "".join(f"| {name} | " + " | ".join(_fmt(k, values[k]) for k in MAIN_METRICS) + " |\n"
+                   for name, values in rows)
     return f"# Tracking evaluation\n\nTrackEval's metrics; fractions, not percentages.\n\n{head}{body}"
 
 
-def _fmt(value: float | int) -> str:
-    return str(value) if isinstance(value, int) else f"{value:.4f}"
+def _fmt(key: str, value: float | int) -> str:
+    return str(round(value)) if key in COUNTS else f"{value:.4f}"
