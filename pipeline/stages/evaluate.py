@@ -16,7 +16,7 @@ from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write
 INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
 log = logging.getLogger(__name__)
-TASKS = ("detection", "tracking")
+TASKS = ("detection", "tracking", "nuscenes-detection")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--task", choices=TASKS, default="detection",
                         help="what is scored: detections (default) or tracks (--task tracking: MOTChallenge files, "
-                        "HOTA, MOTA, IDF1 by TrackEval)")
+                        "HOTA, MOTA, IDF1 by TrackEval), or 3D detections by the nuScenes devkit (--task "
+                        "nuscenes-detection: --gt a nuScenes export, --detections a submission JSON; mAP, NDS)")
     parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory "
                         "(tracking: a MOT gt.txt, a sequence folder or a folder of sequences)")
     parser.add_argument("--detections", type=Path, required=True,
@@ -47,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
     parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
+    parser.add_argument("--eval-set", default="all", metavar="SPLIT",
+                        help="--task nuscenes-detection: the split of the export's splits.json scored (default: "
+                        "%(default)s, every scene)")
 
 
 def main_tracking(args: argparse.Namespace) -> int:
@@ -66,9 +70,28 @@ def main_tracking(args: argparse.Namespace) -> int:
     return 0
 
 
+def main_nuscenes(args: argparse.Namespace) -> int:
+    """--task nuscenes-detection: the nuScenes devkit's DetectionEval (evaluation.nuscenes_detection) on a nuScenes
+    export (--gt: its dataroot) and a submission JSON (--detections) into metrics.json."""
+    from evaluation.nuscenes_detection import evaluate_nuscenes_detection, find_version
+
+    metrics = evaluate_nuscenes_detection(args.gt, args.detections, eval_set=args.eval_set)
+    config = {"task": "nuscenes-detection", "gt": str(args.gt), "detections": str(args.detections),
+              "eval_set": args.eval_set, "gt_sha256": path_sha256(args.gt / find_version(args.gt)),
+              "detections_sha256": path_sha256(args.detections)}
+    with atomic_output_dir(args.out) as tmp:
+        write_json(tmp / "metrics.json", metrics)
+        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    log.info("mAP %.4f NDS %.4f (%s)", metrics["mean_ap"], metrics["nd_score"],
+             ", ".join(f"{k} {v if v is None else round(v, 4)}" for k, v in metrics["tp_errors"].items()))
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     if getattr(args, "task", "detection") == "tracking":
         return main_tracking(args)
+    if getattr(args, "task", "detection") == "nuscenes-detection":
+        return main_nuscenes(args)
     from evaluation import evaluate, parse_metrics
 
     metrics = parse_metrics(args.metrics)
