@@ -20,6 +20,7 @@ import contextlib
 import logging
 import os
 import sys
+import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +30,8 @@ from pipeline.stages.common import int_at_least
 log = logging.getLogger(__name__)
 
 EXECUTORS = ("local", "ray")
+RAY_TIMEOUT_S = 30.0  # default bound on connecting to a cluster (--ray-timeout)
+PROBE_TIMEOUT_S = 3.0  # a TCP connection to the head's port: nothing listening fails at once, a dead host by this
 MAX_RETRIES = 3  # Ray's default for a task whose worker died; said explicitly, it is part of our contract
 WAIT_S = 0.2  # how long the driver waits for finished tasks before it looks again (progress updates)
 
@@ -43,18 +46,24 @@ class ExecutorSpec:
             instance unless ``RAY_ADDRESS`` names one (Ray reads it).
         task_cpus: CPUs Ray reserves for each task, and the threads a task may use.
         local_cpus: CPUs of the local Ray instance started when there is no address (None: all cores).
+        timeout_s: how long connecting to a cluster may take before it fails with advice (``--ray-timeout``).
     """
 
     kind: str = "local"
     address: str | None = None
     task_cpus: int = 1
     local_cpus: int | None = None
+    timeout_s: float = RAY_TIMEOUT_S
 
     def __post_init__(self) -> None:
         if self.kind not in EXECUTORS:
             raise ValueError(f"--executor: expected one of {', '.join(EXECUTORS)}, got {self.kind!r}")
         if self.task_cpus < 1:
             raise ValueError(f"--task-cpus: expected an integer >= 1, got {self.task_cpus}")
+        if not (isinstance(self.timeout_s, (int, float)) and 0 < self.timeout_s <= 3600):
+            raise ValueError(f"--ray-timeout: expected seconds in (0, 3600], got {self.timeout_s!r}")
+        if self.address is not None:
+            head_host_port(self.address)  # a malformed address fails here, before anything runs
 
     @property
     def distributed(self) -> bool:
@@ -70,12 +79,52 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
                         "Ray instance of --workers CPUs)")
     parser.add_argument("--task-cpus", type=int_at_least(1), default=1, metavar="N",
                         help="with --executor ray: CPUs reserved for each task, and its threads (default: 1)")
+    parser.add_argument("--ray-timeout", type=float, default=None, metavar="S",
+                        help=f"with --executor ray: seconds connecting to the cluster may take before it fails "
+                        f"(default: {RAY_TIMEOUT_S:g})")
 
 
 def executor_from_args(args: argparse.Namespace, local_cpus: int | None = None) -> ExecutorSpec:
-    if args.executor == "local" and (args.ray_address is not None or args.task_cpus != 1):
-        raise ValueError("--ray-address and --task-cpus apply to --executor ray only")
-    return ExecutorSpec(args.executor, args.ray_address, args.task_cpus, local_cpus)
+    timeout = getattr(args, "ray_timeout", None)
+    if args.executor == "local" and (args.ray_address is not None or args.task_cpus != 1 or timeout is not None):
+        raise ValueError("--ray-address, --task-cpus and --ray-timeout apply to --executor ray only")
+    return ExecutorSpec(args.executor, args.ray_address, args.task_cpus, local_cpus,
+                        RAY_TIMEOUT_S if timeout is None else timeout)
+
+
+def head_host_port(address: str) -> tuple[str, int] | None:
+    """(host, port) of a cluster address ``HOST:PORT`` or ``ray://HOST:PORT``; None for ``auto`` (Ray finds the
+    cluster this machine runs). Anything else is a ValueError naming --ray-address and the expected form."""
+    if address == "auto":
+        return None
+    rest = address[len("ray://"):] if address.startswith("ray://") else address
+    host, sep, port = rest.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536 or "/" in rest:
+        raise ValueError(f"--ray-address {address!r}: expected HOST:PORT (the head's GCS port, 6379 by default, as "
+                         "`ray start --head` prints), ray://HOST:PORT, or auto")
+    return host.strip("[]"), int(port)
+
+
+def _advice(address: str) -> str:
+    return (f"check that a head runs there (`ray status --address {address}`; `ray start --head` starts one); if "
+            "the cluster uses token authentication, this process needs it too (RAY_AUTH_MODE=token and the token, "
+            "RAY_AUTH_TOKEN or RAY_AUTH_TOKEN_PATH, as on the head); docs/cluster.md")
+
+
+def _probe(address: str, timeout_s: float) -> None:
+    """Fail at once, with advice, when nothing accepts connections at the head's port."""
+    import socket
+
+    target = head_host_port(address)
+    if target is None:
+        return
+    try:
+        with socket.create_connection(target, timeout=min(timeout_s, PROBE_TIMEOUT_S)):
+            pass
+    except OSError as exc:
+        why = "nothing listens there" if isinstance(exc, ConnectionRefusedError) else f"{exc.strerror or exc}"
+        raise RuntimeError(f"--ray-address {address}: cannot reach the Ray head ({why}); {_advice(address)}") \
+            from None
 
 
 @dataclass(frozen=True)
@@ -119,12 +168,49 @@ def ray_session(spec: ExecutorSpec) -> Iterator[Any]:
     kwargs: dict[str, Any] = {"address": address, "log_to_driver": False, "configure_logging": False}
     if address is None:  # "local": a new instance, never whatever cluster this machine runs already
         kwargs.update(address="local", num_cpus=spec.local_cpus, include_dashboard=False)
+    else:
+        _probe(address, spec.timeout_s)
     log.info("connecting to Ray at %s", address or "a new local instance")
-    ray.init(**kwargs)
+    try:
+        _init_within(ray, kwargs, spec.timeout_s if address is not None else None)
+    except (ConnectionError, RuntimeError, TimeoutError) as exc:
+        if address is None:
+            raise
+        raise RuntimeError(f"--ray-address {address}: could not connect to the Ray cluster ({exc}); "
+                           f"{_advice(address)}") from None
     try:
         yield ray
     finally:
         ray.shutdown()
+
+
+def _init_within(ray, kwargs: dict[str, Any], timeout_s: float | None) -> None:
+    """``ray.init(**kwargs)`` in a helper thread, waited for at most ``timeout_s`` (None: as long as it takes).
+
+    Ray retries a cluster that does not answer for minutes in its own code, out of reach of a Python timeout; a
+    thread can be given up on (the process exits soon after, with the error). It also keeps this process's SIGTERM
+    handling (the CLI's, like Ctrl-C): ``ray.init`` replaces the handler when it runs in the main thread.
+    """
+    outcome: dict[str, BaseException] = {}
+
+    def connect() -> None:
+        quiet = logging.getLogger("ray._private.worker")  # its note that it set no SIGTERM handler from a thread
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)
+        try:
+            ray.init(**kwargs)
+        except BaseException as exc:  # handed to the waiting thread
+            outcome["error"] = exc
+        finally:
+            quiet.setLevel(level)
+
+    thread = threading.Thread(target=connect, name="ray-connect", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {timeout_s:g} s (--ray-timeout)")
+    if "error" in outcome:
+        raise outcome["error"]
 
 
 def _in_worker(argv: list[str], fn: Callable[..., Any], *args: Any) -> Any:
