@@ -1,7 +1,7 @@
 """Reading MOTChallenge 2D box files: ground truth (``gt/gt.txt``) and tracker results (``<seq>.txt``).
 
-Formats (MOTChallenge, MOT16 paper and TrackEval's ``MotChallenge2DBox`` reader), one box per line, comma- or
-space-separated:
+Formats (MOTChallenge, MOT16 paper and TrackEval's ``MotChallenge2DBox`` reader), one box per line, comma-separated
+(a line without a comma: whitespace-separated; an empty field is an error, never skipped):
 
 - ground truth: ``frame, id, bb_left, bb_top, bb_width, bb_height, considered, class[, visibility]``:
   ``considered`` 0 marks a box not to evaluate; ``class`` is a MOT class id (:data:`MOT_CLASSES`).
@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import configparser
 import dataclasses
-import re
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ DISTRACTOR_CLASSES = (2, 7, 8, 12)
 to them)."""
 GT_FIELDS = ("frame", "id", "bb_left", "bb_top", "bb_width", "bb_height", "considered", "class", "visibility")
 RESULT_FIELDS = ("frame", "id", "bb_left", "bb_top", "bb_width", "bb_height", "conf")
-_SPLIT = re.compile(r"[,\s]+")
+MAX_INT = 2**31 - 1  # frames and ids are 32-bit in MOT tools
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,7 +70,7 @@ def _parse(path: Path, fields: tuple[str, ...], required: int) -> np.ndarray:
     for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
-        values = _SPLIT.split(line.strip())
+        values = [v.strip() for v in line.split(",")] if "," in line else line.split()
         if len(values) < required:
             raise InputError(f"{path}, line {number}: {len(values)} values, expected at least {required} "
                              f"({', '.join(fields[:required])})")
@@ -92,9 +91,10 @@ def _check(path: Path, table: np.ndarray, length: int | None) -> int:
     """Checks shared by both kinds of file; returns the sequence length."""
     frame, ids, wh = table[:, 0], table[:, 1], table[:, 4:6]
     for name, column, low in (("frame", frame, 1), ("id", ids, 0)):
-        bad = np.flatnonzero((column != np.round(column)) | (column < low))
+        bad = np.flatnonzero((column != np.round(column)) | (column < low) | (column > MAX_INT))
         if len(bad):
-            raise InputError(f"{path}, box {bad[0] + 1}: {name} {column[bad[0]]:g} is not an integer >= {low}")
+            raise InputError(f"{path}, box {bad[0] + 1}: {name} {column[bad[0]]:g} is not an integer from {low} to "
+                             f"{MAX_INT}")
     bad = np.flatnonzero(np.any(wh < 0, axis=1))
     if len(bad):
         raise InputError(f"{path}, box {bad[0] + 1}: bb_width and bb_height must be >= 0, got {wh[bad[0]].tolist()}")
@@ -149,8 +149,8 @@ def _seq_length(seq_dir: Path) -> int | None:
         value = parser["Sequence"]["seqLength"]
     except (configparser.Error, KeyError, UnicodeDecodeError):
         raise InputError(f"{ini}: no [Sequence] seqLength") from None
-    if not value.strip().isdigit():
-        raise InputError(f"{ini}: seqLength {value!r} is not an integer >= 0")
+    if not value.strip().isdigit() or int(value) > MAX_INT:
+        raise InputError(f"{ini}: seqLength {value!r} is not an integer from 0 to {MAX_INT}")
     return int(value)
 
 

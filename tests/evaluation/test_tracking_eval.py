@@ -186,7 +186,7 @@ def test_other_classes_evaluate_like_pedestrians(tmp_path):
 @pytest.mark.parametrize(("line", "message"), [
     ("1,1,10,10,5,5,1", "at least 8"),
     ("1,1,10,10,5,x,1,1,1", "bb_height 'x' is not a number"),
-    ("0,1,10,10,5,5,1,1,1", "frame 0 is not an integer >= 1"),
+    ("0,1,10,10,5,5,1,1,1", "frame 0 is not an integer from 1"),
     ("1,1.5,10,10,5,5,1,1,1", "id 1.5"),
     ("1,1,10,10,-5,5,1,1,1", "bb_width and bb_height must be >= 0"),
     ("1,1,10,10,5,5,2,1,1", "considered 2 is not 0 or 1"),
@@ -236,3 +236,44 @@ def test_cli_task_tracking(tmp_path, capsys):
                  str(root / "trackers" / "t" / "data"), "--out", str(tmp_path / "eval2")]) == 2
     assert "random.txt, line 1: 4 values, expected at least 7" in capsys.readouterr().err
     assert not (tmp_path / "eval2").exists()
+
+
+FIELD_TEXT = ["0", "1", "-1", "2.5", "1e300", "-1e300", "nan", "inf", "x", "", "14", "8", "3"]
+
+
+@pytest.mark.parametrize("kind", ["gt", "results"])
+def test_mutated_files_are_scored_or_refused(tmp_path_factory, kind):
+    """Any field of a valid file replaced by other text: the file is scored or refused with InputError."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    gt_text, res_text, length = cases()["fragments"]
+
+    @settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(line=st.integers(0, 50), field=st.integers(0, 9), text=st.sampled_from(FIELD_TEXT))
+    def check(line, field, text):
+        root = _write_layout(tmp_path_factory.mktemp("fuzz"), {"s": (gt_text, res_text, length)})
+        path = root / "gt" / "s" / "gt" / "gt.txt" if kind == "gt" else root / "trackers" / "t" / "data" / "s.txt"
+        lines = path.read_text().splitlines()
+        values = lines[line % len(lines)].split(",")
+        values[field % len(values)] = text
+        lines[line % len(lines)] = ",".join(values)
+        path.write_text("\n".join(lines) + "\n")
+        try:
+            metrics = evaluate_tracking(root / "gt", root / "trackers" / "t" / "data")
+        except InputError as exc:
+            assert str(path) in str(exc)
+            return
+        assert 0.0 <= metrics["combined"]["HOTA"] <= 1.0
+
+    check()
+
+
+def test_empty_field_is_refused_not_shifted(tmp_path):
+    gt = tmp_path / "s" / "gt" / "gt.txt"
+    gt.parent.mkdir(parents=True)
+    gt.write_text("1,2,,10,5,5,1,1,1\n")
+    with pytest.raises(InputError, match="line 1: bb_left '' is not a number"):
+        read_gt(gt)
+    gt.write_text("1 2 10 10 5 5 1 1 1\n")  # space-separated, as TrackEval's reader also accepts
+    assert read_gt(gt)["s"].boxes.tolist() == [[10, 10, 5, 5]]
