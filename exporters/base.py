@@ -26,6 +26,7 @@ from exporters.filters import HIDDEN, FilterSummary, ObjectFilter
 from exporters.source import ExportSource, RecordSource
 from exporters.splits import SplitSpec
 from exporters.writing import atomic_dir, atomic_file, atomic_named_dir, write_json
+from pipeline.core.record import RecordInfo
 
 log = logging.getLogger(__name__)
 
@@ -135,12 +136,36 @@ class CameraRows:
         return rows
 
 
+def sensors_text(info: RecordInfo) -> str:
+    """The sensors of a record by kind, for messages: ``cameras [front], LiDARs [top], radars []``."""
+    return (f"cameras [{', '.join(c.name for c in info.cameras)}], LiDARs [{', '.join(x.name for x in info.lidars)}], "
+            f"radars [{', '.join(r.name for r in info.radars)}]")
+
+
+def check_contents(source: ExportSource, fmt: str, needs_camera: bool) -> None:
+    """Refuse, naming the record, one that would add nothing to a ``fmt`` export: a record without frames, or
+    without a camera where the format is made of camera images (``needs_camera``). Exporting it would write an
+    export (or a part of one) with no images or no frames, and say nothing."""
+    for src in source.records:
+        root = src.record.root
+        if not len(src.frames):
+            raise ExportError(f"{root}: the record has no frames ({root / 'frames.parquet'} has no rows); a {fmt} "
+                              "export of it would be empty")
+        if needs_camera and not src.info.cameras:
+            raise ExportError(f"{root}: the record has no camera ({sensors_text(src.info)}); a {fmt} export is "
+                              "made of camera images, so it would hold none of this record's frames (render it with "
+                              "a rig that has a camera, or export it as mcap or rosbag2)")
+
+
 class Exporter(ABC):
     """One output format. Subclasses set :attr:`name` and implement :meth:`write`."""
 
     name: ClassVar[str]
     writes_file: ClassVar[bool] = False  # True: ``out`` is one file; False: a folder
     creates_own_dir: ClassVar[bool] = False  # True: write() gets a folder path that does not exist yet
+    needs_camera: ClassVar[bool] = False
+    """True for formats made of camera images: a record without a camera is refused (:func:`check_contents`).
+    Every format refuses a record without frames."""
 
     def check(self, source: ExportSource, options: ExportOptions) -> None:  # noqa: B027 - optional hook
         """Raise :class:`ExportError` before writing when the records do not suit the format."""
@@ -160,6 +185,7 @@ class Exporter(ABC):
         """Export the records ``datasets`` to ``out`` atomically; returns the export description with counts."""
         options = options or ExportOptions()
         source = ExportSource(datasets, options.splits)
+        check_contents(source, self.name, self.needs_camera)
         self.check(source, options)
         description = {"format": self.name, "options": options.to_dict(), **source.describe()}
         atomic = atomic_file if self.writes_file else atomic_named_dir if self.creates_own_dir else atomic_dir

@@ -81,6 +81,7 @@ def instance_rles(instance: np.ndarray, ids: np.ndarray) -> list[tuple[dict[str,
 
 class CocoExporter(Exporter):
     name = "coco"
+    needs_camera = True
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:

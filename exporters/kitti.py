@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from exporters.base import CameraRows, Exporter, ExportError, ExportOptions
+from exporters.base import CameraRows, Exporter, ExportError, ExportOptions, sensors_text
 from exporters.filters import KEPT, FilterSummary
 from exporters.source import ExportSource, RecordSource, safe_name
 from exporters.writing import link_or_copy
@@ -56,9 +56,9 @@ def sensors_of(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo, L
     """The camera and LiDAR a record contributes; :class:`ExportError` if missing or not KITTI-compatible."""
     info, root = src.info, src.record.root
     if not info.cameras or not info.lidars:
-        cams, lidars = ", ".join(c.name for c in info.cameras), ", ".join(x.name for x in info.lidars)
-        raise ExportError(f"{root}: KITTI needs a camera and a LiDAR; the record has cameras [{cams}] and "
-                          f"LiDARs [{lidars}]")
+        missing = "camera or LiDAR" if not (info.cameras or info.lidars) else "camera" if not info.cameras else "LiDAR"
+        raise ExportError(f"{root}: the record has no {missing} ({sensors_text(info)}); KITTI needs a camera "
+                          "(image_2) and a LiDAR (velodyne) in every record")
     try:
         cam = info.camera(options.camera) if options.camera else info.cameras[0]
     except KeyError as exc:

@@ -52,6 +52,7 @@ def label_text(boxes: np.ndarray, classes: np.ndarray, width: int, height: int) 
 
 class YoloExporter(Exporter):
     name = "yolo"
+    needs_camera = True
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
