@@ -23,6 +23,20 @@ interpolation) and its NMS IoU; every one can be overridden (:class:`OnnxOptions
 - post-processing: score threshold, class-wise NMS (``nms_iou``; None when the model does its own),
   ``max_detections`` (:func:`pipeline.detect.infer.postprocess`), boxes back to original pixels.
 
+**Checked before the first image** (each a ValueError naming the model file, the option and the mismatch):
+one rank-4 ``tensor(float)`` or ``tensor(uint8)`` input with 3 channels on the layout's channel axis;
+``input_size`` > 0 and equal to a fixed input size; ``batch_size`` >= 1 and at most a fixed batch; the
+family (given, stored or guessed) reading the output shapes of one run on a blank image (a raw head
+(B, anchors, 5 + C) or (B, 4 + C, anchors) for the input size and strides; ``decoded``: the shapes
+above); output names the model has; options in range (score threshold in [0, 1], ``max_detections``
+>= 1, non-zero ``std``...).
+
+**Non-finite outputs**: an output row (anchor, detection) whose box or score is NaN or inf is dropped and
+counted (:attr:`OnnxDetector.nonfinite_rows` of :attr:`OnnxDetector.rows`); :meth:`OnnxDetector.check_finite`
+fails when every row of a run was non-finite (a broken model or pre-processing, which would otherwise read
+as "nothing detected") and warns with the counts when some were (an overflowing anchor should not void
+the rest of an evaluation).
+
 Sessions use every core this process may run on for one inference (``intra_op_num_threads``), which
 on a CPU gives the best images/s for single-image models, and CUDA when onnxruntime offers it.
 
@@ -38,6 +52,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import math
 import os
 import warnings
 from collections import Counter
@@ -56,7 +71,9 @@ from pipeline.detect.model import decode
 
 log = logging.getLogger(__name__)
 METADATA_KEY = "roadsynth.onnx_options"
+DEFAULT_BATCH_SIZE = 4  # images per run of a model with a dynamic batch axis, unless asked otherwise
 _INTERPOLATION = {"linear": cv2.INTER_LINEAR, "area": cv2.INTER_AREA}
+_INPUT_TYPES = ("tensor(float)", "tensor(uint8)")
 
 
 @dataclass(frozen=True)
@@ -165,6 +182,74 @@ class Placement:
         return out
 
 
+def check_options(o: OnnxOptions, path: Path) -> None:
+    """Refuse options that could only give an error deep inside a run or silently no detections (``path`` names
+    the model in the message; the flags are the command line's)."""
+    problems = []
+    if not (math.isfinite(o.score_threshold) and 0.0 <= o.score_threshold <= 1.0):
+        problems.append(f"--score-threshold {o.score_threshold}: expected a score in [0, 1]")
+    if o.max_detections < 1:
+        problems.append(f"--max-detections {o.max_detections}: expected an integer >= 1")
+    if o.nms_iou is not None and not 0.0 < o.nms_iou <= 1.0:
+        problems.append(f"--nms-iou {o.nms_iou}: expected an IoU in (0, 1] (1 turns NMS off)")
+    if any(not math.isfinite(v) or v == 0.0 for v in o.std):
+        problems.append(f"--std {' '.join(map(str, o.std))}: expected finite non-zero divisors")
+    if any(not math.isfinite(v) for v in o.mean):
+        problems.append(f"--mean {' '.join(map(str, o.mean))}: expected finite values")
+    if o.scale is not None and not (math.isfinite(o.scale) and o.scale > 0.0):
+        problems.append(f"--scale {o.scale}: expected a finite multiplier > 0")
+    if o.pad_value is not None and not 0.0 <= o.pad_value <= 255.0:
+        problems.append(f"--pad-value {o.pad_value}: expected a grey level in [0, 255]")
+    if not o.strides or any(s < 1 for s in o.strides):
+        problems.append(f"--strides {' '.join(map(str, o.strides))}: expected integers >= 1")
+    if problems:
+        raise ValueError(f"{path}: " + "; ".join(problems))
+
+
+def _fixed(dim: Any) -> int | None:
+    """A dimension of a graph shape as an int, None where it is symbolic or unknown (a name, None, <= 0)."""
+    return int(dim) if isinstance(dim, (int, np.integer)) and dim > 0 else None
+
+
+def _guess_layout(shape: list) -> str:
+    """nhwc where the last axis looks like the channels (3, or a few where axis 1 is wide), else nchw."""
+    first, last = _fixed(shape[1]), _fixed(shape[3])
+    if last == 3 and first != 3:
+        return "nhwc"
+    return "nhwc" if last is not None and last <= 4 and first is not None and first > 4 else "nchw"
+
+
+def _raw_mismatch(family: str, shape: tuple[int, ...], width: int, height: int,
+                  strides: tuple[int, ...]) -> str | None:
+    """What a raw head's decoding (:func:`pipeline.detect.heads.decode`) reads from its output, when ``shape``
+    is not that; None when it is."""
+    cells = heads.grid_cells(width, height, strides)
+    anchors = 3 * cells if family == "yolov5" else cells
+    if family == "yolov8":
+        ok = len(shape) == 3 and shape[2] == cells and shape[1] > 4
+        expected = f"(B, 4 + C, {cells})"
+    else:
+        ok = len(shape) == 3 and shape[1] == anchors and shape[2] > 5
+        expected = f"(B, {anchors}, 5 + C)"
+    return None if ok else f"one output {expected} (anchors of the grids at strides {strides})"
+
+
+def _decoded_mismatch(shapes: list[tuple[int, ...]], output_format: str | None) -> str | None:
+    """What a decoded model's reading (:meth:`OnnxDetector._decoded`) expects, when ``shapes`` is not that."""
+    fmt = output_format or ("boxes-scores-classes" if len(shapes) >= 3 else "detections")
+    if fmt == "detections":
+        out = shapes[0]
+        ok = len(out) in (2, 3) and out[-1] in (6, 7)
+        return None if ok else "'detections': one output (B, N, 6) or (N, 6) of box, score, class per row"
+    expected = "'boxes-scores-classes': three outputs, boxes (B, N, 4) or (N, 4), scores and classes (B, N) or (N)"
+    if len(shapes) < 3:
+        return expected
+    boxes, scores, classes = (tuple(s) for s in shapes[:3])
+    rows = boxes[:-1]
+    ok = len(boxes) in (2, 3) and boxes[-1] == 4 and all(s in (rows, (*rows, 1)) for s in (scores, classes))
+    return None if ok else expected
+
+
 def _threads() -> int:
     try:
         return len(os.sched_getaffinity(0))
@@ -193,8 +278,8 @@ class OnnxDetector:
             COCO id, by model class index (summed over every :meth:`predict`).
     """
 
-    def __init__(self, path: Path, options: OnnxOptions | None = None, *, batch_size: int = 8, device: str = "auto",
-                 threads: int | None = None, **overrides: Any):
+    def __init__(self, path: Path, options: OnnxOptions | None = None, *, batch_size: int | None = None,
+                 device: str = "auto", threads: int | None = None, **overrides: Any):
         import onnxruntime as ort
 
         self.path = Path(path)
@@ -214,34 +299,134 @@ class OnnxDetector:
         stored = meta.get(METADATA_KEY)
         base = options or (OnnxOptions.from_json(stored) if stored else OnnxOptions())
         o = base.replace(**overrides)
-        self.input = self.session.get_inputs()[0]
+        # Everything the graph declares is checked before the first run, so that a contradiction is one message
+        # naming the option, not onnxruntime's traceback or a silently empty result.
+        check_options(o, self.path)
+        self.input = self._image_input()
         shape = self.input.shape
-        layout = o.layout or ("nhwc" if shape[-1] == 3 and shape[1] != 3 else "nchw")
-        size = o.input_size
-        if size is None:
-            h, w = (shape[2], shape[3]) if layout == "nchw" else (shape[1], shape[2])
-            if not (isinstance(w, int) and isinstance(h, int)):
-                raise ValueError(f"{self.path}: input {self.input.name} has a dynamic size {shape}; "
-                                 "pass --input-size W H")
-            size = (w, h)
-        o = dataclasses.replace(o, layout=layout, input_size=tuple(size))
-        self.fixed_batch = shape[0] if isinstance(shape[0], int) and shape[0] > 0 else None
-        self.batch = self.fixed_batch or max(1, batch_size)
+        layout = o.layout or _guess_layout(shape)
+        self._check_channels(layout, given=o.layout is not None)
+        o = dataclasses.replace(o, layout=layout, input_size=self._input_size(layout, o.input_size))
+        self.fixed_batch = _fixed(shape[0])
+        self.batch = self._batch(batch_size)
+        self._check_output_names(o.output_names)
         self.options = o
         self.output_shapes = self._probe(o)
         self.family, why = (o.family, "given") if o.family != "auto" else heads.guess_family(
             self.output_shapes, *o.input_size, o.strides)
+        if o.family == "auto":
+            source = f"family {self.family} (auto: {why})"
+        elif overrides.get("family") is not None:
+            source = f"--family {o.family}"
+        else:
+            source = f"family {o.family} ({'the model metadata' if options is None else 'the options'})"
+        self._check_family(o, source)
         self.options = self._resolve(o, meta)
         self.unmapped: Counter[int] = Counter()
+        self.rows = 0
+        self.nonfinite_rows = 0
         shown = dataclasses.replace(self.options, class_map=None).to_json()
         classes = "COCO ids" if self.options.class_map is None else f"{len(self.options.class_map)} mapped to COCO ids"
         log.info("%s: input %s %s %s; family %s (%s); %d image(s) per run on %s, %d threads; classes %s; options %s",
                  self.path, self.input.name, shape, self.input.type, self.family, why, self.batch,
                  self.session.get_providers()[0], so.intra_op_num_threads, classes, shown)
 
+    # --- the model's graph against the options (see check_options for the options alone) ---
+
+    def _image_input(self):
+        """The model's one input, a rank-4 float32 or uint8 tensor."""
+        inputs = self.session.get_inputs()
+        if len(inputs) != 1:
+            listed = ", ".join(f"{i.name!r} {i.shape} {i.type}" for i in inputs)
+            raise ValueError(f"{self.path}: the model has {len(inputs)} inputs ({listed}); roadsynth feeds one image "
+                             "tensor: expected exactly one input")
+        image = inputs[0]
+        if len(image.shape) != 4:
+            raise ValueError(f"{self.path}: input {image.name!r} has shape {image.shape}; expected an image batch "
+                             "(B, 3, H, W) or (B, H, W, 3)")
+        if image.type not in _INPUT_TYPES:
+            raise ValueError(f"{self.path}: input {image.name!r} is {image.type}; roadsynth feeds "
+                             f"{' or '.join(_INPUT_TYPES)} (scaled or raw pixels)")
+        return image
+
+    def _check_channels(self, layout: str, *, given: bool) -> None:
+        shape = self.input.shape
+        channels = _fixed(shape[1] if layout == "nchw" else shape[3])
+        if channels is None or channels == 3:
+            return
+        how = f"--layout {layout}" if given else f"layout {layout}, from the shape"
+        other = "nhwc" if layout == "nchw" else "nchw"
+        hint = f" (the shape fits --layout {other})" if _fixed(shape[3 if layout == "nchw" else 1]) == 3 else ""
+        raise ValueError(f"{self.path}: input {self.input.name!r} {shape} has {channels} channel(s) ({how}); roadsynth "
+                         f"feeds RGB images: expected 3 channels{hint}")
+
+    def _input_size(self, layout: str, size: tuple[int, int] | None) -> tuple[int, int]:
+        """(W, H) of the network input: ``--input-size`` where given (it must fit a fixed size), else the model's."""
+        shape = self.input.shape
+        h, w = (shape[2], shape[3]) if layout == "nchw" else (shape[1], shape[2])
+        fixed_w, fixed_h = _fixed(w), _fixed(h)
+        if size is None:
+            if fixed_w is None or fixed_h is None:
+                raise ValueError(f"{self.path}: input {self.input.name} has a dynamic size {shape}; "
+                                 "pass --input-size W H")
+            return fixed_w, fixed_h
+        size = tuple(size)
+        if len(size) != 2 or any(not isinstance(v, (int, np.integer)) or v <= 0 for v in size):
+            raise ValueError(f"{self.path}: --input-size {' '.join(map(str, size))}: expected two integers > 0 "
+                             "(the network input's width and height)")
+        if (fixed_w is not None and size[0] != fixed_w) or (fixed_h is not None and size[1] != fixed_h):
+            fixed = f"{fixed_w or 'any'}x{fixed_h or 'any'}"
+            raise ValueError(f"{self.path}: --input-size {size[0]} {size[1]} contradicts input {self.input.name!r} "
+                             f"{shape} ({layout}), whose size is fixed at {fixed} (W x H); leave --input-size out")
+        return int(size[0]), int(size[1])
+
+    def _batch(self, batch_size: int | None) -> int:
+        """Images per run: the model's fixed batch, else ``batch_size`` (default :data:`DEFAULT_BATCH_SIZE`)."""
+        if batch_size is not None and batch_size < 1:
+            raise ValueError(f"{self.path}: --batch-size {batch_size}: expected an integer >= 1")
+        if self.fixed_batch is not None:
+            if batch_size is not None and batch_size > self.fixed_batch:
+                raise ValueError(f"{self.path}: --batch-size {batch_size}: input {self.input.name!r} "
+                                 f"{self.input.shape} has a fixed batch of {self.fixed_batch}; expected --batch-size "
+                                 f"<= {self.fixed_batch}, or leave it out")
+            return self.fixed_batch
+        return DEFAULT_BATCH_SIZE if batch_size is None else batch_size
+
+    def _check_output_names(self, names: tuple[str, ...] | None) -> None:
+        outputs = [x.name for x in self.session.get_outputs()]
+        missing = [n for n in names or () if n not in outputs]
+        if missing:
+            raise ValueError(f"{self.path}: --output-names {' '.join(missing)}: the model has no such output; its "
+                             f"outputs: {', '.join(outputs)}")
+
+    def _check_family(self, o: OnnxOptions, source: str) -> None:
+        """The probed output shapes must be what the family's decoding reads (``source`` names who chose it)."""
+        names = list(o.output_names) if o.output_names else [x.name for x in self.session.get_outputs()]
+        shapes = self.output_shapes
+        w, h = o.input_size
+        if self.family == "decoded":
+            expected = _decoded_mismatch(shapes, o.output_format)
+        else:
+            expected = _raw_mismatch(self.family, shapes[0], w, h, o.strides)
+        if expected is None:
+            return
+        listed = ", ".join(f"{n} {tuple(s)}" for n, s in zip(names, shapes, strict=False))
+        try:
+            fits = "; they fit family {} ({})".format(*heads.guess_family(shapes, w, h, o.strides))
+        except ValueError:
+            fits = ""
+        raise ValueError(f"{self.path}: {source} reads {expected}; the model's outputs for a {w}x{h} input are "
+                         f"{listed}{fits}")
+
     def _run(self, x: np.ndarray) -> list[np.ndarray]:
         o = self.options
-        return self.session.run(list(o.output_names) if o.output_names else None, {self.input.name: x})
+        try:
+            return self.session.run(list(o.output_names) if o.output_names else None, {self.input.name: x})
+        except Exception as exc:  # onnxruntime's own exception types; the checks above leave only the model's own
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise ValueError(f"{self.path}: onnxruntime failed on input {self.input.name!r} of shape {x.shape} "
+                             f"{x.dtype} (input size {o.input_size[0]}x{o.input_size[1]}, layout {o.layout}): "
+                             f"{first}") from None
 
     def _probe(self, o: OnnxOptions) -> list[tuple[int, ...]]:
         """Concrete output shapes: one run on a blank image (exported shapes are often symbolic)."""
@@ -260,7 +445,7 @@ class OnnxDetector:
             placement=o.placement or preset.placement,
             nms_iou=preset.nms_iou if o.nms_iou is None else o.nms_iou)
         if self.family == "decoded":
-            fmt = o.output_format or ("boxes-scores-classes" if len(self.session.get_outputs()) >= 3 else "detections")
+            fmt = o.output_format or ("boxes-scores-classes" if len(self.output_shapes) >= 3 else "detections")
             return dataclasses.replace(o, output_format=fmt)
         if o.class_map is None:
             out = self.output_shapes[0]
@@ -317,20 +502,18 @@ class OnnxDetector:
             x /= np.array(o.std, np.float32).reshape(shape)
         return x, place
 
-    def _decoded(self, outputs: list[np.ndarray], n: int) -> list[heads.Decoded]:
+    def _decoded(self, outputs: list[np.ndarray], n: int) -> list[tuple[heads.Decoded, int]]:
+        """Every row of a decoded model's outputs for each of ``n`` images, boxes in input pixels, and the row
+        count; rows with a non-finite box, score or class are left out here (counted by :meth:`_usable`)."""
         o = self.options
         if o.output_format == "detections":
             det = outputs[0]
-            if det.shape[-1] < 6:
-                raise ValueError(f"{self.path}: 'detections' output needs 6 columns, got {det.shape}")
             per_image = [det.reshape(-1, det.shape[-1])] if n == 1 else list(det)
             parts = [(d[:, :4], d[:, 4], d[:, 5]) for d in per_image]
         else:
-            if len(outputs) < 3:
-                raise ValueError(f"{self.path}: 'boxes-scores-classes' needs 3 outputs, the model has {len(outputs)}")
             b, s, c = outputs[:3]
             parts = ([(b.reshape(-1, 4), s.reshape(-1), c.reshape(-1))] if n == 1
-                     else [(b[i], s[i], c[i]) for i in range(n)])
+                     else [(b[i].reshape(-1, 4), s[i].reshape(-1), c[i].reshape(-1)) for i in range(n)])
         result = []
         for boxes, scores, classes in parts:
             boxes = boxes.astype(np.float64)
@@ -340,10 +523,36 @@ class OnnxDetector:
                 boxes = np.concatenate([boxes[:, :2], boxes[:, :2] + boxes[:, 2:]], axis=1)
             elif o.box_format == "cxcywh":
                 boxes = np.concatenate([boxes[:, :2] - boxes[:, 2:] / 2, boxes[:, :2] + boxes[:, 2:] / 2], axis=1)
-            scores = scores.astype(np.float64)
-            keep = scores >= o.score_threshold
-            result.append(heads.Decoded(boxes[keep], scores[keep], np.round(classes[keep]).astype(np.int64)))
+            scores, classes = scores.astype(np.float64), classes.astype(np.float64)
+            finite = np.isfinite(boxes).all(axis=1) & np.isfinite(scores) & np.isfinite(classes)
+            result.append((heads.Decoded(boxes[finite], scores[finite], np.round(classes[finite]).astype(np.int64)),
+                           len(scores)))
         return result
+
+    def _usable(self, d: heads.Decoded, rows: int) -> heads.Decoded:
+        """The candidates of one image: ``d``'s rows with a finite box and score, at or above the score threshold.
+        Of the image's ``rows`` output rows (anchors, detections), those not in ``d`` or not finite are counted
+        in :attr:`nonfinite_rows` (a decoding leaves out rows whose score is NaN, so the count is ``rows`` less the
+        finite ones)."""
+        finite = np.isfinite(d.boxes).all(axis=1) & np.isfinite(d.scores)
+        self.rows += rows
+        self.nonfinite_rows += rows - int(finite.sum())
+        keep = finite & (d.scores >= self.options.score_threshold)
+        return heads.Decoded(d.boxes[keep], d.scores[keep], d.classes[keep])
+
+    def check_finite(self) -> None:
+        """After a run: fail when every output row of every image had a non-finite box or score (the model gave no
+        usable output at all, which would otherwise read as "nothing detected"); warn with the counts when some
+        had (those rows were dropped, as a few overflowing anchors should not void the rest)."""
+        if not self.nonfinite_rows:
+            return
+        counts = f"{self.nonfinite_rows} of {self.rows} output rows (anchors or detections)"
+        if self.nonfinite_rows == self.rows:
+            raise ValueError(f"{self.path}: all {counts} have a non-finite (NaN or inf) box or score; expected "
+                             "finite outputs (check the model and the pre-processing: --scale, --mean, --std, "
+                             "--channels)")
+        log.warning("%s: dropped %s with a non-finite (NaN or inf) box or score (%.2g%%)", self.path, counts,
+                    100.0 * self.nonfinite_rows / self.rows)
 
     def _to_coco(self, d: heads.Decoded) -> heads.Decoded:
         """Model classes -> COCO ids (unchanged without a class map); unmapped ones counted and dropped."""
@@ -379,9 +588,12 @@ class OnnxDetector:
             if self.family == "decoded":
                 decoded = self._decoded(outputs, len(x))
             else:
-                decoded = heads.decode(self.family, outputs[0], *o.input_size, o.score_threshold, o.strides)
-            for rgb, (_, place), d in zip(chunk, prepared, decoded, strict=False):
-                d = self._to_coco(d)
+                # Every anchor whose score is not NaN, so that the non-finite ones are counted (_usable).
+                out = outputs[0]
+                anchors = out.shape[2] if self.family == "yolov8" else out.shape[1]
+                decoded = [(d, anchors) for d in heads.decode(self.family, out, *o.input_size, -np.inf, o.strides)]
+            for rgb, (_, place), (d, rows) in zip(chunk, prepared, decoded, strict=False):
+                d = self._to_coco(self._usable(d, rows))
                 dets.append(postprocess(torch.from_numpy(d.boxes), torch.from_numpy(d.scores),
                                         torch.from_numpy(d.classes), place, rgb.shape[1], rgb.shape[0],
                                         score_threshold=o.score_threshold, nms_iou=o.nms_iou,

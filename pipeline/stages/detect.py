@@ -12,7 +12,10 @@ pre-processing and NMS; classes map to COCO ids by the standard 80-class table (
 ``--class-map``), and every class is kept: ``roadsynth evaluate`` scores the ground truth's categories
 and counts the rest. Options stored in the model by ``roadsynth train --export-onnx`` are the defaults,
 the command-line options below override them. Detections of model classes with no COCO id are dropped
-and counted in the log.
+and counted in the log. A model whose graph contradicts the options (channels, input size, batch, a
+family that does not read its outputs) is refused before the first image; output rows with a NaN or
+infinite box or score are dropped and counted, and a run in which every row was is an error
+(:mod:`pipeline.detect.onnx`).
 """
 
 from __future__ import annotations
@@ -24,9 +27,11 @@ import os
 from pathlib import Path
 
 from pipeline.core.outputs import OutputSpec, json_file
+from pipeline.stages.common import int_at_least
 from pipeline.stages.train import annotations_path
 
 INPUT_ARGS = ("model", "onnx", "coco", "annotations", "names")
+DEFAULT_BATCH_SIZE = 4  # --model, and --onnx models with a dynamic batch axis (pipeline.detect.onnx's default)
 HELP = "detect objects in a COCO export's images with our model or an ONNX model; write COCO results"
 log = logging.getLogger(__name__)
 
@@ -43,9 +48,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="auto: CUDA when torch (--model) or onnxruntime (--onnx) offers it")
     parser.add_argument("--score-threshold", type=float, metavar="S",
                         help="drop detections below S (default: the model's, 0.05)")
-    parser.add_argument("--batch-size", type=int, default=4,
-                        help="images per forward pass (--model; --onnx when its batch axis is dynamic)")
-    parser.add_argument("--threads", type=int, metavar="N", help="(--onnx) onnxruntime threads (default: all cores)")
+    parser.add_argument("--batch-size", type=int_at_least(1), metavar="N",
+                        help=f"images per forward pass (default {DEFAULT_BATCH_SIZE}; --onnx: the model's fixed batch, "
+                        "which N may not exceed, else N)")
+    parser.add_argument("--threads", type=int_at_least(1), metavar="N",
+                        help="(--onnx) onnxruntime threads (default: all cores)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     onnx = parser.add_argument_group("ONNX pre/post-processing (default: stored in the model, else the family's)")
     onnx.add_argument("--family", choices=("auto", "yolox", "yolov5", "yolov8", "decoded"),
@@ -135,12 +142,14 @@ def main(args: argparse.Namespace) -> int:
         def predict(rgbs):
             return detector.predict(rgbs, score_threshold=args.score_threshold)
 
-        batch = args.batch_size
+        batch = args.batch_size or DEFAULT_BATCH_SIZE
     else:
         onnx_detector = _onnx_detector(args)
         data = load_coco(ann, DETECTOR_CLASSES)  # only the image list is used
         predict, batch = onnx_detector.predict, onnx_detector.batch
     results = detect_coco(predict, data, batch_size=batch, progress=not args.no_progress)
+    if args.onnx is not None:
+        onnx_detector.check_finite()  # all non-finite: fails before anything is written; some: a warning
     if args.onnx is not None and onnx_detector.unmapped:
         log.warning("%s: dropped %d detections of model classes without a COCO id (by class index: %s)", args.onnx,
                     sum(onnx_detector.unmapped.values()), dict(sorted(onnx_detector.unmapped.items())))
