@@ -127,6 +127,11 @@ class NuScenesExporter(Exporter):
         tables["ego_pose"] += [{"token": poses[f], "timestamp": time_us[f], "translation": xyz[i],
                                 "rotation": quats[i]} for i, f in enumerate(frame_ids)]
         cameras = {c.name: c for c in info.cameras}
+        for cam in info.cameras:
+            if np.any(np.abs(cam.distortion) > 0):
+                log.warning("%s: camera %s has lens distortion %s, which nuScenes' calibrated_sensor cannot hold: "
+                            "the devkit projects its boxes as through a pinhole", record.root, cam.name,
+                            cam.distortion)
         radars = {r.name: r for r in info.radars}
         per_sensor: dict[str, list[dict]] = {}
         for kind, name, ch in nt.record_channels(src):
