@@ -55,8 +55,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main_tracking(args: argparse.Namespace) -> int:
     """--task tracking: TrackEval's HOTA, CLEAR and identity metrics (evaluation.tracking) into metrics.json."""
+    from evaluation.api import METRICS
+    from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD
     from evaluation.tracking import evaluate_tracking, markdown_summary
 
+    detection_only = {"--iou": args.iou != list(DEFAULT_IOU_THRESHOLDS), "--group-by": args.group_by is not None,
+                      "--score-threshold": args.score_threshold != DEFAULT_SCORE_THRESHOLD,
+                      "--kitti-mode": args.kitti_mode != "official", "--calib": args.calib is not None,
+                      "--png": args.png, "--metrics": args.metrics != ",".join(METRICS)}
+    given = [flag for flag, changed in detection_only.items() if changed]
+    if given:  # they would be ignored without a word
+        raise ValueError(f"{', '.join(given)} apply to --task detection only, not tracking")
     metrics = evaluate_tracking(args.gt, args.detections)
     config = {"task": "tracking", "gt": str(args.gt), "detections": str(args.detections),
               "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}

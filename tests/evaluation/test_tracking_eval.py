@@ -277,3 +277,14 @@ def test_empty_field_is_refused_not_shifted(tmp_path):
         read_gt(gt)
     gt.write_text("1 2 10 10 5 5 1 1 1\n")  # space-separated, as TrackEval's reader also accepts
     assert read_gt(gt)["s"].boxes.tolist() == [[10, 10, 5, 5]]
+
+
+def test_cli_refuses_detection_options_with_task_tracking(tmp_path, capsys):
+    from pipeline.stages.cli import main
+
+    root = _write_layout(tmp_path / "mot", {"s": cases()["idswitch"]})
+    assert main(["evaluate", "--task", "tracking", "--gt", str(root / "gt"), "--detections",
+                 str(root / "trackers" / "t" / "data"), "--out", str(tmp_path / "eval"), "--iou", "0.7",
+                 "--group-by", "condition"]) == 2
+    assert "--iou, --group-by apply to --task detection only, not tracking" in capsys.readouterr().err
+    assert not (tmp_path / "eval").exists()
