@@ -98,6 +98,7 @@ class NuScenesExporter(Exporter):
         return {"version": nt.VERSION, "scenes": len(tables["scene"]), "samples": len(tables["sample"]),
                 "sample_data": len(tables["sample_data"]), "annotations": len(tables["sample_annotation"]),
                 "instances": len(tables["instance"]), "annotations_by_class": dict(sorted(counts.items())),
+                "objects": {"total": {"annotated": len(tables["sample_annotation"])}},
                 "images_linked": int(linked), "images_copied": int(images - linked),
                 "splits": {s: len(v) for s, v in splits.items()}}
 
