@@ -53,19 +53,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "%(default)s, every scene)")
 
 
-def main_tracking(args: argparse.Namespace) -> int:
-    """--task tracking: TrackEval's HOTA, CLEAR and identity metrics (evaluation.tracking) into metrics.json."""
+def refuse_detection_options(args: argparse.Namespace) -> None:
+    """Fail when an option of --task detection is given to another task: it would be ignored without a word."""
     from evaluation.api import METRICS
     from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD
-    from evaluation.tracking import evaluate_tracking, markdown_summary
 
     detection_only = {"--iou": args.iou != list(DEFAULT_IOU_THRESHOLDS), "--group-by": args.group_by is not None,
                       "--score-threshold": args.score_threshold != DEFAULT_SCORE_THRESHOLD,
                       "--kitti-mode": args.kitti_mode != "official", "--calib": args.calib is not None,
                       "--png": args.png, "--metrics": args.metrics != ",".join(METRICS)}
     given = [flag for flag, changed in detection_only.items() if changed]
-    if given:  # they would be ignored without a word
-        raise ValueError(f"{', '.join(given)} apply to --task detection only, not tracking")
+    if given:
+        raise ValueError(f"{', '.join(given)} apply to --task detection only, not {args.task}")
+
+
+def main_tracking(args: argparse.Namespace) -> int:
+    """--task tracking: TrackEval's HOTA, CLEAR and identity metrics (evaluation.tracking) into metrics.json."""
+    from evaluation.tracking import evaluate_tracking, markdown_summary
+
+    refuse_detection_options(args)
     metrics = evaluate_tracking(args.gt, args.detections)
     config = {"task": "tracking", "gt": str(args.gt), "detections": str(args.detections),
               "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}
@@ -84,6 +90,7 @@ def main_nuscenes(args: argparse.Namespace) -> int:
     export (--gt: its dataroot) and a submission JSON (--detections) into metrics.json."""
     from evaluation.nuscenes_detection import evaluate_nuscenes_detection, find_version
 
+    refuse_detection_options(args)
     metrics = evaluate_nuscenes_detection(args.gt, args.detections, eval_set=args.eval_set)
     config = {"task": "nuscenes-detection", "gt": str(args.gt), "detections": str(args.detections),
               "eval_set": args.eval_set, "gt_sha256": path_sha256(args.gt / find_version(args.gt)),
@@ -97,6 +104,8 @@ def main_nuscenes(args: argparse.Namespace) -> int:
 
 
 def main(args: argparse.Namespace) -> int:
+    if getattr(args, "eval_set", "all") != "all" and getattr(args, "task", "detection") != "nuscenes-detection":
+        raise ValueError(f"--eval-set applies to --task nuscenes-detection only, not {args.task}")
     if getattr(args, "task", "detection") == "tracking":
         return main_tracking(args)
     if getattr(args, "task", "detection") == "nuscenes-detection":

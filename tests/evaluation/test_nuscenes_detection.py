@@ -139,3 +139,15 @@ def test_cli_task_nuscenes_detection(export, gt, tmp_path, capsys):
                  str(_write(tmp_path, bad)), "--out", str(tmp_path / "eval2")]) == 2
     assert "field 'rotation' is [0, 0, 0, 0]" in capsys.readouterr().err
     assert not (tmp_path / "eval2").exists()
+
+
+def test_cli_refuses_options_of_other_tasks(export, gt, tmp_path, capsys):
+    from pipeline.stages.cli import main
+
+    results = str(_write(tmp_path, gt))
+    assert main(["evaluate", "--task", "nuscenes-detection", "--gt", str(export), "--detections", results,
+                 "--out", str(tmp_path / "a"), "--iou", "0.7"]) == 2
+    assert "--iou apply to --task detection only, not nuscenes-detection" in capsys.readouterr().err
+    assert main(["evaluate", "--gt", str(export), "--detections", results, "--out", str(tmp_path / "b"),
+                 "--eval-set", "train"]) == 2
+    assert "--eval-set applies to --task nuscenes-detection only, not detection" in capsys.readouterr().err
