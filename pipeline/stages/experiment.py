@@ -115,7 +115,7 @@ def main(args: argparse.Namespace) -> int:
     experiment, path = load_config(ExperimentConfig, args.config, "experiments")
     formats = _formats(args.export)
     spec = executor_from_args(args, local_cpus=args.workers)
-    matrix = resolve_matrix(experiment, args.frames)
+    matrix = resolve_matrix(experiment, args.frames, source=path)
     log.info("experiment %s from %s: %d runs x %d conditions on the %s executor -> %s", experiment.name, path,
              len(matrix.runs), len(matrix.conditions), spec.kind, args.out)
     status = run_experiment(matrix, args.out, spec, workers=args.workers, formats=formats, splits=args.splits,

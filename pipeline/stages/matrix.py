@@ -23,7 +23,7 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.core.config import ConditionConfig, ExperimentConfig, RigConfig, ScenarioConfig, load_config
+from pipeline.core.config import ConditionConfig, ConfigError, ExperimentConfig, RigConfig, ScenarioConfig, load_config
 from pipeline.core.config.resolve import resolve_scenario
 from pipeline.core.files import atomic_file
 from pipeline.stages.common import config_hash, write_json
@@ -49,13 +49,53 @@ class Matrix:
         return [(s, seed) for s in self.scenarios for seed in self.experiment.seeds]
 
 
-def resolve_matrix(experiment: ExperimentConfig, frames: int | None = None) -> Matrix:
-    """Every config the experiment names, validated now (a bad one fails before any task runs)."""
+def resolve_matrix(experiment: ExperimentConfig, frames: int | None = None, source: str | Path = "the experiment",
+                   ) -> Matrix:
+    """Every config the experiment names, validated now (a bad one fails before any task runs); ``source`` (the
+    experiment file) is named in errors. Two scenarios or two conditions of one name are refused: tasks, folders
+    and markers are named after them, so they would be one run that each overwrites or skips."""
     scenarios = [resolve_scenario(name, vehicles=experiment.vehicles, duration_s=experiment.duration_s,
-                                  warmup_s=experiment.warmup_s)[0] for name in experiment.scenarios]
-    conditions = [load_config(ConditionConfig, c, "conditions")[0] for c in experiment.conditions]
-    rig = load_config(RigConfig, experiment.rig, "rigs")[0]
-    return Matrix(experiment, scenarios, conditions, rig, frames if frames is not None else experiment.frames)
+                                  warmup_s=experiment.warmup_s) for name in experiment.scenarios]
+    conditions = [load_config(ConditionConfig, c, "conditions") for c in experiment.conditions]
+    _refuse_same_names(source, "scenarios", scenarios, "the runs (sim/NAME-SEED, records/NAME-SEED-CONDITION)")
+    _refuse_same_names(source, "conditions", conditions, "the records (records/SCENARIO-SEED-NAME)")
+    matrix = Matrix(experiment, [c for c, _ in scenarios], [c for c, _ in conditions],
+                    load_config(RigConfig, experiment.rig, "rigs")[0],
+                    frames if frames is not None else experiment.frames)
+    _refuse_same_folders(source, matrix, [p for _, p in scenarios], [p for _, p in conditions])
+    return matrix
+
+
+def _refuse_same_names(source: str | Path, key: str, loaded: list[tuple[ScenarioConfig | ConditionConfig, Path]],
+                       named: str) -> None:
+    first: dict[str, int] = {}
+    for i, (config, path) in enumerate(loaded):
+        j = first.setdefault(config.name, i)
+        if j == i:
+            continue
+        other, what = loaded[j][1], key[:-1]
+        if path.resolve() == other.resolve():
+            raise ConfigError(f"{source}: {key}[{j}] and {key}[{i}] are both {path} (name: {config.name}); {named} "
+                              f"are named after it, so they would be one run: list each {what} once")
+        raise ConfigError(f"{source}: {key}[{j}] ({other}) and {key}[{i}] ({path}) both have name: {config.name}; "
+                          f"{named} are named after it, so they would be one run: give each {what} file its own name")
+
+
+def _refuse_same_folders(source: str | Path, matrix: Matrix, scenario_files: list[Path],
+                         condition_files: list[Path]) -> None:
+    """Distinct names can still join into one folder name (scenario ``a`` with condition ``2-x`` and scenario
+    ``a-1`` seed 2 with condition ``x``): refuse that too, naming both."""
+    seen: dict[str, str] = {}
+    for scenario, scenario_file in zip(matrix.scenarios, scenario_files, strict=True):
+        for seed in matrix.experiment.seeds:
+            for condition, condition_file in zip(matrix.conditions, condition_files, strict=True):
+                folder = f"{sim_name(scenario, seed)}-{condition.name}"
+                task = (f"scenario {scenario.name} ({scenario_file}) seed {seed} condition {condition.name} "
+                        f"({condition_file})")
+                if folder in seen:
+                    raise ConfigError(f"{source}: {seen[folder]} and {task} would both write records/{folder}; "
+                                      "rename a scenario or a condition")
+                seen[folder] = task
 
 
 def sim_name(scenario: ScenarioConfig, seed: int) -> str:

@@ -66,3 +66,59 @@ def test_bad_flags_are_refused_before_anything_is_written(tiny, tmp_path, capsys
     assert main(["experiment", "run", str(tiny), "--out", str(out), *flags]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def renamed(source: Path, target: Path, name: str) -> Path:
+    """A copy of the config ``source`` whose ``name:`` is ``name``."""
+    data = yaml.safe_load(source.read_text())
+    data["name"] = name
+    target.write_text(yaml.safe_dump(data))
+    return target
+
+
+def experiment(path: Path, scenarios: list, conditions: list, seeds: list[int]) -> Path:
+    path.write_text(yaml.safe_dump({"name": "dup", "scenarios": [str(s) for s in scenarios], "seeds": seeds,
+                                    "conditions": [str(c) for c in conditions], "vehicles": 40, "warmup_s": 20,
+                                    "duration_s": 1, "frames": 2}))
+    return path
+
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def test_two_scenario_files_of_one_name_are_refused_naming_both(tmp_path, capsys):
+    a = renamed(CONFIGS / "scenarios" / "highway.yaml", tmp_path / "a.yaml", "road")
+    b = renamed(CONFIGS / "scenarios" / "urban.yaml", tmp_path / "b.yaml", "road")
+    config = experiment(tmp_path / "exp.yaml", [a, b], ["noon"], [1])
+    out = tmp_path / "exp"
+    assert main(["experiment", "run", str(config), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert (f"{config}: scenarios[0] ({a}) and scenarios[1] ({b}) both have name: road; the runs "
+            "(sim/NAME-SEED, records/NAME-SEED-CONDITION) are named after it") in err
+    assert "give each scenario file its own name" in err and not out.exists()
+
+
+def test_a_scenario_or_condition_listed_twice_is_refused(tmp_path, capsys):
+    config = experiment(tmp_path / "exp.yaml", ["highway", "highway"], ["noon"], [1])
+    assert main(["experiment", "run", str(config), "--out", str(tmp_path / "exp")]) == 2
+    err = capsys.readouterr().err
+    assert f"{config}: scenarios[0] and scenarios[1] are both " in err and "highway.yaml (name: highway)" in err
+    night = renamed(CONFIGS / "conditions" / "night.yaml", tmp_path / "dark.yaml", "noon")
+    config = experiment(tmp_path / "exp2.yaml", ["highway"], ["noon", "night", night], [1])
+    assert main(["experiment", "run", str(config), "--out", str(tmp_path / "exp")]) == 2
+    err = capsys.readouterr().err
+    assert "conditions[0] (" in err and f"noon.yaml) and conditions[2] ({night}) both have name: noon" in err
+    assert not (tmp_path / "exp").exists()
+
+
+def test_names_that_join_into_one_record_folder_are_refused(tmp_path, capsys):
+    hw = renamed(CONFIGS / "scenarios" / "highway.yaml", tmp_path / "hw.yaml", "hw")
+    hw1 = renamed(CONFIGS / "scenarios" / "highway.yaml", tmp_path / "hw1.yaml", "hw-1")
+    late = renamed(CONFIGS / "conditions" / "noon.yaml", tmp_path / "late.yaml", "2-noon")
+    config = experiment(tmp_path / "exp.yaml", [hw, hw1], [late, "noon"], [1, 2])
+    assert main(["experiment", "run", str(config), "--out", str(tmp_path / "exp")]) == 2
+    err = capsys.readouterr().err
+    assert (f"scenario hw ({hw}) seed 1 condition 2-noon ({late}) and scenario hw-1 ({hw1}) seed 2 condition noon "
+            in err and "would both write records/hw-1-2-noon" in err)
+    assert not (tmp_path / "exp").exists()
+
