@@ -92,23 +92,37 @@ def run_experiment(matrix: Matrix, out: Path, spec: ExecutorSpec, *, workers: in
 
 def _merge(matrix: Matrix, out: Path, status: dict[str, dict], formats: list[str], splits: str | None,
            progress: bool, *, complete: bool) -> None:
-    """status.json; and, when every record is finished, the exports of all records (replaced atomically)."""
+    """The exports of all records (replaced atomically) when every task finished, then status.json. An export that
+    fails leaves status.json saying incomplete, with the merge's error, and is raised."""
     from exporters.base import ExportOptions, get_exporter
     from exporters.splits import SplitSpec
-    from pipeline.core.files import atomic_file
     from pipeline.stages.export import export_records
 
-    with atomic_file(out / "status.json") as tmp:
-        write_json(tmp, {"experiment": matrix.experiment.name, "complete": complete, "tasks": status})
     if not complete:
+        _write_status(out, matrix, status, complete=False)
         log.warning("not exporting: some tasks failed (status.json)")
         return
     records = record_paths(matrix, out)
     options = ExportOptions(splits=SplitSpec.parse(splits) if splits else None, progress=progress)
     for fmt in formats:
         target = out / (f"{fmt}.mcap" if get_exporter(fmt).writes_file else fmt)
-        export_records(fmt, records, target, options)
+        try:
+            export_records(fmt, records, target, options)
+        except Exception as exc:
+            _write_status(out, matrix, status, complete=False,
+                          merge={"status": "failed", "format": fmt, "error": f"{type(exc).__name__}: {exc}"})
+            raise
         log.info("merged %d records into %s", len(records), target)
+    _write_status(out, matrix, status, complete=True)
+
+
+def _write_status(out: Path, matrix: Matrix, status: dict[str, dict], *, complete: bool,
+                  merge: dict | None = None) -> None:
+    from pipeline.core.files import atomic_file
+
+    data = {"experiment": matrix.experiment.name, "complete": complete, "tasks": status}
+    with atomic_file(out / "status.json") as tmp:
+        write_json(tmp, data if merge is None else {**data, "merge": merge})
 
 
 def main(args: argparse.Namespace) -> int:

@@ -6,7 +6,7 @@ Layout of an experiment folder OUT (the Makefile's ``paper`` target uses the sam
     OUT/sim/SCENARIO-SEED/             `roadsynth simulate` outputs
     OUT/records/SCENARIO-SEED-COND/    `roadsynth render` outputs
     OUT/runs/NAME.json                 completion markers: a task's key (the hash of its inputs) and summary
-    OUT/status.json                    the merge: every task's status and error
+    OUT/status.json                    the merge: every task's status and error (and the merge's, if it failed)
     OUT/FORMAT[.mcap]                  the merge: exports of all records (only when every record is finished)
 
 Kubric's pattern: each task writes its own folder atomically, then its marker (the manifest it returns, small);

@@ -122,3 +122,19 @@ def test_names_that_join_into_one_record_folder_are_refused(tmp_path, capsys):
             in err and "would both write records/hw-1-2-noon" in err)
     assert not (tmp_path / "exp").exists()
 
+
+def test_a_merge_that_fails_leaves_status_json_incomplete_with_its_error(tiny, tmp_path):
+    from pipeline.core.config import ExperimentConfig, load_config
+    from pipeline.stages.experiment import _merge
+    from pipeline.stages.matrix import resolve_matrix
+
+    matrix = resolve_matrix(load_config(ExperimentConfig, tiny, "experiments")[0], source=tiny)
+    out = tmp_path / "exp"
+    out.mkdir()  # tasks said done, but no record is there: the export fails
+    with pytest.raises(ValueError, match=r"highway-4-noon: dataset record not found"):
+        _merge(matrix, out, {"render": {"status": "done"}}, ["coco"], None, False, complete=True)
+    status = json.loads((out / "status.json").read_text())
+    assert status["complete"] is False and status["merge"]["status"] == "failed"
+    assert status["merge"]["format"] == "coco"
+    assert "highway-4-noon: dataset record not found" in status["merge"]["error"]
+    assert not (out / "coco").exists()
