@@ -43,7 +43,7 @@ from tests.exporters.synthetic_record import build_record
 CASES = [("coco", Compression.ZSTD), ("kitti", Compression.ZSTD), ("yolo", Compression.ZSTD),
          ("mot", Compression.ZSTD), ("kitti-tracking", Compression.ZSTD),
          ("mcap", Compression.NONE), ("mcap", Compression.ZSTD), ("mcap", Compression.LZ4),
-         ("rosbag2", Compression.NONE), ("rosbag2", Compression.ZSTD)]
+         ("rosbag2", Compression.NONE), ("rosbag2", Compression.ZSTD), ("nuscenes", Compression.NONE)]
 LOGS = {"mcap", "rosbag2"}
 
 

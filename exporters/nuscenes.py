@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from exporters import nuscenes_tables as nt
 from exporters.base import Exporter, ExportError, ExportOptions
-from exporters.nuscenes_files import lidar_bytes, radar_pcd
+from exporters.nuscenes_files import lidar_array, radar_pcd
 from exporters.source import ExportSource, RecordSource
 from exporters.writing import dumps_json, link_or_copy
 from pipeline.core.png import encode_png
@@ -162,9 +162,9 @@ class NuScenesExporter(Exporter):
                     counts["_images_linked"] += link_or_copy(record.image_path(name, "rgb", f), path,
                                                              link=options.link_images)
                 elif kinds[name] == "lidar":
-                    path.write_bytes(lidar_bytes(record.point_columns(name, f)))
+                    lidar_array(record.point_columns(name, f)).tofile(path)
                 else:
-                    path.write_bytes(radar_pcd(record.radar_detections(name, f), radars[name].velocity_resolution_mps))
+                    path.write_bytes(radar_pcd(record.radar_columns(name, f), radars[name].velocity_resolution_mps))
             progress.update(1)
         obj = nt.objects(src)
         anns, instances, _ = nt.annotation_tables(stem, obj, time_us, sample_of)

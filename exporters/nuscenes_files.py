@@ -29,18 +29,19 @@ RADAR_FIELDS = (("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("dyn_prop", "i1"), ("
 RADAR_DTYPE = np.dtype(list(RADAR_FIELDS))  # packed: no padding, 43 bytes a detection
 
 
-def lidar_bytes(points: Mapping[str, np.ndarray]) -> bytes:
-    """(N * 20) bytes of one sweep (``DatasetRecord.point_columns``): float32 x, y, z, intensity x 255, ring."""
+def lidar_array(points: Mapping[str, np.ndarray]) -> np.ndarray:
+    """(N, 5) little-endian float32 x, y, z, intensity x 255, ring of one sweep (``DatasetRecord.point_columns``):
+    the ``.pcd.bin`` file's bytes in C order."""
     n = len(points["x_m"])
     out = np.empty((n, 5), dtype="<f4")
     out[:, 0], out[:, 1], out[:, 2] = points["x_m"], points["y_m"], points["z_m"]
     np.multiply(points["intensity"], LIDAR_INTENSITY_SCALE, out=out[:, 3], dtype="<f4", casting="unsafe")
     out[:, 4] = points["ring"]
-    return out.tobytes()
+    return out
 
 
 def radar_pcd(scan: Mapping[str, np.ndarray], velocity_resolution_mps: float) -> bytes:
-    """The PCD file of one radar scan (``DatasetRecord.radar_detections`` columns). A newline follows the binary
+    """The PCD file of one radar scan (``DatasetRecord.radar_columns``). A newline follows the binary
     data: the devkit's reader requires bytes after the last field it unpacks."""
     n = len(scan["x_m"])
     xyz = np.stack([np.asarray(scan[c], dtype=np.float64) for c in ("x_m", "y_m", "z_m")], axis=1)

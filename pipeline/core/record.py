@@ -297,6 +297,14 @@ class DatasetRecord:
         require_finite(table, f"{path} (frame {frame}, radar {radar})", keys=())
         return table
 
+    def radar_columns(self, radar: str, frame: int) -> dict[str, np.ndarray]:
+        """:meth:`radar_detections` as one read-only numpy array per column (:data:`RADAR_COLUMNS` dtypes), without
+        building a DataFrame: for readers that only pack or copy the columns (the nuScenes export)."""
+        if radar not in [r.name for r in self.info.radars]:
+            raise KeyError(f"no radar {radar!r}; radars: {', '.join(r.name for r in self.info.radars) or '(none)'}")
+        return _read_columns(radar_path(self.root, radar, frame), RADAR_COLUMNS, f"frame {frame}, radar {radar}",
+                             "radar scan", "detection(s)")
+
     def points(self, lidar: str, frame: int) -> pd.DataFrame:
         """One LiDAR sweep: x_m, y_m, z_m (LiDAR frame), intensity, ring, instance_id, semantic."""
         return pd.DataFrame(self.point_columns(lidar, frame))
@@ -305,20 +313,26 @@ class DatasetRecord:
         """:meth:`points` as one read-only numpy array per column (schema dtypes; views of the decoded Arrow
         buffers where no cast is needed), without building a DataFrame: for readers that only pack or copy the
         columns (the log exporters)."""
-        path = lidar_path(self.root, lidar, frame)
-        if not path.is_file():
-            raise RecordError(f"{path}: missing from the record")
-        # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs. A plain
-        # ParquetFile read skips read_table's dataset discovery (a large share of a sweep's read).
-        try:
-            with open_parquet(path) as parquet:
-                table = parquet.read()
-        except (pa.ArrowException, OSError) as exc:
-            raise RecordError(f"{damage_message(path, exc, 'LiDAR sweep')} (frame {frame}, LiDAR {lidar})") from None
-        require_columns(table.column_names, POINT_COLUMNS, str(path))
-        columns = {c: np.asarray(table.column(c).to_numpy(), dtype=dtype) for c, dtype in POINT_COLUMNS.items()}
-        for name, values in columns.items():
-            if values.dtype.kind == "f" and not np.isfinite(values).all():
-                raise RecordError(f"{path}: field {name} is not finite in {int((~np.isfinite(values)).sum())} "
-                                  f"point(s) (frame {frame}, LiDAR {lidar})")
-        return columns
+        return _read_columns(lidar_path(self.root, lidar, frame), POINT_COLUMNS, f"frame {frame}, LiDAR {lidar}",
+                             "LiDAR sweep", "point(s)")
+
+
+def _read_columns(path: Path, schema: dict[str, str], where: str, what: str, rows: str) -> dict[str, np.ndarray]:
+    """The ``schema`` columns of the Parquet file ``path`` as numpy arrays; ``where``, ``what`` and ``rows`` name the
+    frame and sensor, the kind of file and its rows in errors."""
+    if not path.is_file():
+        raise RecordError(f"{path}: missing from the record")
+    # Straight from Arrow to numpy (no pandas conversion of the table); cast only what differs. A plain
+    # ParquetFile read skips read_table's dataset discovery (a large share of a sweep's read).
+    try:
+        with open_parquet(path) as parquet:
+            table = parquet.read()
+    except (pa.ArrowException, OSError) as exc:
+        raise RecordError(f"{damage_message(path, exc, what)} ({where})") from None
+    require_columns(table.column_names, schema, str(path))
+    columns = {c: np.asarray(table.column(c).to_numpy(), dtype=dtype) for c, dtype in schema.items()}
+    for name, values in columns.items():
+        if values.dtype.kind == "f" and not np.isfinite(values).all():
+            raise RecordError(f"{path}: field {name} is not finite in {int((~np.isfinite(values)).sum())} "
+                              f"{rows} ({where})")
+    return columns

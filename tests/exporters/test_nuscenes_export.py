@@ -227,3 +227,15 @@ def test_devkit_detection_eval_of_the_ground_truth_scores_one(nusc, export, tmp_
     metrics, _ = evaluator.evaluate()
     assert metrics.mean_ap == pytest.approx(1.0)
     assert metrics.nd_score == pytest.approx(1.0)
+
+
+def test_radar_columns_are_the_radar_detections(radar_record):
+    record = DatasetRecord(radar_record)
+    columns = record.radar_columns("front_radar", 11)
+    table = record.radar_detections("front_radar", 11)
+    assert list(columns) == list(table.columns)
+    for name, values in columns.items():
+        np.testing.assert_array_equal(values, table[name].to_numpy())
+        assert values.dtype == table[name].dtype
+    with pytest.raises(KeyError, match="no radar 'rear'; radars: front_radar"):
+        record.radar_columns("rear", 11)
