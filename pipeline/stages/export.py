@@ -16,7 +16,8 @@ from pipeline.core.outputs import OutputSpec, json_file, mcap_file
 from pipeline.stages.common import command_line, config_hash, int_at_least, software_versions
 
 INPUT_ARGS = ("dataset",)
-HELP = "export dataset records to COCO, KITTI, KITTI tracking, MOTChallenge, YOLO, MCAP (Foxglove) or rosbag2"
+HELP = ("export dataset records to COCO, KITTI, KITTI tracking, MOTChallenge, YOLO, MCAP (Foxglove), rosbag2 or "
+        "nuScenes")
 log = logging.getLogger(__name__)
 
 
@@ -92,7 +93,7 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 # Options that only some formats read: given for another format, they would be ignored without a word.
 _FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "mot"), "lidar": ("kitti", "kitti-tracking"),
                    "compression": ("mcap", "rosbag2"),
-                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot")}
+                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot", "nuscenes")}
 
 
 def _check_applicable(args: argparse.Namespace) -> None:

@@ -239,3 +239,15 @@ def test_radar_columns_are_the_radar_detections(radar_record):
         assert values.dtype == table[name].dtype
     with pytest.raises(KeyError, match="no radar 'rear'; radars: front_radar"):
         record.radar_columns("rear", 11)
+
+
+def test_cli_export_copies_images_on_request(morning, tmp_path):
+    from pipeline.stages.cli import main
+
+    out = tmp_path / "nus"
+    assert main(["export", "--dataset", str(morning), "--format", "nuscenes", "--out", str(out), "--copy-images",
+                 "--no-progress"]) == 0
+    counts = json.loads((out / "export.json").read_text())["counts"]
+    assert counts["images_copied"] == 2 and counts["images_linked"] == 0
+    assert main(["export", "--dataset", str(morning), "--format", "nuscenes", "--out", str(tmp_path / "x"),
+                 "--lidar", "top"]) == 2
