@@ -37,8 +37,9 @@ def build_network(config: NetworkConfig, out_dir: Path) -> Path:
     builders = {NetworkKind.HIGHWAY: _build_highway, NetworkKind.URBAN: _build_urban, NetworkKind.OSM: _build_osm}
     try:
         net = builders[config.kind](config, out_dir)
-    except SumoToolError as exc:
-        raise NetworkError(f"building the {config.kind.value} network in {out_dir} failed: {exc}") from None
+    except SumoToolError as exc:  # from our own plain XML, built from the scenario's settings
+        kind = config.kind.value
+        raise NetworkError(f"network.{kind}: building the {kind} network from these settings failed: {exc}") from None
     strip_timestamp(net)
     return net
 
@@ -206,12 +207,17 @@ def _build_osm(config: NetworkConfig, out_dir: Path) -> Path:
     typemap = sumo_home() / "data" / "typemap" / "osmNetconvert.typ.xml"
     local = out_dir / "map.osm.xml"
     local.write_bytes(osm.read_bytes())  # the exact input travels with the run
-    run_tool([binary("netconvert"), "--osm-files", local.name, "--type-files", str(typemap),
-              "--geometry.remove", "true", "--ramps.guess", "true", "--roundabouts.guess", "true",
-              "--junctions.join", "true", "--tls.guess-signals", "true", "--tls.discard-simple", "true",
-              "--tls.join", "true", "--sidewalks.guess", "true", "--crossings.guess", "true",
-              "--remove-edges.isolated", "true", "--keep-edges.components", "1", "--no-turnarounds", "true",
-              "--output.street-names", "true", "--output-file", NET_FILE], cwd=out_dir)
+    try:
+        run_tool([binary("netconvert"), "--osm-files", local.name, "--type-files", str(typemap),
+                  "--geometry.remove", "true", "--ramps.guess", "true", "--roundabouts.guess", "true",
+                  "--junctions.join", "true", "--tls.guess-signals", "true", "--tls.discard-simple", "true",
+                  "--tls.join", "true", "--sidewalks.guess", "true", "--crossings.guess", "true",
+                  "--remove-edges.isolated", "true", "--keep-edges.components", "1", "--no-turnarounds", "true",
+                  "--output.street-names", "true", "--output-file", NET_FILE], cwd=out_dir, inputs={local.name: osm})
+    except SumoToolError as exc:
+        # The user's file (and line, where netconvert gives one), never our copy in the temporary run folder.
+        raise NetworkError(f"{exc.location or osm}: network.osm_file: expected an OpenStreetMap file that netconvert "
+                           f"reads; {exc.detail}") from None
     return out_dir / NET_FILE
 
 

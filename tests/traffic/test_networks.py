@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,7 @@ import sumolib
 
 from pipeline.core.config import NetworkConfig
 from pipeline.traffic.networks import NetworkError, build_network, network_summary
+from pipeline.traffic.sumo_tools import SumoToolError, binary, run_tool
 from tests.conftest import DATA
 
 
@@ -77,8 +79,50 @@ def test_missing_osm_file_names_the_field(tmp_path):
 def test_broken_osm_file_reports_netconvert_error(tmp_path):
     broken = tmp_path / "broken.osm"
     broken.write_text("<osm><node id='1' lat='48.1' lon='11.5'><way></osm>")
-    with pytest.raises(NetworkError, match="building the osm network .* failed"):
+    with pytest.raises(NetworkError, match=rf"^{re.escape(str(broken))}, line \d+, column \d+: network\.osm_file: "
+                                           r"expected an OpenStreetMap file that netconvert reads; netconvert failed"):
         build_network(NetworkConfig(kind="osm", osm_file=broken), tmp_path / "out")
+
+
+def test_a_truncated_osm_file_is_named_with_its_line_not_our_copy(tmp_path):
+    text = (DATA / "tiny.osm").read_text()
+    truncated = tmp_path / "my extract.osm"  # a space: the path is replaced whole
+    truncated.write_text(text[:600])
+    out = tmp_path / ".simulate.tmp-123"  # as the stage's temporary sibling
+    with pytest.raises(NetworkError) as caught:
+        build_network(NetworkConfig(kind="osm", osm_file=truncated), out)
+    message = str(caught.value)
+    where = re.match(rf"{re.escape(str(truncated))}, line (\d+), column (\d+): network\.osm_file: ", message)
+    assert where is not None, message
+    assert int(where[1]) in (text[:600].count("\n") + 1, text[:600].count("\n") + 2)  # where the input stops
+    assert "unexpected end of input" in message.splitlines()[0]
+    assert f"In file '{truncated}'" in message
+    assert "map.osm.xml" not in message and str(out) not in message
+
+
+def test_an_osm_error_without_a_line_still_names_the_users_file(tmp_path):
+    bad = tmp_path / "bad.osm"
+    bad.write_text('<?xml version="1.0"?>\n<osm version="0.6">\n<node id="1" lat="x" lon="11.5"/>\n</osm>\n')
+    with pytest.raises(NetworkError, match=rf"^{re.escape(str(bad))}: network\.osm_file: .*netconvert failed "
+                                           r"\(exit 1\): Attribute 'lat' in definition of node '1'") as caught:
+        build_network(NetworkConfig(kind="osm", osm_file=bad), tmp_path / "out")
+    assert "map.osm.xml" not in str(caught.value) and str(tmp_path / "out") not in str(caught.value)
+
+
+def test_sumo_tool_errors_name_the_users_paths_for_our_copies(tmp_path):
+    user = tmp_path / "users" / "roads.nod.xml"
+    user.parent.mkdir()
+    user.write_text('<nodes>\n  <node id="a" x="0" y="0"/>\n  <node id="b" x="1" y="0"><bad>\n</nodes>\n')
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "copy.nod.xml").write_bytes(user.read_bytes())
+    with pytest.raises(SumoToolError) as caught:
+        run_tool([binary("netconvert"), "--node-files", "copy.nod.xml", "-o", "n.net.xml"], cwd=work,
+                 inputs={"copy.nod.xml": user})
+    assert "copy.nod.xml" not in str(caught.value) and f"In file '{user}'" in str(caught.value)
+    assert re.fullmatch(rf"{re.escape(str(user))}, line \d+, column \d+", caught.value.location)
+    assert caught.value.detail.startswith("netconvert failed (exit 1): expected end of tag 'bad'\n")
+    assert str(caught.value) == f"{caught.value.location}: {caught.value.detail}"
 
 
 def test_broken_network_file_is_reported(tmp_path):
