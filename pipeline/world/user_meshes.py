@@ -14,14 +14,18 @@ Conventions:
 - Triangles of zero area (repeated or collinear corners) are dropped (counted in the log); vertices that no kept
   triangle uses are dropped too, so that they do not widen the box.
 
-Errors (:class:`UserMeshError`, a ValueError) name the file, the rig key (``where``) and what was expected.
+Errors (:class:`UserMeshError`, a ValueError) name the file, the rig key (``where``) and what was expected. A file
+the mesh names that is not there is named as such: an OBJ's ``.mtl`` (``mtllib``; an error when ``material`` maps the
+file's material names, a warning when one material covers every face) and a ``.gltf``'s buffer files.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Mapping
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
@@ -32,7 +36,7 @@ from pipeline.world.mesh import Mesh
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UserMeshError", "axes_rotation", "load_user_mesh", "read_mesh_file"]
+__all__ = ["UserMeshError", "axes_rotation", "load_user_mesh", "missing_material_libraries", "read_mesh_file"]
 
 SUFFIXES = (".glb", ".gltf", ".obj", ".ply", ".stl")
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -58,6 +62,38 @@ def axes_rotation(forward_axis: str, up_axis: str) -> np.ndarray:
     return np.stack([forward, np.cross(up, forward), up])
 
 
+def missing_material_libraries(path: Path) -> list[tuple[str, Path]]:
+    """The ``.mtl`` files an OBJ's ``mtllib`` lines name that are not there: (the name as written, the path it
+    resolves to beside the OBJ). trimesh reads an OBJ without them as if it had no materials, so the faces'
+    ``usemtl`` names are lost; this tells that apart from a file that has none."""
+    path = Path(path)
+    if path.suffix.lower() != ".obj":
+        return []
+    missing = []
+    with open(path, encoding="utf-8", errors="replace") as lines:
+        for line in lines:
+            words = line.strip()
+            if words.startswith("mtllib") and words[6:7].isspace():
+                name = words[6:].strip()  # the rest of the line, as trimesh reads it (names may hold spaces)
+                if name and not (path.parent / name).is_file():
+                    missing.append((name, path.parent / name))
+    return missing
+
+
+def _check_gltf_buffers(path: Path) -> None:
+    """A ``.gltf`` keeps its geometry in the buffers its JSON names: each must be beside it (or a data URI)."""
+    try:
+        buffers = json.loads(path.read_text(encoding="utf-8")).get("buffers", [])
+    except (OSError, ValueError, AttributeError):
+        return  # not JSON, or no buffers list: trimesh's reading reports it
+    for i, buffer in enumerate(buffers if isinstance(buffers, list) else []):
+        uri = buffer.get("uri") if isinstance(buffer, dict) else None
+        if isinstance(uri, str) and not uri.startswith("data:") and not (path.parent / unquote(uri)).is_file():
+            raise UserMeshError(f"{path}: buffers[{i}].uri names {uri!r}, which is missing "
+                                f"({path.parent / unquote(uri)}); a .gltf keeps its geometry in its buffer files: "
+                                "put them beside it, or use the single-file .glb")
+
+
 def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
     """A mesh file's triangles, every node's geometry in the file's root frame.
 
@@ -70,6 +106,8 @@ def read_mesh_file(path: Path) -> tuple[np.ndarray, np.ndarray, list[str | None]
     path = Path(path)
     if path.suffix.lower() not in SUFFIXES:
         raise UserMeshError(f"{path}: expected a mesh file ({', '.join(SUFFIXES)})")
+    if path.suffix.lower() == ".gltf":
+        _check_gltf_buffers(path)
     try:
         scene = trimesh.load_scene(path, process=False)
     except Exception as exc:  # trimesh raises many kinds (ValueError, KeyError, struct.error, ...) on bad files
@@ -119,6 +157,12 @@ def load_user_mesh(path: Path, object_class: ObjectClass, *, forward_axis: str =
     path = Path(path)
     rotation = axes_rotation(forward_axis, up_axis)
     vertices, triangles, names = read_mesh_file(path)
+    for name, resolved in missing_material_libraries(path):
+        text = f"{path}: its mtllib line names {name!r}, and that .mtl file is missing ({resolved})"
+        if not isinstance(material, str):  # the mapping needs the file's material names, which the .mtl defines
+            raise UserMeshError(f"{text}; {where}.material maps the file's materials by name, which that file "
+                                "defines: put it beside the .obj")
+        log.warning("%s; every face is %s (%s.material), so the mesh is read without it", text, material, where)
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
         raise UserMeshError(f"{path}: {bad} vertices are not finite (inf or NaN); expected finite coordinates")

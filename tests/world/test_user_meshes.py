@@ -3,6 +3,10 @@ materials, placed to fill their 3D boxes, hit by rays with the actor's id, class
 
 from __future__ import annotations
 
+import json
+import logging
+import re
+
 import numpy as np
 import pytest
 
@@ -12,7 +16,7 @@ from pipeline.world.actor_shapes import FAMILIES
 from pipeline.world.actors import ActorMeshes, Actors, Model, place_actors
 from pipeline.world.materials import material_index
 from pipeline.world.scene import FrameScene, StaticScene
-from pipeline.world.user_meshes import UserMeshError, axes_rotation, load_user_mesh
+from pipeline.world.user_meshes import UserMeshError, axes_rotation, load_user_mesh, missing_material_libraries
 from tests.world.user_assets import UNIT_CABIN_HI, UNIT_CABIN_LO, write_glb, write_obj
 
 GLASS, PAINT = material_index("glass"), material_index("paint")
@@ -151,3 +155,44 @@ def test_errors_name_the_file_and_what_was_expected(tmp_path):
     (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00garbage")
     with pytest.raises(UserMeshError, match=r"broken\.glb: cannot read it as glb"):
         load_user_mesh(tmp_path / "broken.glb", ObjectClass.CAR)
+
+
+def test_an_obj_whose_mtl_file_is_missing_names_both_files(tmp_path, caplog):
+    obj = write_obj(tmp_path)
+    (tmp_path / "wedge.mtl").unlink()
+    with pytest.raises(UserMeshError, match=rf"wedge\.obj: its mtllib line names 'wedge\.mtl', and that \.mtl file "
+                                            rf"is missing \({re.escape(str(tmp_path / 'wedge.mtl'))}\); "
+                                            r"actor_meshes\[0\]\.material maps the file's materials by name"):
+        load_user_mesh(obj, ObjectClass.CAR, material={"glass": "glass"}, where="actor_meshes[0]")
+    # one material for every face: the .mtl is not needed, so it is read without it, with a warning naming both
+    caplog.set_level(logging.WARNING, "pipeline.world.user_meshes")
+    mesh = load_user_mesh(obj, ObjectClass.CAR, material="paint")
+    assert (mesh.material == PAINT).all()
+    assert "wedge.obj: its mtllib line names 'wedge.mtl', and that .mtl file is missing" in caplog.text
+
+
+def test_an_mtl_name_with_spaces_is_read_whole_and_a_present_mtl_is_not_reported(tmp_path):
+    obj = write_obj(tmp_path)
+    assert missing_material_libraries(obj) == []
+    text = obj.read_text().replace("mtllib wedge.mtl", "mtllib my wedge.mtl")
+    obj.write_text(text)
+    assert missing_material_libraries(obj) == [("my wedge.mtl", tmp_path / "my wedge.mtl")]
+    (tmp_path / "wedge.mtl").rename(tmp_path / "my wedge.mtl")
+    assert missing_material_libraries(obj) == []
+    mesh = load_user_mesh(obj, ObjectClass.CAR, material={"glass": "glass"})
+    assert (mesh.material == GLASS).any() and (mesh.material == PAINT).any()
+
+
+def test_a_gltf_whose_buffer_file_is_missing_names_it(tmp_path):
+    import trimesh
+
+    files = trimesh.creation.box().export(file_type="gltf")
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    gltf = tmp_path / "model.gltf"
+    assert load_user_mesh(gltf, ObjectClass.CAR).vertices.shape == (8, 3)
+    buffer = json.loads(gltf.read_text())["buffers"][0]["uri"]
+    (tmp_path / buffer).unlink()
+    with pytest.raises(UserMeshError, match=rf"model\.gltf: buffers\[0\]\.uri names '{re.escape(buffer)}', which is "
+                                            rf"missing \({re.escape(str(tmp_path / buffer))}\)"):
+        load_user_mesh(gltf, ObjectClass.CAR)
