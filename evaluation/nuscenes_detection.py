@@ -83,10 +83,10 @@ def _check_box(box: Any, where: str, token: str) -> None:
         "size": (lambda v: isinstance(v, list) and len(v) == 3 and all(is_number(x) and x > 0 for x in v),
                  "3 numbers > 0 (width, length, height)"),
         "rotation": (lambda v: isinstance(v, list) and len(v) == 4 and all(map(is_number, v))
-                     and math.fsum(x * x for x in v) > 0, "4 numbers w, x, y, z (a non-zero quaternion)"),
+                     and 0 < math.fsum(x * x for x in v) < math.inf, "4 numbers w, x, y, z (a non-zero quaternion)"),
         "velocity": (lambda v: isinstance(v, list) and len(v) == 2 and all(map(is_number, v)), "2 numbers vx, vy"),
         "detection_name": (lambda v: v in DETECTION_NAMES, f"one of {', '.join(DETECTION_NAMES)}"),
-        "detection_score": (is_number, "a finite number"),
+        "detection_score": (lambda v: is_number(v) and 0 <= v <= 1, "a number in [0, 1]"),
         "attribute_name": (lambda v: v in ATTRIBUTE_NAMES or v == "", f"'' or one of {', '.join(ATTRIBUTE_NAMES)}"),
     }
     for field, (check, expected) in checks.items():

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from evaluation.nuscenes_detection import evaluate_nuscenes_detection, ground_truth_submission
 from evaluation.validate import InputError
@@ -105,6 +107,7 @@ def test_misses_and_false_positives_as_the_devkit_scores_them(export, gt, tmp_pa
     (lambda s, t: s["results"][t][0].pop("velocity"), r"missing field 'velocity'"),
     (lambda s, t: s["results"].update(nope=[]), r"results\['nope'\]: not a sample"),
     (lambda s, t: s.pop("meta"), r"field 'meta' missing"),
+    (lambda s, t: s["results"][t][0].update(detection_score=1e308), r"field 'detection_score' is 1e\+308"),
 ])
 def test_bad_submissions_name_the_file_and_field(export, gt, tmp_path, mutate, message):
     sub = copy.deepcopy(gt)
@@ -151,3 +154,22 @@ def test_cli_refuses_options_of_other_tasks(export, gt, tmp_path, capsys):
     assert main(["evaluate", "--gt", str(export), "--detections", results, "--out", str(tmp_path / "b"),
                  "--eval-set", "train"]) == 2
     assert "--eval-set applies to --task nuscenes-detection only, not detection" in capsys.readouterr().err
+
+
+_VALUES = [None, True, "x", "", [], [1.0], [1.0, 2.0], [1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0], [1e308] * 4,
+           [-1.0, 2.0, 3.0], [1e308, 1e308, 1e308], {}, 0, -1, 1.5, 1e308, 2**70, "car", "vehicle.moving"]
+_FIELDS = ["sample_token", "translation", "size", "rotation", "velocity", "detection_name", "detection_score",
+           "attribute_name"]
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(field=st.sampled_from(_FIELDS), value=st.sampled_from(_VALUES), box=st.integers(0, 3))
+def test_any_mutated_box_is_scored_or_refused(export, gt, tmp_path, field, value, box):
+    sub = copy.deepcopy(gt)
+    boxes = sub["results"][sorted(sub["results"])[1]]
+    boxes[box % len(boxes)][field] = value
+    try:
+        metrics = evaluate_nuscenes_detection(export, _write(tmp_path, sub))
+    except InputError:
+        return
+    assert 0 <= metrics["mean_ap"] <= 1 + 1e-9 and 0 <= metrics["nd_score"] <= 1 + 1e-9
