@@ -251,3 +251,21 @@ def test_cli_export_copies_images_on_request(morning, tmp_path):
     assert counts["images_copied"] == 2 and counts["images_linked"] == 0
     assert main(["export", "--dataset", str(morning), "--format", "nuscenes", "--out", str(tmp_path / "x"),
                  "--lidar", "top"]) == 2
+
+
+def test_points_and_visibility_from_the_label_rows(nusc, radar_record):
+    labels = DatasetRecord(radar_record).labels
+    sample = _sample(nusc, "radar_s3_morning", 0)
+    by_track = {token("instance", "radar_s3_morning", o.track_id): o.track_id for o in OBJECTS}
+    levels = {v["token"]: v["level"] for v in nusc.visibility}
+    for ann_token in sample["anns"]:
+        ann = nusc.get("sample_annotation", ann_token)
+        rows = labels[(labels["frame"] == 10) & (labels["track_id"] == by_track[ann["instance_token"]])]
+        lidar, cam = rows[rows["sensor_type"] == "lidar"], rows[rows["sensor_type"] == "camera"]
+        assert ann["num_lidar_pts"] == int(lidar["lidar_points"].sum()) > 0
+        share = 0.0 if cam.empty else float((1 - cam["occlusion"].iloc[0]) * (1 - cam["truncation"].iloc[0]))
+        low, high = {"v0-40": (0, 0.4), "v40-60": (0.4, 0.6), "v60-80": (0.6, 0.8), "v80-100": (0.8, 1.01)}[
+            levels[ann["visibility_token"]]]
+        assert low <= share < high, (by_track[ann["instance_token"]], share, levels[ann["visibility_token"]])
+        if by_track[ann["instance_token"]] == 7:  # C, hidden behind A
+            assert levels[ann["visibility_token"]] == "v0-40"
