@@ -15,7 +15,7 @@ from exporters.splits import SplitError, SplitSpec
 from pipeline.core.record import RecordError
 from tests.conftest import tree_hashes
 
-FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking"]
+FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking", "nuscenes"]
 
 
 def _out(base: Path, fmt: str) -> Path:
