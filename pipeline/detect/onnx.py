@@ -408,9 +408,12 @@ class OnnxDetector:
             expected = _decoded_mismatch(shapes, o.output_format)
         else:
             expected = _raw_mismatch(self.family, shapes[0], w, h, o.strides)
-        if expected is None:
-            return
         listed = ", ".join(f"{n} {tuple(s)}" for n, s in zip(names, shapes, strict=False))
+        if expected is None:
+            if self.family == "decoded" and len(shapes[0]) == 2 and self.batch > 1:
+                raise ValueError(f"{self.path}: {self.batch} images per run (--batch-size), but the outputs {listed} "
+                                 "have no batch axis, so they cannot be told apart: expected --batch-size 1")
+            return
         try:
             fits = "; they fit family {} ({})".format(*heads.guess_family(shapes, w, h, o.strides))
         except ValueError:

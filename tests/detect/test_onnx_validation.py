@@ -310,3 +310,13 @@ def test_a_grey_channels_last_input_is_read_as_nhwc_and_refused_for_its_one_chan
     with pytest.raises(ValueError, match=r"grey\.onnx: input 'images' \[1, 64, 64, 1\] has 1 channel\(s\) "
                                          r"\(layout nhwc, from the shape\)"):
         OnnxDetector(path)
+
+
+def test_several_images_per_run_are_refused_when_the_outputs_have_no_batch_axis(tmp_path):
+    path = tmp_path / "flat.onnx"
+    graph_model(path, image_input(["batch", 3, 64, 64]), {"det": np.array(ONE_CAR, np.float32)})  # (N, 6)
+    with pytest.raises(ValueError, match=r"flat\.onnx: 4 images per run \(--batch-size\), but the outputs det \(1, 6\) "
+                                         r"have no batch axis.*expected --batch-size 1"):
+        OnnxDetector(path)
+    det = OnnxDetector(path, batch_size=1, resize="stretch")
+    assert [d.boxes.tolist() for d in det.predict([np.zeros((64, 64, 3), np.uint8)] * 2)] == [[[10, 10, 40, 30]]] * 2
