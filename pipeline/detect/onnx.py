@@ -52,7 +52,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 import os
 import warnings
 from collections import Counter
@@ -68,12 +67,19 @@ from pipeline.detect import heads
 from pipeline.detect.classmap import coco80_map, metadata_names, names_map
 from pipeline.detect.infer import Detections, Detector, postprocess
 from pipeline.detect.model import decode
+from pipeline.detect.onnx_checks import (
+    INPUT_TYPES,
+    check_options,
+    decoded_mismatch,
+    fixed_dim,
+    guess_layout,
+    raw_mismatch,
+)
 
 log = logging.getLogger(__name__)
 METADATA_KEY = "roadsynth.onnx_options"
 DEFAULT_BATCH_SIZE = 4  # images per run of a model with a dynamic batch axis, unless asked otherwise
 _INTERPOLATION = {"linear": cv2.INTER_LINEAR, "area": cv2.INTER_AREA}
-_INPUT_TYPES = ("tensor(float)", "tensor(uint8)")
 
 
 @dataclass(frozen=True)
@@ -182,74 +188,6 @@ class Placement:
         return out
 
 
-def check_options(o: OnnxOptions, path: Path) -> None:
-    """Refuse options that could only give an error deep inside a run or silently no detections (``path`` names
-    the model in the message; the flags are the command line's)."""
-    problems = []
-    if not (math.isfinite(o.score_threshold) and 0.0 <= o.score_threshold <= 1.0):
-        problems.append(f"--score-threshold {o.score_threshold}: expected a score in [0, 1]")
-    if o.max_detections < 1:
-        problems.append(f"--max-detections {o.max_detections}: expected an integer >= 1")
-    if o.nms_iou is not None and not 0.0 < o.nms_iou <= 1.0:
-        problems.append(f"--nms-iou {o.nms_iou}: expected an IoU in (0, 1] (1 turns NMS off)")
-    if any(not math.isfinite(v) or v == 0.0 for v in o.std):
-        problems.append(f"--std {' '.join(map(str, o.std))}: expected finite non-zero divisors")
-    if any(not math.isfinite(v) for v in o.mean):
-        problems.append(f"--mean {' '.join(map(str, o.mean))}: expected finite values")
-    if o.scale is not None and not (math.isfinite(o.scale) and o.scale > 0.0):
-        problems.append(f"--scale {o.scale}: expected a finite multiplier > 0")
-    if o.pad_value is not None and not 0.0 <= o.pad_value <= 255.0:
-        problems.append(f"--pad-value {o.pad_value}: expected a grey level in [0, 255]")
-    if not o.strides or any(s < 1 for s in o.strides):
-        problems.append(f"--strides {' '.join(map(str, o.strides))}: expected integers >= 1")
-    if problems:
-        raise ValueError(f"{path}: " + "; ".join(problems))
-
-
-def _fixed(dim: Any) -> int | None:
-    """A dimension of a graph shape as an int, None where it is symbolic or unknown (a name, None, <= 0)."""
-    return int(dim) if isinstance(dim, (int, np.integer)) and dim > 0 else None
-
-
-def _guess_layout(shape: list) -> str:
-    """nhwc where the last axis looks like the channels (3, or a few where axis 1 is wide), else nchw."""
-    first, last = _fixed(shape[1]), _fixed(shape[3])
-    if last == 3 and first != 3:
-        return "nhwc"
-    return "nhwc" if last is not None and last <= 4 and first is not None and first > 4 else "nchw"
-
-
-def _raw_mismatch(family: str, shape: tuple[int, ...], width: int, height: int,
-                  strides: tuple[int, ...]) -> str | None:
-    """What a raw head's decoding (:func:`pipeline.detect.heads.decode`) reads from its output, when ``shape``
-    is not that; None when it is."""
-    cells = heads.grid_cells(width, height, strides)
-    anchors = 3 * cells if family == "yolov5" else cells
-    if family == "yolov8":
-        ok = len(shape) == 3 and shape[2] == cells and shape[1] > 4
-        expected = f"(B, 4 + C, {cells})"
-    else:
-        ok = len(shape) == 3 and shape[1] == anchors and shape[2] > 5
-        expected = f"(B, {anchors}, 5 + C)"
-    return None if ok else f"one output {expected} (anchors of the grids at strides {strides})"
-
-
-def _decoded_mismatch(shapes: list[tuple[int, ...]], output_format: str | None) -> str | None:
-    """What a decoded model's reading (:meth:`OnnxDetector._decoded`) expects, when ``shapes`` is not that."""
-    fmt = output_format or ("boxes-scores-classes" if len(shapes) >= 3 else "detections")
-    if fmt == "detections":
-        out = shapes[0]
-        ok = len(out) in (2, 3) and out[-1] in (6, 7)
-        return None if ok else "'detections': one output (B, N, 6) or (N, 6) of box, score, class per row"
-    expected = "'boxes-scores-classes': three outputs, boxes (B, N, 4) or (N, 4), scores and classes (B, N) or (N)"
-    if len(shapes) < 3:
-        return expected
-    boxes, scores, classes = (tuple(s) for s in shapes[:3])
-    rows = boxes[:-1]
-    ok = len(boxes) in (2, 3) and boxes[-1] == 4 and all(s in (rows, (*rows, 1)) for s in (scores, classes))
-    return None if ok else expected
-
-
 def _threads() -> int:
     try:
         return len(os.sched_getaffinity(0))
@@ -304,10 +242,10 @@ class OnnxDetector:
         check_options(o, self.path)
         self.input = self._image_input()
         shape = self.input.shape
-        layout = o.layout or _guess_layout(shape)
+        layout = o.layout or guess_layout(shape)
         self._check_channels(layout, given=o.layout is not None)
         o = dataclasses.replace(o, layout=layout, input_size=self._input_size(layout, o.input_size))
-        self.fixed_batch = _fixed(shape[0])
+        self.fixed_batch = fixed_dim(shape[0])
         self.batch = self._batch(batch_size)
         self._check_output_names(o.output_names)
         self.options = o
@@ -344,19 +282,19 @@ class OnnxDetector:
         if len(image.shape) != 4:
             raise ValueError(f"{self.path}: input {image.name!r} has shape {image.shape}; expected an image batch "
                              "(B, 3, H, W) or (B, H, W, 3)")
-        if image.type not in _INPUT_TYPES:
+        if image.type not in INPUT_TYPES:
             raise ValueError(f"{self.path}: input {image.name!r} is {image.type}; roadsynth feeds "
-                             f"{' or '.join(_INPUT_TYPES)} (scaled or raw pixels)")
+                             f"{' or '.join(INPUT_TYPES)} (scaled or raw pixels)")
         return image
 
     def _check_channels(self, layout: str, *, given: bool) -> None:
         shape = self.input.shape
-        channels = _fixed(shape[1] if layout == "nchw" else shape[3])
+        channels = fixed_dim(shape[1] if layout == "nchw" else shape[3])
         if channels is None or channels == 3:
             return
         how = f"--layout {layout}" if given else f"layout {layout}, from the shape"
         other = "nhwc" if layout == "nchw" else "nchw"
-        hint = f" (the shape fits --layout {other})" if _fixed(shape[3 if layout == "nchw" else 1]) == 3 else ""
+        hint = f" (the shape fits --layout {other})" if fixed_dim(shape[3 if layout == "nchw" else 1]) == 3 else ""
         raise ValueError(f"{self.path}: input {self.input.name!r} {shape} has {channels} channel(s) ({how}); roadsynth "
                          f"feeds RGB images: expected 3 channels{hint}")
 
@@ -364,7 +302,7 @@ class OnnxDetector:
         """(W, H) of the network input: ``--input-size`` where given (it must fit a fixed size), else the model's."""
         shape = self.input.shape
         h, w = (shape[2], shape[3]) if layout == "nchw" else (shape[1], shape[2])
-        fixed_w, fixed_h = _fixed(w), _fixed(h)
+        fixed_w, fixed_h = fixed_dim(w), fixed_dim(h)
         if size is None:
             if fixed_w is None or fixed_h is None:
                 raise ValueError(f"{self.path}: input {self.input.name} has a dynamic size {shape}; "
@@ -405,9 +343,9 @@ class OnnxDetector:
         shapes = self.output_shapes
         w, h = o.input_size
         if self.family == "decoded":
-            expected = _decoded_mismatch(shapes, o.output_format)
+            expected = decoded_mismatch(shapes, o.output_format)
         else:
-            expected = _raw_mismatch(self.family, shapes[0], w, h, o.strides)
+            expected = raw_mismatch(self.family, shapes[0], w, h, o.strides)
         listed = ", ".join(f"{n} {tuple(s)}" for n, s in zip(names, shapes, strict=False))
         if expected is None:
             if self.family == "decoded" and len(shapes[0]) == 2 and self.batch > 1:
