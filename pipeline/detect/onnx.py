@@ -250,8 +250,11 @@ class OnnxDetector:
         self._check_output_names(o.output_names)
         self.options = o
         self.output_shapes = self._probe(o)
-        self.family, why = (o.family, "given") if o.family != "auto" else heads.guess_family(
-            self.output_shapes, *o.input_size, o.strides)
+        try:
+            self.family, why = (o.family, "given") if o.family != "auto" else heads.guess_family(
+                self.output_shapes, *o.input_size, o.strides)
+        except ValueError as exc:  # the shapes fit no family: name the model and its outputs
+            raise ValueError(f"{self.path}: family auto: {exc}") from None
         if o.family == "auto":
             source = f"family {self.family} (auto: {why})"
         elif overrides.get("family") is not None:

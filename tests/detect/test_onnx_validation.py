@@ -320,3 +320,11 @@ def test_several_images_per_run_are_refused_when_the_outputs_have_no_batch_axis(
         OnnxDetector(path)
     det = OnnxDetector(path, batch_size=1, resize="stretch")
     assert [d.boxes.tolist() for d in det.predict([np.zeros((64, 64, 3), np.uint8)] * 2)] == [[[10, 10, 40, 30]]] * 2
+
+
+def test_outputs_that_fit_no_family_are_refused_naming_the_model(tmp_path):
+    path = tmp_path / "odd.onnx"
+    graph_model(path, image_input([1, 3, 64, 64]), {"out": np.zeros((1, 10, 9))})
+    with pytest.raises(ValueError, match=r"odd\.onnx: family auto: output shapes \[\(1, 10, 9\)\] fit no known head "
+                                         r"for a 64x64 input"):
+        OnnxDetector(path)
