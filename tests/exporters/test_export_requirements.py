@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from exporters.base import ExportError, get_exporter
+from exporters.base import ExportError, formats, get_exporter
 from pipeline.core.record import FRAME_COLUMNS, RADAR_COLUMNS, RECORD_FILE, DatasetRecord, radar_path
 from pipeline.core.tables import write_parquet
 from pipeline.stages.cli import main as cli_main
@@ -145,7 +145,7 @@ def test_rosbag2_carries_a_radar_only_record(tmp_path, radar_only):
     assert not any(t.startswith(("/camera/", "/lidar/")) for t in counts)
 
 
-@pytest.mark.parametrize("fmt", ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking"])
+@pytest.mark.parametrize("fmt", formats())
 def test_every_format_refuses_a_record_without_frames(tmp_path, morning, no_frames, fmt):
     with pytest.raises(ExportError, match=rf"{no_frames.name}: the record has no frames \(.*frames\.parquet has no "
                                           rf"rows\); a {fmt} export of it would be empty"):
@@ -159,3 +159,9 @@ def test_the_cli_refuses_a_coco_export_of_a_radar_only_record_in_one_line(tmp_pa
     err = capsys.readouterr().err
     assert f"{radar_only}: the record has no camera" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_nuscenes_refuses_a_radar_only_record_naming_it(tmp_path, radar_only):
+    with pytest.raises(ExportError, match=rf"{radar_only.name}: nuScenes needs a LiDAR"):
+        get_exporter("nuscenes").export([radar_only], tmp_path / "nus")
+    assert not (tmp_path / "nus").exists()
