@@ -59,7 +59,7 @@ def test_the_matrix_runs_from_one_command_and_a_rerun_skips_it(tiny, tmp_path, c
 
 @pytest.mark.parametrize(("flags", "message"), [
     (["--export", "coco,pdf"], "--export: unknown format pdf"),
-    (["--task-cpus", "2"], "--ray-address and --task-cpus apply to --executor ray only"),
+    (["--task-cpus", "2"], "--ray-address, --task-cpus and --ray-timeout apply to --executor ray only"),
 ])
 def test_bad_flags_are_refused_before_anything_is_written(tiny, tmp_path, capsys, flags, message):
     out = tmp_path / "exp"
