@@ -41,7 +41,7 @@ def test_the_local_executor_keeps_the_contract():
 def test_executor_flags_are_checked():
     import argparse
 
-    with pytest.raises(ValueError, match="--ray-address and --task-cpus apply to --executor ray only"):
+    with pytest.raises(ValueError, match="--ray-address, --task-cpus and --ray-timeout apply to --executor ray only"):
         executor_from_args(argparse.Namespace(executor="local", ray_address="h:1", task_cpus=1))
     with pytest.raises(ValueError, match="--executor: expected one of local, ray, got 'dask'"):
         ExecutorSpec("dask")
