@@ -32,6 +32,7 @@ import pandas as pd
 from gymnasium import spaces
 
 from pipeline.core.config import ScenarioConfig, SimulationConfig
+from pipeline.core.config.base import MAX_RUN_SEED, run_seed_problem
 from pipeline.core.config.resolve import resolve_scenario
 from pipeline.envs import features
 from pipeline.envs.options import EnvOptions, RewardWeights
@@ -131,9 +132,11 @@ class RoadsynthEnv(gym.Env):
     # ---- episode ----
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if seed is not None and run_seed_problem(seed):
+            raise ValueError(f"reset(seed={seed!r}): {run_seed_problem(seed)}")
         super().reset(seed=seed)
         self._write_record(None)  # an episode left unfinished is written as far as it went
-        run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        run_seed = int(seed) if seed is not None else int(self.np_random.integers(0, MAX_RUN_SEED + 1))
         sumocfg, candidates, _ = self.sumo_inputs(run_seed)
         sumo = start_sumo(["-c", str(sumocfg), "--no-warnings", "true", "--no-step-log", "true",
                            "--end", f"{self.sim.warmup_s + self.options.time_limit_s + 60:g}"], self._owner,

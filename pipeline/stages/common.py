@@ -140,6 +140,20 @@ def int_at_least(minimum: int) -> Callable[[str], int]:
     return parse
 
 
+def run_seed(text: str) -> int:
+    """An argparse ``type`` for a run seed (:func:`pipeline.core.config.base.run_seed_problem`)."""
+    from pipeline.core.config.base import run_seed_problem
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    problem = run_seed_problem(value)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return value
+
+
 def float_list(text: str) -> list[float]:
     """An argparse ``type`` for list flags: comma-separated numbers (``0.5,0.7``); with ``nargs="+"`` and
     :class:`Flatten`, space-separated ones too (``0.5 0.7``), as the other list flags take commas."""

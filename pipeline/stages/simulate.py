@@ -22,7 +22,7 @@ from pipeline.core.config.resolve import resolve_scenario
 from pipeline.core.files import atomic_file
 from pipeline.core.outputs import OutputSpec, json_file
 from pipeline.core.tables import write_parquet
-from pipeline.stages.common import atomic_output_dir, int_at_least, write_json, write_meta
+from pipeline.stages.common import atomic_output_dir, run_seed, write_json, write_meta
 from pipeline.traffic import networks
 from pipeline.traffic.demand import Demand, build_demand
 from pipeline.traffic.parking import PARKED_FILE, place_parked, with_parked
@@ -37,7 +37,7 @@ HELP = "simulate traffic with SUMO and record every actor"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", required=True, help="scenario NAME (configs/scenarios/) or YAML PATH")
-    parser.add_argument("--seed", type=int_at_least(0), required=True,
+    parser.add_argument("--seed", type=run_seed, required=True,
                         help="run seed (every random draw derives from it)")
     parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
     parser.add_argument("--vehicles", type=int, help="override demand.vehicles")

@@ -115,3 +115,12 @@ def test_names_resolve_in_the_project_configs_first_then_the_shipped_ones(tmp_pa
     assert load_config(ScenarioConfig, "mine", "scenarios")[1] == tmp_path / "configs" / "scenarios" / "mine.yaml"
     assert load_config(ScenarioConfig, "urban", "scenarios")[1] == REPO / "configs" / "scenarios" / "urban.yaml"
     assert {"mine", "highway", "urban"} <= set(available_names("scenarios"))
+
+
+def test_experiment_seeds_must_be_seeds_sumo_takes():
+    from pipeline.core.config.experiment import ExperimentConfig
+
+    base = {"name": "x", "scenarios": ["highway"], "conditions": ["noon"]}
+    ExperimentConfig.model_validate({**base, "seeds": [0, 2**31 - 2]})
+    with pytest.raises(ValueError, match="32-bit seed"):
+        ExperimentConfig.model_validate({**base, "seeds": [2**31]})

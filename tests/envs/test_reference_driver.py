@@ -119,3 +119,15 @@ def test_the_reference_agent_drives_the_highway_without_collision():
         assert np.mean(speeds) > 15.0  # it drives, at highway speed
     finally:
         env.close()
+
+
+def test_a_seed_sumo_cannot_take_is_refused_at_reset():
+    import pipeline.envs  # noqa: F401  (registers the envs)
+
+    env = gym.make("roadsynth/Highway-v0", vehicles=20, warmup_s=5.0)
+    try:
+        for seed in (2**31, -1):
+            with pytest.raises(ValueError, match=r"reset\(seed="):
+                env.reset(seed=seed)
+    finally:
+        env.close()

@@ -109,6 +109,9 @@ REFUSED = [
     ("preview --frames 0", ["preview", "--dataset", "rec", "--out", "p.png", "--frames", "0"], "--frames"),
     ("report --examples 0", [*REPORT, "--out", "rep", "--examples", "0"], "--examples"),
     ("simulate --seed -1", [*SIMULATE[:3], "--seed", "-1", "--out", "s"], "--seed"),
+    # SUMO reads --seed as a C int: past 2^31 - 1 it printed "not a valid integer" and ran with its own default seed
+    # while meta.json kept ours
+    ("simulate --seed 2^31", [*SIMULATE[:3], "--seed", str(2**31), "--out", "s"], "SUMO takes a 32-bit seed"),
     ("a folder as --scenario", ["simulate", "--scenario", "notes", "--seed", "1", "--out", "s"], "notes: a folder"),
     ("render --workers 0", [*RENDER[:-3], "--workers", "0", "--out", "r"], "--workers"),
     ("render --frames 0", [*RENDER, "--frames", "0", "--out", "r"], "--frames"),

@@ -23,10 +23,20 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
-__all__ = ["MAX_ABS", "MIN_ABS", "ConfigModel"]
+__all__ = ["MAX_ABS", "MAX_RUN_SEED", "MIN_ABS", "ConfigModel", "run_seed_problem"]
 
 MAX_ABS = 1e6
 MIN_ABS = 1e-9
+# A run seed goes to SUMO (--seed, a C int: SUMO prints "not a valid integer" for a larger one and runs with its own
+# default seed) and, plus one, to randomTrips for the pedestrians; numpy's generators take no negative seed.
+MAX_RUN_SEED = 2**31 - 2
+
+
+def run_seed_problem(seed: object) -> str | None:
+    """Why ``seed`` cannot be a run seed (None: it can): an integer in [0, MAX_RUN_SEED] is expected."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_RUN_SEED:
+        return f"expected an integer from 0 to {MAX_RUN_SEED} (SUMO takes a 32-bit seed), got {seed!r}"
+    return None
 
 
 def _floats(value: Any, where: str = "") -> Iterator[tuple[str, float]]:

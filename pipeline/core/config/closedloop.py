@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field, field_validator
 
-from pipeline.core.config.base import ConfigModel
+from pipeline.core.config.base import ConfigModel, run_seed_problem
 
 
 class ClosedLoopConfig(ConfigModel):
@@ -29,8 +29,11 @@ class ClosedLoopConfig(ConfigModel):
     @field_validator("seeds")
     @classmethod
     def _seeds(cls, seeds: list[int]) -> list[int]:
-        if len(set(seeds)) != len(seeds) or any(not 0 <= s < 2 ** 31 for s in seeds):
-            raise ValueError("seeds must be unique integers in [0, 2^31)")
+        if len(set(seeds)) != len(seeds):
+            raise ValueError("seeds must be unique")
+        for seed in seeds:
+            if run_seed_problem(seed):
+                raise ValueError(f"seed {seed}: {run_seed_problem(seed)}")
         return seeds
 
     @field_validator("detector")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field, field_validator
 
-from pipeline.core.config.base import ConfigModel
+from pipeline.core.config.base import ConfigModel, run_seed_problem
 
 
 class ExperimentConfig(ConfigModel):
@@ -25,8 +25,11 @@ class ExperimentConfig(ConfigModel):
     @field_validator("seeds")
     @classmethod
     def _unique_seeds(cls, seeds: list[int]) -> list[int]:
-        if len(set(seeds)) != len(seeds) or any(s < 0 for s in seeds):
-            raise ValueError("seeds must be unique non-negative integers")
+        if len(set(seeds)) != len(seeds):
+            raise ValueError("seeds must be unique")
+        for seed in seeds:
+            if run_seed_problem(seed):
+                raise ValueError(f"seed {seed}: {run_seed_problem(seed)}")
         return seeds
 
     @field_validator("iou_thresholds")
