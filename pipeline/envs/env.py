@@ -20,8 +20,10 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import os
 import shutil
 import tempfile
+import weakref
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import ClassVar
@@ -83,6 +85,12 @@ class RoadsynthEnv(gym.Env):
                  condition: str | Path = "noon", record: str | Path | None = None, **option_kwargs) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if dt is not None and (isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt)
+                               or not 0 < dt <= 1.0):
+            raise ValueError(f"dt: expected the seconds of one step, a number in (0, 1], got {dt!r}")
+        self._closed = False
+        self._work: Path | None = None
+        self._work_cleanup: weakref.finalize | None = None
         self.render_mode = render_mode
         self.options = _options(options, option_kwargs)
         # The renderer (open3d, numba kernels) and OpenCV are imported only when asked for: a feature-only env
@@ -93,6 +101,8 @@ class RoadsynthEnv(gym.Env):
 
             self.sensors = LiveSensors(check_sensors(sensors), rig, condition)
         self.record_dir = Path(record) if record is not None else None
+        if self.record_dir is not None:
+            _check_writable(self.record_dir)
         self._episodes_recorded = 0
         self._recorder: RunRecorder | None = None
         self._tables_seed: int | None = None
@@ -119,7 +129,6 @@ class RoadsynthEnv(gym.Env):
             self.action_space = spaces.Box(np.array([o.accel_min_mps2, -o.lat_accel_max_mps2], dtype=np.float32),
                                            np.array([o.accel_max_mps2, o.lat_accel_max_mps2], dtype=np.float32))
         self._owner = f"RoadsynthEnv({config.name}, #{next(_owners)})"
-        self._work: Path | None = None
         self._net_file: Path | None = None
         self._demands: dict[int, tuple[Path, list[str], Demand]] = {}
         self._classes: dict[int, dict[str, int]] = {}  # run seed -> vehicle id -> features.CLASS_ORDER index + 1
@@ -132,6 +141,7 @@ class RoadsynthEnv(gym.Env):
     # ---- episode ----
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        self._require_open("reset")
         if seed is not None and run_seed_problem(seed):
             raise ValueError(f"reset(seed={seed!r}): {run_seed_problem(seed)}")
         super().reset(seed=seed)
@@ -183,6 +193,7 @@ class RoadsynthEnv(gym.Env):
         return self._obs, self._info()
 
     def step(self, action):
+        self._require_open("step")
         if self._sumo is None:
             raise RuntimeError("step() before reset()")
         require_sumo(self._owner)
@@ -259,6 +270,7 @@ class RoadsynthEnv(gym.Env):
         """The camera image (with the "camera" sensor) or a top view around the ego, for render_mode "rgb_array"."""
         if self.render_mode is None:
             return None
+        self._require_open("render")
         if self._sumo is None:
             raise RuntimeError("render() before reset()")
         require_sumo(self._owner)
@@ -271,9 +283,14 @@ class RoadsynthEnv(gym.Env):
             self._write_record(None)
         close_sumo(self._owner)
         self._sumo = None
-        if self._work is not None:
-            shutil.rmtree(self._work, ignore_errors=True)
-            self._work, self._net_file, self._demands, self._classes = None, None, {}, {}
+        if self._work_cleanup is not None:
+            self._work_cleanup()
+        self._work, self._work_cleanup, self._net_file, self._demands, self._classes = None, None, None, {}, {}
+        self._closed = True
+
+    def _require_open(self, call: str) -> None:
+        if self._closed:
+            raise RuntimeError(f"{self._owner}: {call}() after close(); make a new env")
 
     def ego_length_m(self) -> float:
         """The ego's length (its leader's gap is ds minus half of both lengths)."""
@@ -301,6 +318,8 @@ class RoadsynthEnv(gym.Env):
         """The run's .sumocfg, ego candidates and demand: network built once per env, demand once per run seed."""
         if self._work is None:
             self._work = Path(tempfile.mkdtemp(prefix="roadsynth-env-"))
+            # Removed by close(), or when the env is garbage-collected or the interpreter exits without close().
+            self._work_cleanup = weakref.finalize(self, shutil.rmtree, str(self._work), True)
             self._net_file = networks.build_network(self.config.network, self._work / "net")
             if self.sensors is not None:
                 write_road_geometry(self._net_file, self._work / "roads")
@@ -434,6 +453,20 @@ class RoadsynthEnv(gym.Env):
         self._episodes_recorded += 1
         log.info("recorded the episode (%s) in %s", end or "stopped", out)
         return out
+
+
+def _check_writable(folder: Path) -> None:
+    """Raise ValueError, naming ``record=``, when episodes cannot be written into ``folder`` (checked at
+    construction: an episode is written when it ends, and would otherwise be lost then)."""
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"record={folder}: is a file; expected a folder to write episodes into")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".roadsynth-env-probe-", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ValueError(f"record={folder}: cannot write episodes there ({exc.strerror or exc})") from None
 
 
 def scenario_env(scenario: str | Path | None = None, **kwargs) -> RoadsynthEnv:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 
@@ -60,6 +61,15 @@ class EnvOptions:
     reward: RewardWeights = field(default_factory=RewardWeights)
 
     def __post_init__(self) -> None:
+        for name in ("accel_min_mps2", "accel_max_mps2", "lat_accel_max_mps2", "lat_speed_max_mps", "max_speed_mps",
+                     "time_limit_s", "neighbour_range_m"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"{name}: expected a finite number, got {value!r}")
+        if isinstance(self.nearby_k, bool) or not isinstance(self.nearby_k, int):
+            raise ValueError(f"nearby_k: expected an integer >= 0, got {self.nearby_k!r}")
+        if not isinstance(self.normalize_actions, bool):
+            raise ValueError(f"normalize_actions: expected True or False, got {self.normalize_actions!r}")
         if not (self.accel_min_mps2 < 0 < self.accel_max_mps2):
             raise ValueError(f"need accel_min_mps2 < 0 < accel_max_mps2, got {self.accel_min_mps2}, "
                              f"{self.accel_max_mps2}")
