@@ -8,6 +8,7 @@ output and the temporaries of killed runs: :mod:`pipeline.core.outputs`.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import shutil
@@ -79,8 +80,29 @@ def atomic_named_dir(out: Path) -> Iterator[Path]:
         shutil.rmtree(holder, ignore_errors=True)
 
 
+MANIFEST_KEY = "files"  # meta.json's list of the files a stage wrote into its output folder
+
+
+def seal(folder: Path) -> None:
+    """Record in ``folder/meta.json`` (when the folder has one) every other file the stage wrote there, by relative
+    path, with its size: the manifest by which a later run knows the folder holds only what a stage wrote
+    (:mod:`pipeline.core.outputs`). meta.json is left out of byte comparisons, so the record changes no output."""
+    meta_path = folder / "meta.json"
+    if not meta_path.is_file():
+        return
+    meta = json.loads(meta_path.read_text())
+    if not isinstance(meta, dict):
+        return
+    meta[MANIFEST_KEY] = {p.relative_to(folder).as_posix(): p.stat().st_size
+                          for p in sorted(folder.rglob("*")) if p.is_file() and p != meta_path}
+    meta_path.write_text(json.dumps(meta, sort_keys=True, indent=2) + "\n")
+
+
 def replace_path(tmp: Path, out: Path) -> None:
-    """Move ``tmp`` onto ``out``; an existing ``out`` (file or folder) is set aside first, then deleted."""
+    """Move ``tmp`` onto ``out``; an existing ``out`` (file or folder) is set aside first, then deleted. A folder is
+    sealed first (:func:`seal`)."""
+    if tmp.is_dir() and not tmp.is_symlink():
+        seal(tmp)
     old = _tmp_sibling(out, "old")
     if out.exists() or out.is_symlink():
         remove_path(old)

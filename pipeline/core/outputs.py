@@ -7,11 +7,14 @@ The rule, the same for every stage (:func:`claimed_outputs`):
   inside a stage output (a folder with a ``meta.json`` naming its stage) stands for that whole folder: an
   evaluation written into the COCO export it scores would change that export. ``--overwrite`` does not lift
   this.
-- A folder output may replace nothing, an empty folder, or an earlier output of the same stage (its
-  ``meta.json`` names the stage): that is how ``dvc repro`` reruns a stage. A file output may replace a file
-  that holds what the stage writes (its :attr:`OutputSpec.recognise`: a PNG for preview, an MCAP for an MCAP
-  export...). Anything else -- a file where a folder goes, a folder of other files, a symbolic link -- is
-  replaced only with ``--overwrite``.
+- A folder output may replace nothing, an empty folder, or exactly an earlier output of the same stage: its
+  ``meta.json`` names the stage and lists every file the stage wrote there with its size (the manifest,
+  :func:`pipeline.core.files.seal`), and the folder holds those files and no other, unchanged in size. A file
+  the user put there (notes, a plot), or a file changed since, makes it not the stage's alone. A file output
+  may replace a file that carries the stage's own mark (its :attr:`OutputSpec.recognise`: a PNG whose text
+  chunk names roadsynth, an MCAP with roadsynth's metadata record, a JSON object with roadsynth's key, a
+  results list with roadsynth's sidecar). Anything else -- another program's file of the same kind, a file
+  where a folder goes, a folder of other files, a symbolic link -- is replaced only with ``--overwrite``.
 - While a stage writes an output it holds an exclusive lock (``flock``) on a hidden sibling
   ``.NAME.lock``; a second writer fails at once, naming the first. The kernel drops the lock when the
   holder dies, even by ``kill -9``, so a later run finds the lock free and removes the temporaries a killed
@@ -32,7 +35,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.core.files import remove_path
+from pipeline.core.files import MANIFEST_KEY, remove_path
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +61,9 @@ class OutputSpec:
         recognise: for a file output, whether an existing file holds what the stage writes (then it may be
             replaced without ``--overwrite``): returns None when it does, else what it is instead.
         expected: what the stage writes there, in words (for messages).
+        resumable: for a folder a stage resumes into (``experiment run``: it is never replaced whole, so it has
+            no manifest), why an existing folder of the stage holds something the stage does not write there
+            (None: it holds only the stage's); used instead of the manifest.
     """
 
     path: Path
@@ -65,6 +71,7 @@ class OutputSpec:
     folder: bool = True
     recognise: Callable[[Path], str | None] | None = None
     expected: str = "a folder"
+    resumable: Callable[[Path], str | None] | None = None
 
 
 # --- recognisers of earlier file outputs -------------------------------------------------------------------
@@ -74,20 +81,64 @@ def _starts_with(path: Path, magic: bytes) -> bool:
         return fh.read(len(magic)) == magic
 
 
+MARK = "roadsynth"  # the mark of our own file outputs (a PNG text chunk's value starts with it, a JSON key, ...)
+MARK_KEY = "written_by"  # the JSON key (and PNG text keyword "Software" holds the value) that carries it
+
+
 def png_file(path: Path) -> str | None:
-    """None when ``path`` is a PNG image."""
-    return None if _starts_with(path, b"\x89PNG\r\n\x1a\n") else "not a PNG image"
+    """None when ``path`` is a PNG image that roadsynth wrote (a ``Software`` text chunk naming roadsynth)."""
+    from pipeline.core.png import png_text
+
+    if not _starts_with(path, b"\x89PNG\r\n\x1a\n"):
+        return "not a PNG image"
+    return None if png_text(path).get("Software", "").startswith(MARK) else "a PNG image roadsynth did not write"
 
 
 def mcap_file(path: Path) -> str | None:
-    """None when ``path`` is an MCAP file."""
-    return None if _starts_with(path, b"\x89MCAP") else "not an MCAP file"
+    """None when ``path`` is an MCAP file that roadsynth's export wrote (its ``roadsynth.export`` metadata)."""
+    if not _starts_with(path, b"\x89MCAP"):
+        return "not an MCAP file"
+    try:
+        from mcap.reader import make_reader
+
+        with path.open("rb") as fh:
+            names = {m.name for m in make_reader(fh).iter_metadata()}
+    except Exception:  # any damage, or another writer's variant: not provably ours
+        return "an MCAP file that cannot be read"
+    return None if "roadsynth.export" in names else "an MCAP file roadsynth did not write"
 
 
-def json_file(top: type, keys: Iterable[str] = ()) -> Callable[[Path], str | None]:
+def sidecar_path(path: Path) -> Path:
+    """The mark of a file output that cannot carry one itself (a COCO results list): a hidden JSON beside it."""
+    return path.with_name(f".{path.name}.roadsynth.json")
+
+
+def marked_sidecar(stage: str) -> Callable[[Path], str | None]:
+    """A recogniser of files whose :func:`sidecar_path` says ``stage`` wrote them, with their current size."""
+
+    def recognise(path: Path) -> str | None:
+        try:
+            mark = json.loads(sidecar_path(path).read_text())
+        except (OSError, UnicodeDecodeError, ValueError):
+            return f"no {sidecar_path(path).name} beside it says roadsynth wrote it"
+        if not isinstance(mark, dict) or mark.get(MARK_KEY) != f"{MARK} {stage}":
+            return f"{sidecar_path(path).name} does not say `roadsynth {stage}` wrote it"
+        if mark.get("size") != path.stat().st_size:
+            return "changed since roadsynth wrote it"
+        return None
+
+    return recognise
+
+
+def write_sidecar(path: Path, stage: str) -> None:
+    """Mark ``path`` (written by ``stage``) with :func:`sidecar_path`."""
+    sidecar_path(path).write_text(json.dumps({MARK_KEY: f"{MARK} {stage}", "size": path.stat().st_size}) + "\n")
+
+
+def json_file(top: type, keys: Iterable[str] = (), *, marked: bool = True) -> Callable[[Path], str | None]:
     """A recogniser of JSON files whose top level is a ``top`` (dict or list) holding ``keys`` (a dict's keys, or
-    each item's keys of a list)."""
-    keys = tuple(keys)
+    each item's keys of a list); a dict must also carry roadsynth's mark (``MARK_KEY``) unless not ``marked``."""
+    keys = tuple(keys) + ((MARK_KEY,) if marked and top is dict else ())
 
     def recognise(path: Path) -> str | None:
         try:
@@ -148,6 +199,37 @@ def _clash_with_inputs(spec: OutputSpec, inputs: Sequence[Path]) -> str | None:
     return None
 
 
+def _not_the_stages(folder: Path) -> str | None:
+    """Why ``folder`` (whose meta.json names a stage) holds more than what that stage wrote there, by its manifest
+    (:func:`pipeline.core.files.seal`); None when it holds exactly those files."""
+    meta = json.loads((folder / "meta.json").read_text())
+    listed = meta.get(MANIFEST_KEY)
+    if not isinstance(listed, dict):
+        return "its meta.json lists no files (an older roadsynth wrote it): nothing shows that all it holds is ours"
+    extra, changed = [], []
+    for path in sorted(folder.rglob("*")):
+        if (path.name == "meta.json" and path.parent == folder) or path.is_dir():
+            continue
+        rel = path.relative_to(folder).as_posix()
+        if rel not in listed:
+            extra.append(rel)
+        elif path.is_symlink() or path.stat().st_size != listed[rel]:
+            changed.append(rel)
+    if not extra and not changed:
+        return None
+    parts = []
+    if extra:
+        parts.append(f"it also holds {_some(extra)}, which the stage did not write")
+    if changed:
+        parts.append(f"{_some(changed)} changed since the stage wrote {'it' if len(changed) == 1 else 'them'}")
+    return " and ".join(parts)
+
+
+def _some(names: list[str], shown: int = 3) -> str:
+    more = f" and {len(names) - shown} more" if len(names) > shown else ""
+    return ", ".join(names[:shown]) + more
+
+
 def _not_replaceable(spec: OutputSpec, stage: str) -> str | None:
     """Why the existing ``spec.path`` is not an output this stage may replace without --overwrite (None: it may)."""
     path = Path(spec.path)
@@ -164,7 +246,10 @@ def _not_replaceable(spec: OutputSpec, stage: str) -> str | None:
             return None
         found = output_stage(path)
         if found == stage:
-            return None
+            unlisted = (spec.resumable or _not_the_stages)(path)
+            if unlisted is None:
+                return None
+            return f"{head} is an earlier `roadsynth {stage}` output, but {unlisted}; {hint}"
         why = ("it has no meta.json" if not (path / "meta.json").exists() else
                "its meta.json is unreadable or names no stage" if found is None else
                f"its meta.json says it is a `roadsynth {found}` output")

@@ -101,3 +101,32 @@ def check_png(data: bytes, source: str, *, width: int | None = None, height: int
         if kind == b"IEND":
             return
         at = end
+
+
+def with_text(data: bytes, keyword: str, text: str) -> bytes:
+    """The PNG ``data`` with a tEXt chunk (``keyword``, ``text``; Latin-1) right after its IHDR."""
+    check_png(data, "the PNG being marked")
+    after_ihdr = 8 + 12 + struct.unpack(">I", data[8:12])[0]
+    chunk = _chunk(b"tEXt", keyword.encode("latin-1") + b"\0" + text.encode("latin-1"))
+    return data[:after_ihdr] + chunk + data[after_ihdr:]
+
+
+def png_text(path: Path) -> dict[str, str]:
+    """The tEXt chunks before the image data of the PNG file ``path`` (keyword -> text); {} for a file that is not
+    a PNG or is damaged there. Reads only the chunk headers up to the first IDAT."""
+    out: dict[str, str] = {}
+    with Path(path).open("rb") as fh:
+        if fh.read(8) != SIGNATURE:
+            return out
+        while True:
+            head = fh.read(8)
+            if len(head) < 8:
+                return out
+            length, kind = struct.unpack(">I4s", head)
+            if kind in (b"IDAT", b"IEND"):
+                return out
+            body = fh.read(length)
+            fh.read(4)  # CRC
+            if kind == b"tEXt" and b"\0" in body:
+                key, _, value = body.partition(b"\0")
+                out[key.decode("latin-1")] = value.decode("latin-1")

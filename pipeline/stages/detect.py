@@ -26,7 +26,7 @@ import logging
 import os
 from pathlib import Path
 
-from pipeline.core.outputs import OutputSpec, json_file
+from pipeline.core.outputs import OutputSpec, marked_sidecar, write_sidecar
 from pipeline.stages.common import int_at_least
 from pipeline.stages.train import annotations_path
 
@@ -85,7 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def outputs(args: argparse.Namespace) -> list[OutputSpec]:
-    return [OutputSpec(args.out, folder=False, recognise=json_file(list, ("image_id", "category_id", "bbox", "score")),
+    return [OutputSpec(args.out, folder=False, recognise=marked_sidecar("detect"),
                        expected="a COCO results JSON file")]
 
 
@@ -127,6 +127,7 @@ def write_results(path: Path, results: list[dict], gt_path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(results, separators=(",", ":")) + "\n")
     tmp.replace(path)
+    write_sidecar(path, "detect")  # a COCO results list has no room for our mark: a hidden file beside it
 
 
 def main(args: argparse.Namespace) -> int:

@@ -17,6 +17,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pipeline.core.config import ExperimentConfig, load_config
+from pipeline.core.outputs import OutputSpec
 from pipeline.stages.common import int_at_least, write_json, write_meta
 from pipeline.stages.executor import ExecutorSpec, TaskFailures, add_executor_arguments, executor_from_args, run_tasks
 from pipeline.stages.matrix import Matrix, matrix_tasks, record_paths, resolve_matrix
@@ -123,6 +124,49 @@ def _write_status(out: Path, matrix: Matrix, status: dict[str, dict], *, complet
     data = {"experiment": matrix.experiment.name, "complete": complete, "tasks": status}
     with atomic_file(out / "status.json") as tmp:
         write_json(tmp, data if merge is None else {**data, "merge": merge})
+
+
+def outputs(args: argparse.Namespace) -> list[OutputSpec]:
+    """The experiment folder, which a rerun resumes into (never replaced whole): see :func:`_only_the_experiments`."""
+    return [OutputSpec(args.out, resumable=_only_the_experiments)]
+
+
+_EXPERIMENT_FILES = ("meta.json", "status.json")
+_EXPERIMENT_FOLDERS = ("sim", "records", "runs")
+
+
+def _only_the_experiments(folder: Path) -> str | None:
+    """Why an experiment folder holds what the experiment does not write there (None: it holds only its own): at
+    the top its meta.json and status.json, its sim/, records/ and runs/ folders, and the exports of the merge (a
+    folder that is a stage's output, an MCAP and its layout of ours); in sim/ and records/ only stage outputs and
+    what a stopped task left (removed by the next run); in runs/ the tasks' JSON markers."""
+    from pipeline.core.outputs import mcap_file, output_stage
+
+    foreign = []
+    for entry in sorted(folder.iterdir()):
+        name = entry.name
+        if name in _EXPERIMENT_FILES and entry.is_file():
+            continue
+        if name in _EXPERIMENT_FOLDERS and entry.is_dir():
+            for inner in sorted(entry.iterdir()):
+                ours = (inner.suffix == ".json" and inner.is_file() if name == "runs" else
+                        (inner.is_dir() and output_stage(inner) is not None) or inner.name.startswith("."))
+                if not ours:
+                    foreign.append(f"{name}/{inner.name}")
+            continue
+        if entry.is_dir() and output_stage(entry) is not None:
+            continue
+        if entry.is_file() and (mcap_file(entry) is None or (name.endswith(".layout.json") and
+                                                             mcap_file(folder / name.replace(".layout.json", ".mcap"))
+                                                             is None)):
+            continue
+        if name.startswith(".") and (".tmp-" in name or ".old-" in name or name.endswith(".lock")):
+            continue  # what a stopped merge left beside its output: removed by the next run
+        foreign.append(name)
+    if not foreign:
+        return None
+    shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+    return f"it also holds {shown}, which the experiment did not write"
 
 
 def main(args: argparse.Namespace) -> int:

@@ -59,7 +59,23 @@ def outputs(args: argparse.Namespace) -> list[OutputSpec]:
 
     return [OutputSpec(args.out, folder=False, recognise=mcap_file, expected="an MCAP file"),
             OutputSpec(layout_path(args.out), flag="--out's layout", folder=False,
-                       recognise=json_file(dict, ("configById", "layout")), expected="a Foxglove layout JSON file")]
+                       recognise=_layout_beside_our_mcap(Path(args.out)), expected="a Foxglove layout JSON file")]
+
+
+def _layout_beside_our_mcap(mcap: Path):
+    """A Foxglove layout is ours when the MCAP it sits beside is (a layout file has no room for a mark of ours:
+    Foxglove reads it)."""
+    layout = json_file(dict, ("configById", "layout"), marked=False)
+
+    def recognise(path: Path) -> str | None:
+        why = layout(path)
+        if why is not None:
+            return why
+        if not mcap.is_file() or mcap_file(mcap) is not None:
+            return f"a Foxglove layout not beside an MCAP file roadsynth wrote ({mcap.name})"
+        return None
+
+    return recognise
 
 
 def options_from_args(args: argparse.Namespace):

@@ -21,7 +21,8 @@ import numpy as np
 from pipeline.core.classes import ObjectClass
 from pipeline.core.files import atomic_file
 from pipeline.core.geometry import Boxes3D
-from pipeline.core.outputs import OutputSpec, png_file
+from pipeline.core.outputs import MARK, OutputSpec, png_file
+from pipeline.core.png import with_text
 from pipeline.core.record import CameraInfo, DatasetRecord, LidarInfo, RadarInfo
 from pipeline.stages.common import int_at_least
 
@@ -212,7 +213,7 @@ def main(args: argparse.Namespace) -> int:
     ok, png = cv2.imencode(".png", sheet)  # the bytes cv2.imwrite would write, written atomically
     if not ok:
         raise OSError(f"{args.out}: could not encode the contact sheet")
-    with atomic_file(args.out) as tmp:
-        tmp.write_bytes(png.tobytes())
+    with atomic_file(args.out) as tmp:  # marked as ours: a rerun may replace it, another program's PNG it may not
+        tmp.write_bytes(with_text(png.tobytes(), "Software", f"{MARK} preview"))
     log.info("wrote %s (%dx%d)", args.out, sheet.shape[1], sheet.shape[0])
     return 0

@@ -20,7 +20,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ScenarioConfig
 from pipeline.core.config.resolve import resolve_scenario
 from pipeline.core.files import atomic_file
-from pipeline.core.outputs import OutputSpec, json_file
+from pipeline.core.outputs import MARK, MARK_KEY, OutputSpec, json_file
 from pipeline.core.tables import write_parquet
 from pipeline.stages.common import atomic_output_dir, run_seed, write_json, write_meta
 from pipeline.traffic import networks
@@ -129,6 +129,7 @@ def main(args: argparse.Namespace) -> int:
     stats = simulate(config, args.seed, args.out, progress=not args.no_progress)
     if args.metrics_out is not None:
         summary = {k: v for k, v in stats.items() if k not in ("collision_events", "ego_id")}
+        summary[MARK_KEY] = f"{MARK} simulate"  # ours: a rerun may replace it, another program's file it may not
         with atomic_file(args.metrics_out) as tmp:
             write_json(tmp, summary)
     log.info("recorded %d frames, %d actor states; %d collisions, %d teleports -> %s", stats["frames"],

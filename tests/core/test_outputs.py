@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from pipeline.core.files import seal
 from pipeline.core.outputs import (
     OutputError,
     OutputSpec,
@@ -14,16 +15,23 @@ from pipeline.core.outputs import (
     check_replaceable,
     json_file,
     lock_path,
+    marked_sidecar,
     output_lock,
+    png_file,
+    write_sidecar,
 )
-from pipeline.core.png import check_png, encode_png
+from pipeline.core.png import check_png, encode_png, png_text, with_text
 
 
-def _folder(path, stage=None):
+def _folder(path, stage=None, *, sealed=True):
     path.mkdir(parents=True)
     (path / "data.bin").write_bytes(b"x")
+    (path / "sub").mkdir()
+    (path / "sub" / "more.txt").write_text("abc")
     if stage:
         (path / "meta.json").write_text(json.dumps({"stage": stage}))
+        if sealed:
+            seal(path)
     return path
 
 
@@ -31,13 +39,69 @@ def test_a_folder_output_replaces_only_nothing_an_empty_folder_or_its_own_stage(
     check_replaceable([OutputSpec(tmp_path / "missing")], "render")
     (tmp_path / "empty").mkdir()
     check_replaceable([OutputSpec(tmp_path / "empty")], "render")
-    check_replaceable([OutputSpec(_folder(tmp_path / "mine", "render"))], "render")
+    mine = _folder(tmp_path / "mine", "render")
+    assert json.loads((mine / "meta.json").read_text())["files"] == {"data.bin": 1, "sub/more.txt": 3}
+    check_replaceable([OutputSpec(mine)], "render")
     for name, stage, why in [("theirs", "export", "`roadsynth export` output"), ("plain", None, "no meta.json")]:
         with pytest.raises(OutputError, match=why):
             check_replaceable([OutputSpec(_folder(tmp_path / name, stage))], "render")
     (tmp_path / "file").write_text("x")
     with pytest.raises(OutputError, match="is a file"):
         check_replaceable([OutputSpec(tmp_path / "file")], "render")
+
+
+def test_a_stage_output_holding_anything_else_is_not_replaced(tmp_path):
+    """Exactly what the stage wrote (its manifest): a user's file in it, a file changed since, or no manifest at
+    all (an older roadsynth) each need --overwrite."""
+    notes = _folder(tmp_path / "notes", "evaluate")
+    (notes / "sub" / "NOTES.md").write_text("mine")
+    with pytest.raises(OutputError, match="also holds sub/NOTES.md, which the stage did not write"):
+        check_replaceable([OutputSpec(notes)], "evaluate")
+    edited = _folder(tmp_path / "edited", "evaluate")
+    (edited / "data.bin").write_bytes(b"xy")
+    with pytest.raises(OutputError, match="data.bin changed since the stage wrote it"):
+        check_replaceable([OutputSpec(edited)], "evaluate")
+    old = _folder(tmp_path / "old", "evaluate", sealed=False)
+    with pytest.raises(OutputError, match="lists no files"):
+        check_replaceable([OutputSpec(old)], "evaluate")
+    removed = _folder(tmp_path / "removed", "evaluate")
+    (removed / "data.bin").unlink()  # less than the stage wrote: nothing of the user's to lose
+    check_replaceable([OutputSpec(removed)], "evaluate")
+
+
+def test_a_json_object_output_is_replaced_only_with_our_mark(tmp_path):
+    stats = json_file(dict, ("frames",))
+    spec = OutputSpec(tmp_path / "s.json", folder=False, recognise=stats, expected="stats")
+    spec.path.write_text('{"frames": 3, "written_by": "roadsynth simulate"}')
+    check_replaceable([spec], "simulate")
+    spec.path.write_text('{"frames": 3}')  # the same keys, another program's
+    with pytest.raises(OutputError, match="did not write"):
+        check_replaceable([spec], "simulate")
+
+
+def test_a_png_is_replaced_only_with_our_text_chunk(tmp_path):
+    png = encode_png(np.zeros((4, 5, 3), np.uint8))
+    spec = OutputSpec(tmp_path / "p.png", folder=False, recognise=png_file, expected="a PNG image")
+    spec.path.write_bytes(png)
+    with pytest.raises(OutputError, match="a PNG image roadsynth did not write"):
+        check_replaceable([spec], "preview")
+    marked = with_text(png, "Software", "roadsynth preview")
+    check_png(marked, "marked")
+    spec.path.write_bytes(marked)
+    assert png_text(spec.path) == {"Software": "roadsynth preview"}
+    check_replaceable([spec], "preview")
+
+
+def test_a_results_list_is_replaced_only_with_our_sidecar(tmp_path):
+    spec = OutputSpec(tmp_path / "r.json", folder=False, recognise=marked_sidecar("detect"), expected="results")
+    spec.path.write_text("[]")
+    with pytest.raises(OutputError, match="says roadsynth wrote it"):
+        check_replaceable([spec], "detect")
+    write_sidecar(spec.path, "detect")
+    check_replaceable([spec], "detect")
+    spec.path.write_text('[{"image_id": 1}]')
+    with pytest.raises(OutputError, match="changed since"):
+        check_replaceable([spec], "detect")
 
 
 def test_a_file_output_replaces_only_a_file_of_its_kind(tmp_path):

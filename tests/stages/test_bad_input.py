@@ -11,9 +11,11 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
+from pipeline.core.png import encode_png, with_text
 from pipeline.stages.cli import build_parser
 from pipeline.stages.cli import main as cli_main
 from tests.conftest import REPO
@@ -294,12 +296,41 @@ ACCEPTED = [
 def test_an_earlier_output_of_the_stage_is_replaced(workspace, capsys, argv, output):
     (workspace / "empty.png").mkdir()
     shutil.copytree(workspace / "rec", workspace / "rec2")  # an earlier render output
-    (workspace / "sheet.png").write_bytes(b"\x89PNG\r\n\x1a\n an earlier contact sheet")
+    # an earlier contact sheet: a PNG carrying preview's mark
+    (workspace / "sheet.png").write_bytes(with_text(encode_png(np.zeros((2, 2, 3), np.uint8)), "Software",
+                                                    "roadsynth preview"))
     before = {k: v for k, v in snapshot(workspace).items() if k != output and not k.startswith(f"{output}/")}
     assert main(argv) == 0, capsys.readouterr().err
     after = {k: v for k, v in snapshot(workspace).items() if k != output and not k.startswith(f"{output}/")}
     assert after == before  # no lock or temporary left beside it, nothing else touched
     assert (workspace / output).exists()
+
+
+def test_a_users_file_in_a_stage_output_or_another_programs_file_is_kept(workspace, capsys, tmp_path):
+    """Issue 38's data losses: an evaluation folder into which the user put NOTES.md, an MCAP another program
+    wrote, a contact sheet another program drew: each refused and kept as it was; --overwrite replaces it."""
+    from mcap.writer import Writer
+
+    assert main([*EVALUATE, "--out", "eval2"]) == 0
+    (workspace / "eval2" / "NOTES.md").write_text("my notes")
+    with (workspace / "theirs.mcap").open("wb") as fh:  # a valid MCAP of someone else's
+        writer = Writer(fh)
+        writer.start(profile="", library="another program")
+        writer.finish()
+    foreign_png = encode_png(np.zeros((2, 2, 3), np.uint8))
+    (workspace / "theirs.png").write_bytes(foreign_png)
+    cases = [([*EVALUATE, "--out", "eval2"], "eval2/NOTES.md", "also holds NOTES.md"),
+             ([*EXPORT, "--format", "mcap", "--out", "theirs.mcap"], "theirs.mcap", "an MCAP file roadsynth did not"),
+             (["preview", "--dataset", "rec", "--out", "theirs.png"], "theirs.png", "a PNG image roadsynth did not")]
+    for argv, kept, why in cases:
+        before = (workspace / kept).read_bytes()
+        capsys.readouterr()
+        assert main(argv) == 2, argv
+        assert why in capsys.readouterr().err
+        assert (workspace / kept).read_bytes() == before
+        assert main([*argv, "--overwrite"]) == 0, capsys.readouterr().err
+    assert not (workspace / "eval2" / "NOTES.md").exists()  # replaced, as asked
+    assert main([*EVALUATE, "--out", "eval2"]) == 0  # and a plain rerun replaces its own output again
 
 
 def test_the_iou_list_takes_commas_and_spaces(workspace, capsys):

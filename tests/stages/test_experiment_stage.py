@@ -55,6 +55,13 @@ def test_the_matrix_runs_from_one_command_and_a_rerun_skips_it(tiny, tmp_path, c
     status = json.loads((out / "status.json").read_text())
     assert [t["status"] for t in status["tasks"].values()] == ["skipped"] * 3
     assert "render highway-4 condition night: skipped (finished earlier)" in caplog.text
+    # a file of the user's in the experiment folder, or beside its records: the rerun refuses, and keeps it
+    for mine in (out / "NOTES.md", out / "records" / "plot.png"):
+        mine.write_text("mine")
+        assert main(argv) == 2
+        assert mine.read_text() == "mine"
+        mine.unlink()
+    assert main(argv) == 0
 
 
 @pytest.mark.parametrize(("flags", "message"), [
