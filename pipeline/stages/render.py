@@ -189,20 +189,49 @@ def _prepare_work(work: Path, key: str) -> None:
         write_json(manifest, {"key": key})
 
 
-def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...]) -> bool:
-    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last) and its
-    tables read back whole; a damaged shard is rendered again."""
+def _shard_done(shard_dir: Path, index: int, frames: tuple[int, ...], record_dir: Path | None = None) -> bool:
+    """Whether shard ``index`` was rendered with exactly ``frames`` (its done file lists them, written last), its
+    tables read back whole and, in ``record_dir``, each of its frames' images and sweeps is whole (a PNG's chunks and
+    CRCs, a Parquet file's page checksums): a shard with anything damaged or missing is rendered again."""
     done = shard_dir / f"done-{index:05d}"
     if not (done.is_file() and done.read_text().split() == [str(f) for f in frames]):
         return False
-    for table in (f"frames-{index:05d}.arrow", f"labels-{index:05d}.arrow"):
-        try:
+    try:
+        for table in (f"frames-{index:05d}.arrow", f"labels-{index:05d}.arrow"):
             read_ipc(shard_dir / table)
-        except (OSError, ValueError) as exc:
-            log.warning("rendering shard %d again: %s", index, exc)
-            done.unlink()
-            return False
+        if record_dir is not None:
+            _check_frame_files(record_dir, frames)
+    except (OSError, ValueError) as exc:
+        log.warning("rendering shard %d again: %s", index, exc)
+        done.unlink()
+        return False
     return True
+
+
+def _check_frame_files(record_dir: Path, frames: tuple[int, ...]) -> None:
+    """Raise ValueError naming the file unless every folder of per-frame files in the partial record (a camera's
+    image kind, a LiDAR's or radar's scans) holds a whole file for each of ``frames``."""
+    import pyarrow as pa
+
+    from pipeline.core.png import check_png
+    from pipeline.core.tables import damage_message, open_parquet
+
+    names = {f"{f:06d}" for f in frames}
+    folders = {p.parent for pattern in ("*.png", "*.parquet") for p in record_dir.rglob(pattern)}
+    for folder in sorted(folders):
+        kinds = {p.suffix for p in folder.iterdir() if p.is_file()}
+        for frame in sorted(names):
+            for suffix in kinds & {".png", ".parquet"}:
+                path = folder / f"{frame}{suffix}"
+                if not path.is_file():
+                    raise ValueError(f"{path}: missing")
+                if suffix == ".png":
+                    check_png(path.read_bytes(), str(path))
+                else:
+                    try:
+                        open_parquet(path).read()
+                    except (pa.ArrowException, OSError) as exc:
+                        raise ValueError(damage_message(path, exc)) from None
 
 
 def pickle_static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
@@ -263,7 +292,7 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     shards = plan_shards(selection, shard_size)
     jobs = [ShardJob(i, s, sim_dir, work / "static.pkl", work / "record", work / "shards", rig, condition, seed,
                      threads=(1 if workers > 1 else 0) if shard_threads is None else shard_threads)
-            for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s)]
+            for i, s in enumerate(shards) if not _shard_done(work / "shards", i, s, work / "record")]
     distributed = executor is not None and executor.distributed
     # A forkserver starts now (see there).
     context = worker_context() if workers > 1 and len(jobs) > 1 and not distributed else None

@@ -51,6 +51,35 @@ def test_a_resume_with_another_shard_size_renders_every_frame(run_21_frames, sma
     assert tree_hashes(out, skip=("meta.json",)) == tree_hashes(small_record, skip=("meta.json",))
 
 
+@pytest.mark.parametrize("damage", ["truncated png", "missing sweep", "flipped parquet byte"])
+def test_a_resume_renders_again_a_shard_whose_files_are_damaged(run_21_frames, small_rig, noon_condition, small_record,
+                                                                 tmp_path, monkeypatch, caplog, damage):
+    """A finished shard whose image was truncated, or whose LiDAR sweep is gone or damaged (a full disk, a copy cut
+    short) is not reused: it is rendered again, and the record is the uninterrupted one, byte for byte."""
+    out = tmp_path / "resumed"
+    kill_render_after(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=1,
+               progress=False)
+    monkeypatch.undo()
+    partial = tmp_path / ".resumed.partial" / "record"
+    if damage == "truncated png":
+        victim = next(partial.rglob("rgb/000000.png"))
+        victim.write_bytes(victim.read_bytes()[: victim.stat().st_size // 2])
+    elif damage == "missing sweep":
+        victim = next(partial.rglob("lidars/*/000010.parquet"))
+        victim.unlink()
+    else:
+        victim = next(partial.rglob("lidars/*/000000.parquet"))
+        data = bytearray(victim.read_bytes())
+        data[len(data) // 3] ^= 0xFF
+        victim.write_bytes(bytes(data))
+    caplog.set_level("WARNING", "pipeline.stages.render")
+    render(run_21_frames, noon_condition, small_rig, out, frames=EVERY_10TH, workers=1, shard_size=1, progress=False)
+    assert "rendering shard" in caplog.text and victim.name in caplog.text
+    assert tree_hashes(out, skip=("meta.json",)) == tree_hashes(small_record, skip=("meta.json",))
+
+
 def test_the_frame_rate_is_the_records_own(small_record):
     record = DatasetRecord(small_record)
     assert np.diff(record.frames["frame"]).tolist() == [10, 10]  # every 10th frame of a 10 Hz run
