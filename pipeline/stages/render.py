@@ -347,14 +347,49 @@ def _finalize(work: Path, out: Path, sim_dir: Path, sim_meta: dict, rig: RigConf
     config = {"sim": {"config_hash": sim_meta["config_hash"], "scenario": info.scenario, "seed": seed},
               "rig": rig.model_dump(mode="json"), "condition": condition.model_dump(mode="json"),
               "frames": frames["frame"].tolist()}
+    visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
+    blank = _blank_frames(record, visible, [c.name for c in rig.cameras], condition.name)
     write_meta(record, stage="render", config=config, seed=seed)
     replace_path(record, out)
     shutil.rmtree(work)
-    visible = labels[(labels["sensor_type"] == "camera") & labels["visible"]]
     # Per camera: the share of frames nearly repeating the one before (pipeline/core/scene_content.py).
     near_dup = {c.name: round(near_duplicate_rate(frames, labels, c.name), 4) for c in rig.cameras}
     return {"frames": len(frames), "labels": len(labels), "visible_camera_labels": len(visible),
-            "near_duplicate_rate": near_dup}
+            "near_duplicate_rate": near_dup, "blank_frames": blank}
+
+
+BLACK_LUMA = 2.0  # mean 8-bit luma below this, with 99 % of pixels under BLACK_P99: a black frame
+BLACK_P99 = 10
+WHITE_LUMA = 253.0  # mean above this: a white (saturated) frame
+
+
+def _blank_frames(record: Path, visible: pd.DataFrame, cameras: list[str], condition: str) -> dict[str, dict]:
+    """Per camera, the frames whose image came out black or white although their labels say objects are visible
+    (an exposure or light out of what the camera can show). A warning names them; a camera whose every frame with a
+    visible object is blank is an error: the record would hold labels of objects nobody can see."""
+    out = {}
+    for camera in cameras:
+        frames = sorted(set(visible.loc[visible["sensor"] == camera, "frame"].tolist()))
+        black, white = [], []
+        for frame in frames:
+            path = record / "cameras" / camera / "rgb" / f"{frame:06d}.png"
+            luma = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            if luma is None:
+                raise RuntimeError(f"{path}: the image just rendered cannot be read back")
+            mean = float(luma.mean())
+            if mean < BLACK_LUMA and np.percentile(luma, 99) < BLACK_P99:
+                black.append(frame)
+            elif mean > WHITE_LUMA:
+                white.append(frame)
+        out[camera] = {"black": len(black), "white": len(white), "with_visible_objects": len(frames)}
+        if frames and len(black) + len(white) == len(frames):
+            how = f"black (mean 8-bit luma < {BLACK_LUMA:g})" if black else f"white (mean 8-bit luma > {WHITE_LUMA:g})"
+            raise ValueError(f"camera {camera}: every frame with visible objects came out {how} under condition "
+                             f"{condition}; its lens.exposure or its lights are out of what the camera can show")
+        if black or white:
+            log.warning("camera %s: %d black and %d white frames although objects are visible in them (frames %s)",
+                        camera, len(black), len(white), (black + white)[:10])
+    return out
 
 
 def main(args: argparse.Namespace) -> int:
@@ -370,4 +405,7 @@ def main(args: argparse.Namespace) -> int:
                      executor=executor_from_args(args, local_cpus=args.workers))
     log.info("wrote %s: %d frames, %d labels (%d visible in cameras); near-duplicate frame rate %s", args.out,
              summary["frames"], summary["labels"], summary["visible_camera_labels"], summary["near_duplicate_rate"])
+    blank = {c: n for c, n in summary["blank_frames"].items() if n["black"] or n["white"]}
+    if blank:
+        log.warning("frames that came out black or white while objects are visible in them: %s", blank)
     return 0

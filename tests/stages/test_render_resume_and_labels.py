@@ -141,3 +141,44 @@ def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
     assert rows["track_id"].tolist() == [1, 2]
     assert rows["lidar_points"].tolist() == [0, 5]
     assert rows["distance_m"] == pytest.approx([30.0, 70.0])
+
+
+def test_an_exposure_the_camera_cannot_honour_is_refused_naming_the_field():
+    from pipeline.core.config.loading import ConfigError, parse_config
+
+    noon = load_config(ConditionConfig, "noon", "conditions")[0].model_dump(mode="json")
+    for exposure in (1e-9, 100.0):
+        with pytest.raises(ConfigError, match=r"lens\.exposure"):
+            parse_config(ConditionConfig, {**noon, "lens": {**noon["lens"], "exposure": exposure}}, "cond.yaml")
+
+
+def test_a_record_whose_frames_are_all_black_is_an_error_and_some_black_ones_a_warning(run_21_frames, small_rig,
+                                                                                      tmp_path, caplog):
+    """A condition without light at the lowest exposure: every frame black while its labels say objects are
+    visible (they are, to the geometry): refused, nothing written. Frames of a record checked one by one: the
+    black ones are counted and named."""
+    import cv2
+
+    from pipeline.stages.render import _blank_frames
+
+    night = load_config(ConditionConfig, "night", "conditions")[0].model_dump(mode="json")
+    dark = {**night, "headlights": None, "street_lamps": None, "vehicle_lights": {"glow": False},
+            "sky": {**night["sky"], "ambient_rgb": [0.0, 0.0, 0.0], "zenith_rgb": [0.0, 0.0, 0.0],
+                    "horizon_rgb": [0.0, 0.0, 0.0]},
+            "noise": {"shot": 0.0, "read_std": 0.0, "grain_std": 0.0}, "lens": {**night["lens"], "exposure": 1 / 64}}
+    condition = ConditionConfig.model_validate(dark)
+    with pytest.raises(ValueError, match="every frame with visible objects came out black"):
+        render(run_21_frames, condition, small_rig, tmp_path / "rec", frames=EVERY_10TH, workers=1, progress=False)
+    assert not (tmp_path / "rec").exists()
+
+    record = tmp_path / "made"
+    folder = record / "cameras" / "front" / "rgb"
+    folder.mkdir(parents=True)
+    cv2.imwrite(str(folder / "000000.png"), np.zeros((8, 8), np.uint8))
+    cv2.imwrite(str(folder / "000001.png"), np.full((8, 8), 120, np.uint8))
+    cv2.imwrite(str(folder / "000002.png"), np.full((8, 8), 255, np.uint8))
+    visible = pd.DataFrame({"sensor": ["front"] * 4, "frame": [0, 1, 2, 2]})
+    caplog.set_level("WARNING", "pipeline.stages.render")
+    assert _blank_frames(record, visible, ["front"], "noon") == {
+        "front": {"black": 1, "white": 1, "with_visible_objects": 3}}
+    assert "1 black and 1 white frames" in caplog.text

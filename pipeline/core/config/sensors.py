@@ -321,7 +321,10 @@ class SensorNoiseConfig(_Model):
 class LensConfig(_Model):
     """Optics and exposure effects, applied to linear radiance before tone mapping."""
 
-    exposure: float = Field(1.0, gt=0.0, description="exposure / gain applied before tone mapping")
+    # Six stops either way of the shipped conditions' 1-2.5: beyond, every frame is black (1e-9 rendered one whose
+    # labels still said ten objects were visible) or white; the render also checks the frames it writes.
+    exposure: float = Field(1.0, ge=1 / 64, le=64.0, description="exposure / gain applied before tone mapping, "
+                            "from 1/64 to 64")
     vignetting: float = Field(0.2, ge=0.0, lt=1.0, description="fraction of light lost at the image corners")
     bloom_threshold: float = Field(1.5, gt=0.0, description="linear radiance above which light blooms")
     bloom_strength: float = Field(0.0, ge=0.0, description="bloom added (0 = off)")
