@@ -310,9 +310,17 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
     if key in _HELD:
         yield
         return
-    created = _make_parents(path.parent)
-    while True:
+    created: list[Path] = []
+    try:
+        created = _make_parents(path.parent)
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:  # name the user's output, not our lock file
+        for folder in created:
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise OutputError(f"{flag} {given}: cannot write there ({exc.strerror or exc}); choose another {flag}") \
+            from None
+    while True:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -329,6 +337,7 @@ def output_lock(out: Path, stage: str, flag: str = "--out") -> Iterator[None]:
         if same:
             break
         os.close(fd)  # unlinked by its last holder after we opened it: lock the new one
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     _HELD.add(key)
     try:
         os.ftruncate(fd, 0)

@@ -14,8 +14,10 @@ earlier output of the same stage is replaced only with ``--overwrite``.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
+import re
 import signal
 import sys
 from importlib import metadata
@@ -109,6 +111,18 @@ def _stopped(exc: KeyboardInterrupt) -> tuple[str, int]:
     return ("terminated", 128 + signal.SIGTERM) if isinstance(exc, Terminated) else ("interrupted", 130)
 
 
+_TEMPORARY = re.compile(r"(^|/)\.([^/]+)\.(?:tmp|old)-\d+(?=/|'|$| )")
+
+
+def _for_people(exc: BaseException) -> str:
+    """The error's message with our temporaries (``.NAME.tmp-PID``, where a stage writes ``NAME`` before it renames
+    it into place) shown as the output the user named; a full or read-only disk says that nothing was written."""
+    text = _TEMPORARY.sub(r"\1\2", str(exc))
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+        text += " (the output was not written: nothing half-written is left; free space or choose another --out)"
+    return text
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
@@ -153,7 +167,7 @@ def _main(argv: list[str], command: str | None) -> int:
         # Input and run errors: the message names the file, the field and what was expected;
         # -v shows the traceback.
         logging.getLogger("roadsynth").debug("traceback", exc_info=True)
-        print(f"roadsynth {args.command}: error: {exc}", file=sys.stderr)
+        print(f"roadsynth {args.command}: error: {_for_people(exc)}", file=sys.stderr)
         return 2
 
 
