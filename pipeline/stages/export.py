@@ -36,10 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--splits", metavar="SPEC",
                         help="splits by whole runs: fractions 'train=0.8,val=0.2' or runs "
                         "'val=highway:3+urban:1,train=*' (default: one split)")
-    parser.add_argument("--min-visible-px", type=int_at_least(0), default=DEFAULT_MIN_VISIBLE_PX, metavar="N",
-                        help="objects with fewer visible pixels become ignore regions (default: %(default)s)")
-    parser.add_argument("--max-occlusion", type=float, default=DEFAULT_MAX_OCCLUSION, metavar="F",
-                        help="objects more occluded than F become ignore regions (default: %(default)s)")
+    parser.add_argument("--min-visible-px", type=int_at_least(0), default=None, metavar="N",
+                        help=f"objects with fewer visible pixels become ignore regions "
+                        f"(default: {DEFAULT_MIN_VISIBLE_PX})")
+    parser.add_argument("--max-occlusion", type=float, default=None, metavar="F",
+                        help=f"objects more occluded than F become ignore regions (default: {DEFAULT_MAX_OCCLUSION})")
     parser.add_argument("--compression", choices=[c.value for c in Compression],
                         help=f"MCAP/rosbag2 chunk compression (default: {Compression.ZSTD.value})")
     parser.add_argument("--camera", help="KITTI, KITTI tracking, MOT: the camera exported as image_2 / the sequence "
@@ -80,12 +81,14 @@ def _layout_beside_our_mcap(mcap: Path):
 
 def options_from_args(args: argparse.Namespace):
     from exporters.base import BoxMode, Compression, ExportOptions
-    from exporters.filters import ObjectFilter
+    from exporters.filters import DEFAULT_MAX_OCCLUSION, DEFAULT_MIN_VISIBLE_PX, ObjectFilter
     from exporters.splits import SplitSpec
 
     return ExportOptions(
         box=BoxMode(args.box), splits=SplitSpec.parse(args.splits) if args.splits else None,
-        filter=ObjectFilter(min_visible_px=args.min_visible_px, max_occlusion=args.max_occlusion),
+        filter=ObjectFilter(
+            min_visible_px=DEFAULT_MIN_VISIBLE_PX if args.min_visible_px is None else args.min_visible_px,
+            max_occlusion=DEFAULT_MAX_OCCLUSION if args.max_occlusion is None else args.max_occlusion),
         compression=Compression(args.compression or Compression.ZSTD.value), camera=args.camera, lidar=args.lidar,
         link_images=not args.copy_images, progress=not args.no_progress)
 
@@ -106,10 +109,13 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
     return out
 
 
+_FILTERED = ("coco", "kitti", "yolo", "mcap", "rosbag2", "kitti-tracking", "mot")
 # Options that only some formats read: given for another format, they would be ignored without a word.
 _FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "mot"), "lidar": ("kitti", "kitti-tracking"),
                    "compression": ("mcap", "rosbag2"),
-                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot", "nuscenes")}
+                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot", "nuscenes"),
+                   # the camera object filter; nuScenes annotates objects in 3D whatever the cameras see
+                   "min_visible_px": _FILTERED, "max_occlusion": _FILTERED}
 
 
 def _check_applicable(args: argparse.Namespace) -> None:

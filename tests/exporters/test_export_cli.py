@@ -30,3 +30,13 @@ def test_cli_reports_a_missing_record(tmp_path, capsys):
 def test_cli_rejects_unknown_format(tmp_path, morning):
     with pytest.raises(SystemExit):
         main(["export", "--dataset", str(morning), "--format", "voc", "--out", str(tmp_path / "x")])
+
+
+@pytest.mark.parametrize("flag", [["--min-visible-px", "50"], ["--max-occlusion", "0.5"]])
+def test_the_camera_filter_is_refused_for_nuscenes_which_ignores_it(tmp_path, morning, capsys, flag):
+    """nuScenes annotates objects in 3D whatever the cameras see: the filter would be ignored without a word."""
+    rc = main(["export", "--dataset", str(morning), "--format", "nuscenes", "--out", str(tmp_path / "n"), *flag,
+               "--no-progress"])
+    assert rc == 2
+    assert f"{flag[0]} applies to --format coco" in capsys.readouterr().err
+    assert not (tmp_path / "n").exists()
