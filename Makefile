@@ -40,9 +40,10 @@ $(VENV)/.installed: pyproject.toml | $(BIN)/python
 	touch $@
 
 $(VENV)/.installed-dev: pyproject.toml $(VENV)/.installed
-	$(BIN)/python -m pip install --quiet -e '.[dev,ray,nuscenes]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,ray,nuscenes,cityscapes]'
 	$(BIN)/python -m pip install --quiet --no-deps 'nuscenes-devkit==1.2.0'  # not an extra: see pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-deps 'trackeval>=1.3,<2'  # not an extra: see pyproject.toml
+	$(BIN)/python -m pip install --quiet --no-deps 'cityscapesscripts==2.3.0'  # not an extra: see pyproject.toml
 	touch $@
 
 # Open3D needs the system library libusb-1.0.

@@ -1,4 +1,5 @@
-"""``roadsynth evaluate``: score a detector's output against ground truth (COCO JSON or KITTI label dirs).
+"""``roadsynth evaluate``: score a detector's output against ground truth (COCO JSON or KITTI label dirs; tracks,
+nuScenes detections and Cityscapes segmentations with their tools of record).
 
 A thin adapter over :func:`evaluation.evaluate`; the output folder (metrics.json, plots/, report.md,
 meta.json) is written atomically.
@@ -16,7 +17,7 @@ from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write
 INPUT_ARGS = ("gt", "detections", "calib")
 HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
 log = logging.getLogger(__name__)
-TASKS = ("detection", "tracking", "nuscenes-detection")
+TASKS = ("detection", "tracking", "nuscenes-detection", "segmentation")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,12 +27,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", choices=TASKS, default="detection",
                         help="what is scored: detections (default) or tracks (--task tracking: MOTChallenge files, "
                         "HOTA, MOTA, IDF1 by TrackEval), or 3D detections by the nuScenes devkit (--task "
-                        "nuscenes-detection: --gt a nuScenes export, --detections a submission JSON; mAP, NDS)")
+                        "nuscenes-detection: --gt a nuScenes export, --detections a submission JSON; mAP, NDS), or "
+                        "semantic segmentation by cityscapesscripts (--task segmentation: --gt a Cityscapes export or "
+                        "gtFine folder, --detections a folder of label id PNGs; IoU, iIoU)")
     parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory "
-                        "(tracking: a MOT gt.txt, a sequence folder or a folder of sequences)")
+                        "(tracking: a MOT gt.txt, a sequence folder or a folder of sequences; segmentation: a "
+                        "Cityscapes export, its gtFine folder or a split of it)")
     parser.add_argument("--detections", type=Path, required=True,
                         help="COCO results JSON, or a KITTI label directory with a 16th column (score) (tracking: "
-                        "MOT tracker results, a <sequence>.txt per sequence or one file)")
+                        "MOT tracker results, a <sequence>.txt per sequence or one file; segmentation: a folder of "
+                        "<city>_<sequence>_<frame>*.png of Cityscapes label ids)")
     parser.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
     parser.add_argument("--iou", type=float_list, nargs="+", action=Flatten, default=list(DEFAULT_IOU_THRESHOLDS),
                         metavar="T", help="IoU thresholds of the precision/recall table, separated by spaces or "
@@ -103,6 +108,23 @@ def main_nuscenes(args: argparse.Namespace) -> int:
     return 0
 
 
+def main_segmentation(args: argparse.Namespace) -> int:
+    """--task segmentation: cityscapesscripts' pixel-level evaluation (evaluation.segmentation) of predicted label id
+    PNGs (--detections) against a Cityscapes export (--gt) into metrics.json and report.md."""
+    from evaluation.segmentation import evaluate_segmentation, markdown_summary
+
+    refuse_detection_options(args)
+    metrics = evaluate_segmentation(args.gt, args.detections)
+    config = {"task": "segmentation", "gt": str(args.gt), "detections": str(args.detections),
+              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}
+    with atomic_output_dir(args.out) as tmp:
+        write_json(tmp / "metrics.json", metrics)
+        (tmp / "report.md").write_text(markdown_summary(metrics))
+        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    log.info("mIoU %s iIoU %s (%d image(s))", metrics["mIoU"], metrics["iIoU"], metrics["images"])
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     if getattr(args, "eval_set", "all") != "all" and getattr(args, "task", "detection") != "nuscenes-detection":
         raise ValueError(f"--eval-set applies to --task nuscenes-detection only, not {args.task}")
@@ -110,6 +132,8 @@ def main(args: argparse.Namespace) -> int:
         return main_tracking(args)
     if getattr(args, "task", "detection") == "nuscenes-detection":
         return main_nuscenes(args)
+    if getattr(args, "task", "detection") == "segmentation":
+        return main_segmentation(args)
     from evaluation import evaluate, parse_metrics
 
     metrics = parse_metrics(args.metrics)
