@@ -84,3 +84,41 @@ def test_other_formats_export_a_rendered_record(rendered, tmp_path, fmt):
     description = get_exporter(fmt).export([rendered], out)
     assert description["counts"]["objects"]["total"]["kept"] > 0
     assert json.loads(json.dumps(description))["records"][0]["frames"] == 2
+
+
+def test_cityscapes_of_a_rendered_record(rendered, tmp_path):
+    """Every semantic class the renderer writes has its Cityscapes label; instances are the record's tracks; the
+    ground truth scores IoU 1 in cityscapesscripts' evaluation."""
+    pytest.importorskip("cityscapesscripts")
+    from PIL import Image
+
+    from evaluation.segmentation import evaluate_segmentation
+    from exporters.cityscapes_labels import BY_NAME, CITYSCAPES_OF
+    from pipeline.core.classes import SemanticClass
+
+    out = tmp_path / "cityscapes"
+    get_exporter("cityscapes").export([rendered], out)
+    record = DatasetRecord(rendered)
+    camera = record.info.cameras[0].name
+    tracks = {(line.split()[1], int(line.split()[2])): int(line.split()[3])
+              for line in (out / "instances.txt").read_text().splitlines()}
+    seen = set()
+    for labels_png in sorted(out.rglob("*_gtFine_labelIds.png")):
+        frame = int(labels_png.name.split("_")[2])
+        semantic, instance = record.semantic(camera, frame), record.instance(camera, frame)
+        labels = np.array(Image.open(labels_png))
+        codes = np.array(Image.open(str(labels_png).replace("labelIds", "instanceIds")))
+        for value in np.unique(semantic):
+            cls = SemanticClass(int(value))
+            seen.add(cls)
+            assert np.all(labels[semantic == value] == BY_NAME[CITYSCAPES_OF[cls]].id), cls
+        stem = labels_png.name[: -len("_gtFine_labelIds.png")]
+        for code in np.unique(codes[codes >= 1000]):
+            np.testing.assert_array_equal(codes == code, instance == tracks[(stem, int(code))])
+    assert {SemanticClass.ROAD, SemanticClass.CAR} <= seen
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    for labels_png in out.rglob("*_gtFine_labelIds.png"):
+        (pred / labels_png.name.replace("_gtFine_labelIds", "_pred")).write_bytes(labels_png.read_bytes())
+    metrics = evaluate_segmentation(out, pred)
+    assert metrics["mIoU"] == 1.0 and metrics["iIoU"] == 1.0
