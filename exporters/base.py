@@ -218,6 +218,7 @@ for _name in ("coco", "kitti", "yolo", "mcap", "rosbag2", "nuscenes"):
     register_format(_name, f"exporters.{_name}")
 register_format("mot", "exporters.mot")
 register_format("kitti-tracking", "exporters.kitti_tracking")
+register_format("kitti-depth", "exporters.kitti_depth")
 
 
 def formats() -> list[str]:

@@ -16,8 +16,8 @@ from pipeline.core.outputs import OutputSpec, json_file, mcap_file
 from pipeline.stages.common import command_line, config_hash, int_at_least, software_versions
 
 INPUT_ARGS = ("dataset",)
-HELP = ("export dataset records to COCO, KITTI, KITTI tracking, MOTChallenge, YOLO, MCAP (Foxglove), rosbag2 or "
-        "nuScenes")
+HELP = ("export dataset records to COCO, KITTI, KITTI tracking, KITTI depth, MOTChallenge, YOLO, MCAP (Foxglove), "
+        "rosbag2 or nuScenes")
 log = logging.getLogger(__name__)
 
 
@@ -43,9 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"objects more occluded than F become ignore regions (default: {DEFAULT_MAX_OCCLUSION})")
     parser.add_argument("--compression", choices=[c.value for c in Compression],
                         help=f"MCAP/rosbag2 chunk compression (default: {Compression.ZSTD.value})")
-    parser.add_argument("--camera", help="KITTI, KITTI tracking, MOT: the camera exported as image_2 / the sequence "
-                        "(default: the first)")
-    parser.add_argument("--lidar", help="KITTI, KITTI tracking: the LiDAR exported as velodyne (default: the first)")
+    parser.add_argument("--camera", help="KITTI, KITTI tracking, KITTI depth, MOT: the camera exported as image_2 / "
+                        "the sequence (default: the first)")
+    parser.add_argument("--lidar", help="KITTI, KITTI tracking, KITTI depth: the LiDAR exported as velodyne / "
+                        "projected into velodyne_raw (default: the first)")
     parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -111,9 +112,10 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 _FILTERED = ("coco", "kitti", "yolo", "mcap", "rosbag2", "kitti-tracking", "mot")
 # Options that only some formats read: given for another format, they would be ignored without a word.
-_FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "mot"), "lidar": ("kitti", "kitti-tracking"),
+_FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "kitti-depth", "mot"),
+                   "lidar": ("kitti", "kitti-tracking", "kitti-depth"),
                    "compression": ("mcap", "rosbag2"),
-                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot", "nuscenes"),
+                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "kitti-depth", "mot", "nuscenes"),
                    # the camera object filter; nuScenes annotates objects in 3D whatever the cameras see
                    "min_visible_px": _FILTERED, "max_occlusion": _FILTERED}
 
