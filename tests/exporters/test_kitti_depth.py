@@ -274,3 +274,16 @@ def test_a_distorted_camera_is_refused(tmp_path, morning):
     with pytest.raises(ExportError, match="camera front has lens distortion"):
         get_exporter("kitti-depth").export([root], tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_exports_kitti_depth_and_refuses_the_object_filter(tmp_path, morning, capsys):
+    from pipeline.stages.cli import main
+
+    out = tmp_path / "kd"
+    assert main(["export", "--dataset", str(morning), "--format", "kitti-depth", "--out", str(out), "--camera", "front",
+                 "--lidar", "top", "--copy-images", "--no-progress"]) == 0
+    assert json.loads((out / "meta.json").read_text())["config"]["format"] == "kitti-depth"
+    assert json.loads((out / "export.json").read_text())["counts"]["images_copied"] == 2
+    assert main(["export", "--dataset", str(morning), "--format", "kitti-depth", "--out", str(tmp_path / "x"),
+                 "--min-visible-px", "5", "--no-progress"]) == 2
+    assert "--min-visible-px applies to --format coco" in capsys.readouterr().err and not (tmp_path / "x").exists()
