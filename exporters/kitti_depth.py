@@ -107,8 +107,8 @@ def sparse_depth(points_cam: np.ndarray, K: np.ndarray, width: int, height: int)
 def points_in_front(cloud: dict[str, np.ndarray], transform: np.ndarray) -> np.ndarray:
     """(M, 3) float64 camera-frame points, of a sweep's ``x_m``, ``y_m``, ``z_m`` columns under the (4, 4)
     ``transform``, that lie in front of the camera (z > 0): z first, so that x and y are computed only for those (a
-    sweep is 360 degrees, a camera sees a quarter of it); column by column, where a (N, 3) @ (3, 3) product goes
-    through BLAS at many times the cost."""
+    sweep is 360 degrees, about half of it behind the camera); column by column, where a (N, 3) @ (3, 3) product
+    goes through BLAS at many times the cost."""
     x, y, z = (cloud[c].astype(np.float64) for c in ("x_m", "y_m", "z_m"))
     r = transform
     depth = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + r[2, 3]
