@@ -219,6 +219,7 @@ for _name in ("coco", "kitti", "yolo", "mcap", "rosbag2", "nuscenes"):
 register_format("mot", "exporters.mot")
 register_format("kitti-tracking", "exporters.kitti_tracking")
 register_format("cityscapes", "exporters.cityscapes")
+register_format("kitti-depth", "exporters.kitti_depth")
 
 
 def formats() -> list[str]:

@@ -16,8 +16,8 @@ from pipeline.core.outputs import OutputSpec, json_file, mcap_file
 from pipeline.stages.common import command_line, config_hash, int_at_least, software_versions
 
 INPUT_ARGS = ("dataset",)
-HELP = ("export dataset records to COCO, KITTI, KITTI tracking, MOTChallenge, YOLO, MCAP (Foxglove), rosbag2, "
-        "nuScenes or Cityscapes")
+HELP = ("export dataset records to COCO, KITTI, KITTI tracking, KITTI depth, MOTChallenge, YOLO, MCAP (Foxglove), "
+        "rosbag2, nuScenes or Cityscapes")
 log = logging.getLogger(__name__)
 
 
@@ -43,9 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"objects more occluded than F become ignore regions (default: {DEFAULT_MAX_OCCLUSION})")
     parser.add_argument("--compression", choices=[c.value for c in Compression],
                         help=f"MCAP/rosbag2 chunk compression (default: {Compression.ZSTD.value})")
-    parser.add_argument("--camera", help="KITTI, KITTI tracking, MOT, Cityscapes: the camera exported as image_2 / the "
-                        "sequence / the city's images (default: the first)")
-    parser.add_argument("--lidar", help="KITTI, KITTI tracking: the LiDAR exported as velodyne (default: the first)")
+    parser.add_argument("--camera", help="KITTI, KITTI tracking, KITTI depth, MOT, Cityscapes: the camera exported "
+                        "as image_2 / the sequence / the city's images (default: the first)")
+    parser.add_argument("--lidar", help="KITTI, KITTI tracking, KITTI depth: the LiDAR exported as velodyne / "
+                        "projected into velodyne_raw (default: the first)")
     parser.add_argument("--copy-images", action="store_true", help="copy images instead of hard-linking them")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -111,9 +112,11 @@ def expand_datasets(paths: list[Path]) -> list[Path]:
 
 _FILTERED = ("coco", "kitti", "yolo", "mcap", "rosbag2", "kitti-tracking", "mot")
 # Options that only some formats read: given for another format, they would be ignored without a word.
-_FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "mot", "cityscapes"), "lidar": ("kitti", "kitti-tracking"),
+_FORMAT_OPTIONS = {"camera": ("kitti", "kitti-tracking", "kitti-depth", "mot", "cityscapes"),
+                   "lidar": ("kitti", "kitti-tracking", "kitti-depth"),
                    "compression": ("mcap", "rosbag2"),
-                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "mot", "nuscenes", "cityscapes"),
+                   "copy_images": ("coco", "kitti", "yolo", "kitti-tracking", "kitti-depth", "mot", "nuscenes",
+                                   "cityscapes"),
                    # the camera object filter; nuScenes annotates objects in 3D whatever the cameras see, Cityscapes
                    # every pixel
                    "min_visible_px": _FILTERED, "max_occlusion": _FILTERED}

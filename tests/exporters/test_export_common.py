@@ -15,7 +15,8 @@ from exporters.splits import SplitError, SplitSpec
 from pipeline.core.record import RecordError
 from tests.conftest import tree_hashes
 
-FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking", "nuscenes", "cityscapes"]
+FORMATS = ["coco", "kitti", "yolo", "mcap", "rosbag2", "mot", "kitti-tracking", "nuscenes", "kitti-depth",
+           "cityscapes"]
 
 
 def _out(base: Path, fmt: str) -> Path:
@@ -93,7 +94,8 @@ def test_same_record_twice_is_an_error(tmp_path, morning):
 
 
 def test_registry_lists_known_formats():
-    registered = ["coco", "kitti", "yolo", "mcap", "rosbag2", "nuscenes", "mot", "kitti-tracking", "cityscapes"]
+    registered = ["coco", "kitti", "yolo", "mcap", "rosbag2", "nuscenes", "mot", "kitti-tracking", "cityscapes",
+                  "kitti-depth"]
     assert formats() == registered and set(FORMATS) <= set(registered)
     with pytest.raises(KeyError, match=f"known formats: {', '.join(registered)}"):
         get_exporter("voc")

@@ -1,4 +1,5 @@
-"""Exports of a real rendered record (small SUMO run, 2 frames, default rig) read back by independent readers."""
+"""Exports of a real rendered record (``rendered`` in conftest.py: small SUMO run, 2 frames, default rig) read back by
+independent readers."""
 
 from __future__ import annotations
 
@@ -14,29 +15,6 @@ from pipeline.core.record import DatasetRecord
 from tests.exporters.test_export_kitti import box_contains, parse_calib, parse_label
 
 pytestmark = [pytest.mark.slow, pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")]
-
-
-@pytest.fixture(scope="module")
-def rendered(tmp_path_factory):
-    """highway, 80 vehicles, seed 2 (several cars in front of the ego), 2 frames under noon: ~10 s."""
-    from pipeline.core.config import ConditionConfig, RigConfig, load_config
-    from pipeline.stages.simulate import resolve_scenario, simulate
-
-    try:
-        from pipeline.stages.render import render
-    except ImportError as exc:  # the render stage is being built concurrently; skip rather than hide a pass
-        pytest.skip(f"render stage not importable yet: {exc}")
-
-    base = tmp_path_factory.mktemp("rendered")
-    config, _ = resolve_scenario("highway", vehicles=80, duration_s=2.0, warmup_s=20.0)
-    simulate(config, 2, base / "sim", progress=False)
-    rig = load_config(RigConfig, "default", "rigs")[0]
-    condition = load_config(ConditionConfig, "noon", "conditions")[0]
-    render(base / "sim", condition, rig, base / "highway-2-noon", frames=2, workers=1, progress=False)
-    labels = DatasetRecord(base / "highway-2-noon").labels
-    if not (labels["visible_px"] >= 20).any():
-        raise RuntimeError("the rendered fixture shows no object in front of the ego; pick another seed")
-    return base / "highway-2-noon"
 
 
 def test_coco_masks_of_a_rendered_record(rendered, tmp_path):

@@ -95,7 +95,7 @@ def out_path(tmp_path: Path, fmt: str) -> Path:
     return tmp_path / ("out.mcap" if get_exporter(fmt).writes_file else "out")
 
 
-@pytest.mark.parametrize("fmt", ["coco", "yolo", "mot", "kitti-tracking", "cityscapes"])
+@pytest.mark.parametrize("fmt", ["coco", "yolo", "mot", "kitti-tracking", "kitti-depth", "cityscapes"])
 def test_image_formats_refuse_a_record_without_a_camera_naming_it(tmp_path, radar_only, lidar_only, morning, fmt):
     for record, sensors in ((radar_only, r"cameras \[\], LiDARs \[\], radars \[front_radar\]"),
                             (lidar_only, r"cameras \[\], LiDARs \[top\], radars \[\]")):

@@ -221,7 +221,7 @@ def test_cli_export_and_evaluate_tracking(tmp_path, morning, capsys):
     assert (out / "meta.json").is_file() and (out / "train" / "highway_s1_morning_front" / "gt" / "gt.txt").is_file()
     assert main(["export", "--dataset", str(morning), "--format", "mot", "--lidar", "top", "--out",
                  str(tmp_path / "x")]) == 2
-    assert "--lidar applies to --format kitti, kitti-tracking only, not mot" in capsys.readouterr().err
+    assert "--lidar applies to --format kitti, kitti-tracking, kitti-depth only, not mot" in capsys.readouterr().err
     results = tmp_path / "results"
     results.mkdir()
     gt = (out / "train" / "highway_s1_morning_front" / "gt" / "gt.txt").read_text().splitlines()
