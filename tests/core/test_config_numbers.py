@@ -31,9 +31,9 @@ from tests.conftest import REPO
 BAD_CONDITION_LINES = [
     ("lens:\n  exposure: .inf\n", "lens.exposure", "finite"),
     ("lens:\n  exposure: -.inf\n", "lens.exposure", "finite"),
-    ("lens:\n  exposure: 1e30\n", "lens.exposure", "magnitude"),
-    ("lens:\n  exposure: 1.0e-30\n", "lens.exposure", "magnitude"),
-    ("noise:\n  read_std: 1.0e+30\n", "noise.read_std", "magnitude"),
+    ("sun:\n  intensity: 1e30\n", "sun.intensity", "magnitude"),
+    ("sun:\n  intensity: 1.0e-30\n", "sun.intensity", "magnitude"),
+    ("lens:\n  bloom_strength: 1.0e+30\n", "lens.bloom_strength", "magnitude"),
     ("sky:\n  zenith_rgb: [0.2, .nan, 0.6]\n", "sky.zenith_rgb[1]", "finite"),
     ("sun:\n  intensity: .NaN\n", "sun.intensity", "finite"),
     ("fog:\n  visibility_m: .inf\n", "fog.visibility_m", "finite"),
@@ -53,9 +53,10 @@ def test_condition_with_bad_number_fails_naming_file_and_key(tmp_path: Path, tex
 
 def test_limits_are_inclusive_and_zero_is_allowed(tmp_path: Path) -> None:
     path = tmp_path / "edge.yaml"
-    path.write_text(f"name: edge\nlens:\n  exposure: {MAX_ABS!r}\n  bloom_strength: 0.0\nnoise:\n  shot: {MIN_ABS!r}\n")
+    path.write_text(f"name: edge\nsun:\n  intensity: {MAX_ABS!r}\nlens:\n  bloom_strength: 0.0\n"
+                    f"  lens_flare: {MIN_ABS!r}\n")
     config, _ = load_config(ConditionConfig, path, "conditions")
-    assert (config.lens.exposure, config.lens.bloom_strength, config.noise.shot) == (MAX_ABS, 0.0, MIN_ABS)
+    assert (config.sun.intensity, config.lens.bloom_strength, config.lens.lens_flare) == (MAX_ABS, 0.0, MIN_ABS)
 
 
 def test_scenario_distribution_and_experiment_numbers(tmp_path: Path) -> None:
