@@ -52,13 +52,10 @@ def occlusion_level(occlusion: np.ndarray) -> np.ndarray:
     return np.searchsorted(np.asarray(OCCLUSION_LEVEL_EDGES), np.asarray(occlusion, dtype=np.float64), side="right")
 
 
-def sensors_of(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo, LidarInfo]:
-    """The camera and LiDAR a record contributes; :class:`ExportError` if missing or not KITTI-compatible."""
+def camera_and_lidar(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo, LidarInfo]:
+    """The camera (``options.camera``, default the first) and the LiDAR (``options.lidar``, default the first) of a
+    record that has both; :class:`ExportError` naming the record when the one asked for is not there."""
     info, root = src.info, src.record.root
-    if not info.cameras or not info.lidars:
-        missing = "camera or LiDAR" if not (info.cameras or info.lidars) else "camera" if not info.cameras else "LiDAR"
-        raise ExportError(f"{root}: the record has no {missing} ({sensors_text(info)}); KITTI needs a camera "
-                          "(image_2) and a LiDAR (velodyne) in every record")
     try:
         cam = info.camera(options.camera) if options.camera else info.cameras[0]
     except KeyError as exc:
@@ -67,13 +64,24 @@ def sensors_of(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo, L
     name = options.lidar or info.lidars[0].name
     if name not in lidars:
         raise ExportError(f"{root}: no LiDAR {name!r}; LiDARs: {', '.join(lidars)}")
+    return cam, lidars[name]
+
+
+def sensors_of(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo, LidarInfo]:
+    """The camera and LiDAR a record contributes; :class:`ExportError` if missing or not KITTI-compatible."""
+    info, root = src.info, src.record.root
+    if not info.cameras or not info.lidars:
+        missing = "camera or LiDAR" if not (info.cameras or info.lidars) else "camera" if not info.cameras else "LiDAR"
+        raise ExportError(f"{root}: the record has no {missing} ({sensors_text(info)}); KITTI needs a camera "
+                          "(image_2) and a LiDAR (velodyne) in every record")
+    cam, lidar = camera_and_lidar(src, options)
     if np.any(np.abs(cam.distortion) > 0):
         raise ExportError(f"{root}: camera {cam.name} has lens distortion {cam.distortion}; KITTI's calib models "
                           "a rectified pinhole camera (export COCO/MCAP instead, or render without distortion)")
     if not np.allclose(cam.T_array[:3, 1], [0.0, 0.0, -1.0], atol=1e-6):
         raise ExportError(f"{root}: camera {cam.name} is not level (its image y axis is {cam.T_array[:3, 1]} in the "
                           "ego frame, not straight down); KITTI's 3D labels assume a level camera")
-    return cam, lidars[name]
+    return cam, lidar
 
 
 def calib_text(cam: CameraInfo, lidar: LidarInfo) -> str:

@@ -41,6 +41,7 @@ import numpy as np
 from tqdm import tqdm
 
 from exporters.base import Exporter, ExportError, ExportOptions, sensors_text
+from exporters.kitti import camera_and_lidar
 from exporters.source import ExportSource, RecordSource, safe_name
 from exporters.writing import link_or_copy
 from pipeline.core.png import encode_png
@@ -163,18 +164,11 @@ def depth_sensors(src: RecordSource, options: ExportOptions) -> tuple[CameraInfo
     if not info.lidars:
         raise ExportError(f"{root}: the record has no LiDAR ({sensors_text(info)}); a kitti-depth export writes each "
                           "frame's LiDAR sweep projected into the camera (proj_depth/velodyne_raw), so it needs one")
-    try:
-        cam = info.camera(options.camera) if options.camera else info.cameras[0]
-    except KeyError as exc:
-        raise ExportError(f"{root}: {exc.args[0]}") from None
-    lidars = {x.name: x for x in info.lidars}
-    name = options.lidar or info.lidars[0].name
-    if name not in lidars:
-        raise ExportError(f"{root}: no LiDAR {name!r}; LiDARs: {', '.join(lidars)}")
+    cam, lidar = camera_and_lidar(src, options)
     if np.any(np.abs(cam.distortion) > 0):
         raise ExportError(f"{root}: camera {cam.name} has lens distortion {cam.distortion}; KITTI's depth maps belong "
                           "to rectified pinhole images (render without distortion)")
-    return cam, lidars[name]
+    return cam, lidar
 
 
 def check_files(src: RecordSource, cam: CameraInfo, lidar: LidarInfo) -> None:

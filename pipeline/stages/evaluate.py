@@ -72,18 +72,25 @@ def refuse_detection_options(args: argparse.Namespace) -> None:
         raise ValueError(f"{', '.join(given)} apply to --task detection only, not {args.task}")
 
 
+def write_task_output(args: argparse.Namespace, task: str, metrics: dict, report: str | None, **config) -> None:
+    """The output folder of a task scored by its community's tool, written atomically: metrics.json, report.md
+    (when given) and meta.json, whose config names the task, the inputs and ``config``."""
+    config = {"task": task, "gt": str(args.gt), "detections": str(args.detections), **config}
+    with atomic_output_dir(args.out) as tmp:
+        write_json(tmp / "metrics.json", metrics)
+        if report is not None:
+            (tmp / "report.md").write_text(report)
+        write_meta(tmp, stage="evaluate", config=config, seed=None)
+
+
 def main_tracking(args: argparse.Namespace) -> int:
     """--task tracking: TrackEval's HOTA, CLEAR and identity metrics (evaluation.tracking) into metrics.json."""
     from evaluation.tracking import evaluate_tracking, markdown_summary
 
     refuse_detection_options(args)
     metrics = evaluate_tracking(args.gt, args.detections)
-    config = {"task": "tracking", "gt": str(args.gt), "detections": str(args.detections),
-              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}
-    with atomic_output_dir(args.out) as tmp:
-        write_json(tmp / "metrics.json", metrics)
-        (tmp / "report.md").write_text(markdown_summary(metrics))
-        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    write_task_output(args, "tracking", metrics, markdown_summary(metrics), gt_sha256=path_sha256(args.gt),
+                      detections_sha256=path_sha256(args.detections))
     c = metrics["combined"]
     log.info("HOTA %.4f MOTA %.4f IDF1 %.4f (%d sequence(s))", c["HOTA"], c["MOTA"], c["IDF1"],
              len(metrics["sequences"]))
@@ -97,12 +104,9 @@ def main_nuscenes(args: argparse.Namespace) -> int:
 
     refuse_detection_options(args)
     metrics = evaluate_nuscenes_detection(args.gt, args.detections, eval_set=args.eval_set)
-    config = {"task": "nuscenes-detection", "gt": str(args.gt), "detections": str(args.detections),
-              "eval_set": args.eval_set, "gt_sha256": path_sha256(args.gt / find_version(args.gt)),
-              "detections_sha256": path_sha256(args.detections)}
-    with atomic_output_dir(args.out) as tmp:
-        write_json(tmp / "metrics.json", metrics)
-        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    write_task_output(args, "nuscenes-detection", metrics, None, eval_set=args.eval_set,
+                      gt_sha256=path_sha256(args.gt / find_version(args.gt)),
+                      detections_sha256=path_sha256(args.detections))
     log.info("mAP %.4f NDS %.4f (%s)", metrics["mean_ap"], metrics["nd_score"],
              ", ".join(f"{k} {v if v is None else round(v, 4)}" for k, v in metrics["tp_errors"].items()))
     return 0
@@ -115,12 +119,8 @@ def main_segmentation(args: argparse.Namespace) -> int:
 
     refuse_detection_options(args)
     metrics = evaluate_segmentation(args.gt, args.detections)
-    config = {"task": "segmentation", "gt": str(args.gt), "detections": str(args.detections),
-              "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections)}
-    with atomic_output_dir(args.out) as tmp:
-        write_json(tmp / "metrics.json", metrics)
-        (tmp / "report.md").write_text(markdown_summary(metrics))
-        write_meta(tmp, stage="evaluate", config=config, seed=None)
+    write_task_output(args, "segmentation", metrics, markdown_summary(metrics), gt_sha256=path_sha256(args.gt),
+                      detections_sha256=path_sha256(args.detections))
     log.info("mIoU %s iIoU %s (%d image(s))", metrics["mIoU"], metrics["iIoU"], metrics["images"])
     return 0
 
