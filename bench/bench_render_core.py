@@ -21,12 +21,14 @@ import numpy as np
 import open3d as o3d
 
 from pipeline.core.classes import ObjectClass, SemanticClass
-from pipeline.core.config.sensors import CameraConfig, LidarConfig
+from pipeline.core.config.sensors import CameraConfig, ImageSensorConfig, LidarConfig
 from pipeline.core.geometry import Boxes3D, Transform
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import get_condition
+from pipeline.sensors.exposure import exposure_for
 from pipeline.sensors.groundtruth import camera_labels, project_actors
 from pipeline.sensors.lidar import Lidar, render_lidar
+from pipeline.sensors.post import sensor_noise
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.shading import shade, to_srgb8
 from pipeline.world.actor_shapes import cuboid, wheel
@@ -36,6 +38,7 @@ from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
 
 EGO_SPEED_MPS = 15.0
+EXPOSURE = exposure_for(ImageSensorConfig(), 1 / 1000, 1.0)  # a daylight exposure's noise on the bare shading
 DIMS = {"car": (4.5, 1.8, 1.5), "van": (5.0, 2.0, 2.2), "truck": (8.0, 2.5, 3.5), "bus": (12.0, 2.55, 3.2),
         "motorcycle": (2.2, 0.8, 1.5), "bicycle": (1.8, 0.6, 1.75), "pedestrian": (0.5, 0.6, 1.75)}
 
@@ -192,8 +195,8 @@ def main() -> None:
         image = np.where(hits.instance_id > 0, hits.actor_index + 1, 0).astype(np.int32).reshape(camera.height, -1)
         camera_labels(scene, camera, cam_to_world, amodal, image)
         c3 = time.perf_counter()
-        radiance = condition.noisy(condition.fog(shade(scene, crays, hits, condition), hits.t_m, hits.hit),
-                                   np.random.default_rng(f))
+        radiance = sensor_noise(condition.fog(shade(scene, crays, hits, condition), hits.t_m, hits.hit),
+                                EXPOSURE, np.random.default_rng(f))
         c4 = time.perf_counter()
         to_srgb8(radiance)
         c5 = time.perf_counter()

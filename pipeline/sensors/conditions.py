@@ -25,13 +25,12 @@ from pipeline.core.config.sensors import (
     LidarConditionConfig,
     LidarConfig,
     RainConfig,
-    SensorNoiseConfig,
     StreetLampConfig,
 )
 from pipeline.core.geometry import Transform
 from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
-from pipeline.sensors.post import luminance, sensor_noise
+from pipeline.sensors.post import luminance
 from pipeline.sensors.shadows import sun_disc
 from pipeline.sensors.sky import gradient_params, preetham_params
 from pipeline.world.actors import Actors
@@ -45,7 +44,7 @@ class Condition:
     definition of every field, default and check) and the values derived from it, as properties.
 
     Shading (:func:`pipeline.sensors.shading.shade`) reads the sun, sky, exposure, glow and wetness properties;
-    the camera's fog, noise and spot lights and the LiDAR's degradation are methods here.
+    the camera's fog and spot lights and the LiDAR's degradation are methods here.
     """
 
     def __init__(self, config: ConditionConfig) -> None:
@@ -109,7 +108,9 @@ class Condition:
 
     @property
     def exposure(self) -> float:
-        """The one exposure: the shading applies it, the noise model reads it as the gain."""
+        """The exposure compensation: the shading multiplies the radiance by it, and the camera's auto-exposure
+        divides it out of the light it meters and aims at its key times it (pipeline.sensors.exposure): the image is
+        brighter by this factor wherever the sensor's limits allow."""
         return self.config.lens.exposure
 
     @property
@@ -159,10 +160,6 @@ class Condition:
         return self.config.rain
 
     @property
-    def noise(self) -> SensorNoiseConfig:
-        return self.config.noise
-
-    @property
     def lens(self) -> LensConfig:
         return self.config.lens
 
@@ -181,11 +178,6 @@ class Condition:
         channels = cv2.split(np.ascontiguousarray(radiance, np.float32).reshape(-1, 1, 3))
         haze = 1.0 - transmittance
         return cv2.merge([c.reshape(-1) * transmittance + fog[k] * haze for k, c in enumerate(channels)]).reshape(-1, 3)
-
-    def noisy(self, radiance: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Shot + read noise (no grain) on radiance of any shape, drawn from ``rng`` (see
-        :func:`pipeline.sensors.post.sensor_noise`; the renderer applies the full model through the post effects)."""
-        return sensor_noise(radiance, self.noise.model_copy(update={"grain_std": 0.0}), self.lens.exposure, rng)
 
     def frame_lights(
         self,

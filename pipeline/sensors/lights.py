@@ -48,6 +48,7 @@ import numpy as np
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config.sensors import HeadlightConfig, StreetLampConfig
 from pipeline.core.geometry import Transform
+from pipeline.core.photometry import lux_to_irradiance
 from pipeline.world.actors import Actors, unit_to_world
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, Hits, take_columns
@@ -60,7 +61,9 @@ HEADLIGHT_AHEAD_M = 0.1  # lights sit just ahead of the lamp plaques, so a car n
 LIT_CLASSES = (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.BUS, ObjectClass.MOTORCYCLE)
 DEFAULT_EGO_SIZE_M = (4.5, 1.8, 1.5)
 MIN_DISTANCE_M = 0.5  # the inverse-square law is clamped closer than this
-MIN_IRRADIANCE = 2e-3  # light below this (before exposure) is not shaded: under one 8-bit step on dark asphalt
+# Light below this is not shaded: 0.05 lx, under one 8-bit step on dark asphalt even at the night camera's longest
+# exposure and highest gain (pipeline.sensors.exposure), and far below the illuminance of a lit street (EN 13201).
+MIN_IRRADIANCE = lux_to_irradiance(0.05)
 RETRO_REFERENCE_RAD = np.radians(1.05)  # observation angle of the 30 m geometry at which R is given
 RETRO_MIN_RAD = np.radians(0.5)  # closer to the light's direction R is taken as at this angle
 RETRO_WIDTH_RAD = np.radians(6.0)  # beyond a few degrees from the light's direction nothing returns

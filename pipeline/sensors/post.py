@@ -1,16 +1,16 @@
 """Image post effects on linear radiance (after exposure, before tone mapping), with OpenCV, seeded.
 
 Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
-lens), lens effects (bloom, flare ghosts, vignetting), the camera's wide-dynamic-range processing, then the sensor's
-noise. Images are (H, W, 3) float32
+lens), lens effects (bloom, flare ghosts, point spread, vignetting), the sensor's noise, then the image processor
+(wide-dynamic-range curve, highlights compressed keeping their hue). Images are (H, W, 3) float32
 linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized Gaussian fields
 from a counter-based generator keyed by one draw of it: :func:`standard_normal`), so the same generator state
 gives the same image. Effects that need randomness are skipped when no generator is given.
 
 - Vignetting: gain(r) = 1 - v * (r / r_corner)^2 with r the distance from the image centre; the corners
   keep exactly 1 - v.
-- Noise (shot + read, at gain g = exposure): sigma^2 = g * shot * max(s, 0) + (g * read_std)^2 per channel,
-  plus grain: luminance noise blurred by a Gaussian of ``grain_size_px`` and rescaled to std g * grain_std.
+- Noise: the sensor's photon shot noise and read noise at the frame's exposure (:mod:`pipeline.sensors.exposure`):
+  sigma^2 = shot_scale * max(s, 0) + read_variance per channel and pixel.
 - Motion blur: per-pixel image motion of the static world during the shutter time (from depth and the ego's
   velocity), averaged over samples along it with ``cv2.remap``.
 - Wide dynamic range (``wdr_gamma`` < 1): automotive cameras are HDR sensors whose processing compresses a scene's
@@ -29,13 +29,17 @@ gives the same image. Effects that need randomness are skipped when no generator
 from __future__ import annotations
 
 import functools
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 from scipy.special import ndtri
 
-from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
+from pipeline.core.config.sensors import LensConfig, RainConfig
 from pipeline.core.jit import as_input, kernel
+
+if TYPE_CHECKING:
+    from pipeline.sensors.exposure import Exposure
 
 MOTION_BLUR_SAMPLES = 16
 FLARE_SOURCES = 4
@@ -139,17 +143,13 @@ def _normal_draws(out, key, quantiles):
         out[i] = _draw(_splitmix64(key, i // 4), i % 4, quantiles)
 
 
-def sensor_noise(image: np.ndarray, cfg: SensorNoiseConfig, gain: float, rng: np.random.Generator) -> np.ndarray:
-    """Shot + read noise and grain at exposure gain ``gain`` (see the module docstring)."""
+def sensor_noise(image: np.ndarray, exposure: Exposure, rng: np.random.Generator) -> np.ndarray:
+    """``image`` + z sqrt(shot_scale max(image, 0) + read_variance) of the ``exposure``, z the draws of
+    :func:`standard_normal` (made where they are used)."""
     image = as_input(image, np.float32)
     out = np.empty(image.shape, np.float32)
-    # The draws of standard_normal(image.shape, rng), made where they are used.
-    _add_noise(image.reshape(-1), out.reshape(-1), np.float32(gain * cfg.shot),
-               np.float32((gain * cfg.read_std) ** 2), np.uint64(rng.integers(1 << 63)), _QUANTILES)
-    if cfg.grain_std > 0:
-        grain = cv2.GaussianBlur(standard_normal(image.shape[:2], rng), (0, 0), cfg.grain_size_px)
-        grain *= np.float32(gain * cfg.grain_std / max(float(grain.std()), 1e-6))
-        out += per_channel(grain)
+    _add_noise(image.reshape(-1), out.reshape(-1), np.float32(exposure.shot_scale), np.float32(exposure.read_variance),
+               np.uint64(rng.integers(1 << 63)), _QUANTILES)
     return out
 
 
@@ -243,13 +243,32 @@ def point_spread(image: np.ndarray, sigma_px: float) -> np.ndarray:
     return out
 
 
+BLOOM_CEILING = 4.0  # the image processor's white (the tone curve's top): brighter light blooms no more than this
+
+
+def hold_hue(image: np.ndarray, white: float) -> np.ndarray:
+    """Scale down each pixel of the (H, W, 3) float32 linear ``image`` whose brightest channel exceeds ``white`` so
+    that it equals ``white``, keeping its hue: an HDR camera's image processor compresses what its sensor holds
+    beyond the output's range instead of clipping each channel (a red lamp stays red, not white)."""
+    peak = image.max(axis=2)
+    over = peak > np.float32(white)
+    if not over.any():
+        return image
+    out = image.copy()
+    out[over] *= (np.float32(white) / peak[over])[:, None]
+    return out
+
+
 def bloom(image: np.ndarray, threshold: float, strength: float, sigma_px: float) -> np.ndarray:
-    """Add the blurred excess above ``threshold`` (glow of lamps, headlights, the sun's reflections)."""
+    """Add the blurred excess above ``threshold`` (glow of lamps, headlights, the sun's reflections), of the image
+    clipped at BLOOM_CEILING: the glow of what the camera renders white. (At night the sensor's longest exposure
+    and highest gain scale a lamp's face to thousands; the lens's veiling glare of such sources is not modelled.)"""
     if strength == 0:
         return image
     h, w = image.shape[:2]
     # The part above the threshold: OpenCV's threshold to zero is faster than numpy's maximum.
-    excess = cv2.threshold(image - np.float32(threshold), 0.0, 0.0, cv2.THRESH_TOZERO)[1]
+    clipped = cv2.threshold(image, BLOOM_CEILING, 0.0, cv2.THRESH_TRUNC)[1]
+    excess = cv2.threshold(clipped - np.float32(threshold), 0.0, 0.0, cv2.THRESH_TOZERO)[1]
     small = cv2.resize(excess, (max(w // 4, 1), max(h // 4, 1)), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), max(sigma_px / 4.0, 0.5)) + cv2.GaussianBlur(
         small, (0, 0), max(sigma_px, 0.5)) * np.float32(0.5)
@@ -326,23 +345,9 @@ def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.nd
     return image * (1.0 - mask) + blurred * mask
 
 
-AE_KEY = 0.12  # log-average luminance a metered frame is scaled to (about a morning frame's; noon ~0.25, night ~0.01)
-AE_GAIN_LIMITS = (1.0, 2.5)  # the metering only brightens, by up to 1.3 stops: dark frames, not bright ones
-
-
-def auto_exposure_gain(image: np.ndarray) -> float:
-    """The gain a camera's metering applies to an (H, W, 3) float32 linear image (after the condition's exposure):
-    AE_KEY over the image's log-average luminance (Rec. 709 weights, every 4th pixel and row, +1e-4 against log 0),
-    clipped to AE_GAIN_LIMITS."""
-    sub = np.asarray(image, np.float32)[::4, ::4]
-    log_average = float(np.exp(np.mean(np.log(1e-4 + np.maximum(luminance(sub), 0.0)), dtype=np.float64)))
-    return float(np.clip(AE_KEY / log_average, *AE_GAIN_LIMITS))
-
-
 def apply_post(
     image: np.ndarray,
     lens: LensConfig,
-    noise: SensorNoiseConfig,
     rain: RainConfig | None,
     rng: np.random.Generator | None,
     *,
@@ -350,14 +355,16 @@ def apply_post(
     sky_level: float = 0.0,
     gain: float = 1.0,
     psf_sigma_px: float = 0.0,
+    sensor: Exposure | None = None,
 ) -> np.ndarray:
     """All post effects of a condition on an (H, W, 3) float32 linear image (see the module docstring).
 
     ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``sky_level`` the
-    mean sky radiance after exposure (sets the brightness of rain streaks); ``gain`` the metering's gain on top of
-    the condition's exposure (:func:`auto_exposure_gain`): the image is scaled by it first; the sensor noise stays
-    the condition's (its figures describe the image processor's output, denoised at high gain); ``psf_sigma_px``
-    the camera's point-spread function (:func:`point_spread`), applied with the other optics, before the sensor.
+    mean sky radiance after exposure (sets the brightness of rain streaks); ``gain`` scales the image first (the
+    camera's exposure, :mod:`pipeline.sensors.exposure`); ``psf_sigma_px`` the camera's point-spread function
+    (:func:`point_spread`), applied with the other optics, before the sensor; ``sensor`` the frame's
+    :class:`pipeline.sensors.exposure.Exposure`, whose shot and read noise the sensor adds after the optics and
+    before the image processor (None, or no ``rng``: no noise).
     """
     out = np.asarray(image, np.float32)
     if gain != 1.0:
@@ -373,7 +380,6 @@ def apply_post(
         out = rain_drops(out, rain.drops, rng)
     out = point_spread(out, psf_sigma_px)
     out = vignette(out, lens.vignetting)
-    out = wide_dynamic_range(out, lens.wdr_gamma)
-    if rng is not None:
-        out = sensor_noise(out, noise, lens.exposure, rng)
-    return out
+    if sensor is not None and rng is not None:
+        out = sensor_noise(out, sensor, rng)
+    return hold_hue(wide_dynamic_range(out, lens.wdr_gamma), BLOOM_CEILING)

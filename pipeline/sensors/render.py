@@ -23,8 +23,9 @@ from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition, get_condition
+from pipeline.sensors.exposure import auto_exposure
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
-from pipeline.sensors.post import apply_post, auto_exposure_gain, motion_flow
+from pipeline.sensors.post import apply_post, motion_flow
 from pipeline.sensors.shading import shade, sky, to_srgb8
 from pipeline.sensors.shadows import (
     SHADOW_FILTER_DEPTH,
@@ -99,6 +100,7 @@ def render_camera(
     samples = camera.sample_directions
     indirect = camera.config.quality == "realistic"
     texture_rad = 1.0 / camera.fx if indirect else 0.0  # the realistic camera textures the static world
+    metered = None  # the radiance the camera meters: its pixel centres' (so that anti-aliasing moves no exposure)
     if len(samples) == 1:
         radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
                                  hits.t_m, hits.hit)
@@ -112,6 +114,7 @@ def render_camera(
             radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w),
                                            sunlit), hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
+            metered = radiance.reshape(h, w, 3).copy()
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
         for sample in samples:  # loop over samples; all chosen pixels vectorised
@@ -122,16 +125,23 @@ def render_camera(
                                         texture_rad, sunlit=lent), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
+    radiance = radiance.reshape(h, w, 3)
+    # The camera meters its frame and exposes it within its sensor's limits (pipeline.sensors.exposure); the
+    # exposure time blurs motion, the sensor's shot and read noise follow from the signal and the gain.
+    exposure = auto_exposure(radiance if metered is None else metered, camera.config.sensor, condition.exposure,
+                             shaded_with=condition.exposure)
+    gain = exposure.scale / condition.exposure
+    shutter_s = exposure.time_s
     flow = None
-    shutter_s = condition.lens.motion_blur_exposure_s
     if shutter_s > 0 and ego_speed_mps != 0:
         shift_world = ego_pose.rotation[:, 0] * (ego_speed_mps * shutter_s)
         points = np.where(hits.hit[:, None], dirs_cam * hits.t_m[:, None], np.inf)
         flow = motion_flow(points, cam_to_world.rotation.T @ shift_world, camera.fx, camera.fy).reshape(h, w, 2)
-    radiance = radiance.reshape(h, w, 3)
-    gain = auto_exposure_gain(radiance) if indirect else 1.0  # a realistic camera meters its frame
-    image = apply_post(radiance, condition.lens, condition.noise, condition.rain, rng, flow=flow,
-                       sky_level=_sky_level(condition), gain=gain, psf_sigma_px=camera.config.psf_sigma_px)
+        if float(np.abs(flow).max()) < MIN_BLUR_PX:  # a daylight exposure: no pixel moves visibly
+            flow = None
+    image = apply_post(radiance, condition.lens, condition.rain, rng, flow=flow,
+                       sky_level=_sky_level(condition), gain=gain, psf_sigma_px=camera.config.psf_sigma_px,
+                       sensor=exposure)
     return CameraFrame(
         rgb=to_srgb8(image, "filmic" if indirect else "soft"),
         instance_id=hits.instance_id.reshape(h, w),
@@ -143,6 +153,7 @@ def render_camera(
     )
 
 
+MIN_BLUR_PX = 0.25  # motion during the exposure below this everywhere is not blurred (it would not show)
 # Edge tests between neighbouring pixel centres (see edge_pixels).
 EDGE_INVERSE_DEPTH = 0.02  # |second difference of 1/z| over 1/z: 0 on any plane, large at a silhouette
 EDGE_NORMAL_COS = 0.9  # normals of one actor's neighbouring pixels further apart than this: a body crease

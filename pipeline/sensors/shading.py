@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
+from pipeline.core.photometry import luminance_to_radiance, lux_to_irradiance
 from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
 from pipeline.sensors.shadows import sun_shares
@@ -36,10 +37,16 @@ TAIL_LIGHT_RGB = np.array([0.8, 0.03, 0.02], np.float32)
 HEAD_LIGHT_RGB = np.array([3.0, 2.9, 2.6], np.float32)
 STREET_LAMP_RGB = np.array([3.0, 2.4, 1.5], np.float32)
 MARKER_LAMP_RGB = np.array([1.6, 0.7, 0.05], np.float32)  # amber side markers of long vehicles
-PLATE_LAMP_RGB = np.array([0.6, 0.6, 0.6], np.float32)  # a rear plate's lamp: white light on the plate
+# A rear plate's lamp: white light on the plate, 30 lx (ECE R4 asks a plate luminance of at least 2.5 cd/m^2 at every
+# test point; 30 lx on the retroreflective white plate, albedo ~0.8, gives ~8 cd/m^2).
+PLATE_LAMP_RGB = np.full(3, lux_to_irradiance(30.0), np.float32)
 # A room lit behind a façade pane: warm (tungsten-like) light times the pane's textured albedo, so each window shows
 # its own room, brighter or dimmer, instead of a flat saturated rectangle.
-ROOM_LIGHT_RGB = np.array([0.8, 0.55, 0.3], np.float32)
+# A lit room seen through its pane has a luminance of some tens of cd/m^2 (rooms lit to 100-500 lx, walls, curtains
+# and furniture of albedo 0.2-0.5, a pane passing 70 %); this light times the lit pane's albedo (0.11) gives 20 cd/m^2
+# at a glow scale of 1.
+ROOM_LIGHT_RGB = (np.array([0.8, 0.55, 0.3]) * luminance_to_radiance(20.0) / 0.11
+                  / (0.2126 * 0.8 + 0.7152 * 0.55 + 0.0722 * 0.3)).astype(np.float32)
 # What glows with the vehicle lights (dusk, night): material -> (radiance added, the condition's glow scale, on actors
 # only).
 NIGHT_GLOWS = {

@@ -3,10 +3,13 @@ point-spread function."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from pipeline.core.config.sensors import LensConfig, RainConfig, SensorNoiseConfig
+from pipeline.core.config.sensors import ImageSensorConfig, LensConfig, RainConfig
+from pipeline.sensors.exposure import exposure_for
 from pipeline.sensors.post import (
     apply_post,
     bloom,
@@ -32,16 +35,19 @@ def test_vignetting_darkens_corners_by_the_configured_factor():
     assert out[H // 2, W // 2, 0] == pytest.approx(1.0, abs=1e-5)
     assert np.all(np.diff(out[H // 2, W // 2:, 0]) <= 0)  # monotone towards the edge
     lens = LensConfig(vignetting=0.3)
-    post = apply_post(image, lens, SensorNoiseConfig(), None, None)
+    post = apply_post(image, lens, None, None)
     np.testing.assert_allclose(post, out)
 
 
+EXPOSURE = exposure_for(ImageSensorConfig(), 1 / 60, 4.0)  # a dim frame's exposure: visible noise
+
+
 def test_noise_follows_the_shot_plus_read_model():
-    cfg = SensorNoiseConfig(shot=0.001, read_std=0.004)
-    for gain, level in ((1.0, 0.2), (3.0, 0.05)):
+    for gain, level in ((1.0, 0.2), (16.0, 0.05)):
+        exposure = exposure_for(ImageSensorConfig(), 1 / 100, gain)
         image = np.full((400, 400, 3), level, np.float32)
-        noisy = sensor_noise(image, cfg, gain, np.random.default_rng(1))
-        expected = np.sqrt(gain * cfg.shot * level + (gain * cfg.read_std) ** 2)
+        noisy = sensor_noise(image, exposure, np.random.default_rng(1))
+        expected = np.sqrt(exposure.shot_scale * level + exposure.read_variance)
         assert noisy.std() == pytest.approx(expected, rel=0.02)
         assert noisy.mean() == pytest.approx(level, abs=3 * expected / 400)
 
@@ -49,32 +55,19 @@ def test_noise_follows_the_shot_plus_read_model():
 def test_each_pixel_gets_its_own_sigma_times_one_draw():
     rng = np.random.default_rng(4)
     image = (rng.random((30, 40, 3)) * 1.2 - 0.2).astype(np.float32)  # some below 0: read noise only there
-    cfg = SensorNoiseConfig(shot=0.01, read_std=0.02, grain_std=0.0)
-    noisy = sensor_noise(image, cfg, 2.0, np.random.default_rng(5))
+    noisy = sensor_noise(image, EXPOSURE, np.random.default_rng(5))
     draws = standard_normal(image.shape, np.random.default_rng(5))  # the same draws: the same generator state
-    sigma = np.sqrt(2.0 * 0.01 * np.maximum(image.astype(np.float64), 0.0) + (2.0 * 0.02) ** 2)
+    sigma = np.sqrt(EXPOSURE.shot_scale * np.maximum(image.astype(np.float64), 0.0) + EXPOSURE.read_variance)
     np.testing.assert_allclose(noisy, image + draws * sigma, rtol=1e-5, atol=1e-6)
-
-
-def test_noise_grows_at_night():
-    from pipeline.sensors.conditions import get_condition
-
-    dark = np.full((200, 200, 3), 0.02, np.float32)
-    std = {}
-    for name in ("noon", "night"):
-        cond = get_condition(name)
-        std[name] = (sensor_noise(dark * cond.lens.exposure, cond.noise, cond.lens.exposure,
-                                  np.random.default_rng(0)) - dark * cond.lens.exposure).std()
-    assert std["night"] > 2.0 * std["noon"]
 
 
 def test_same_seed_same_post_and_rain_only_adds_light():
     rng_image = np.random.default_rng(9).random((120, 160, 3)).astype(np.float32) * 0.5
     lens = LensConfig(vignetting=0.2, bloom_strength=0.3, lens_flare=0.1)
     rain = RainConfig(intensity=1.0, drops=3)
-    a = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(3))
-    b = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(3))
-    c = apply_post(rng_image, lens, SensorNoiseConfig(), rain, np.random.default_rng(4))
+    a = apply_post(rng_image, lens, rain, np.random.default_rng(3), sensor=EXPOSURE)
+    b = apply_post(rng_image, lens, rain, np.random.default_rng(3), sensor=EXPOSURE)
+    c = apply_post(rng_image, lens, rain, np.random.default_rng(4), sensor=EXPOSURE)
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
     streaks = rain_streaks(rng_image, rain, 0.4, np.random.default_rng(0))
@@ -140,27 +133,12 @@ def test_normal_draws_are_splitmix64_quarters_indexing_the_quantiles():
     np.testing.assert_array_equal(draws, expected)  # the last three from a part of the third output
 
 
-@pytest.mark.parametrize(("level", "gain"), [(0.06, 0.12 / 0.0601), (0.1, 0.12 / 0.1001), (0.2, 1.0),
-                                             (0.01, 2.5)])
-def test_auto_exposure_brightens_dark_frames_by_their_log_average(level, gain):
-    """A grey frame of luminance L gets AE_KEY / (L + 1e-4), at least 1 and at most 2.5."""
-    from pipeline.sensors.post import auto_exposure_gain
-
-    image = np.full((60, 80, 3), level, np.float32)
-    assert auto_exposure_gain(image) == pytest.approx(gain, rel=1e-5)
-    # The log-average: half the frame at 4x a level, half at 1/4 of it, meters as about that level.
-    split = np.concatenate([np.full((32, 80, 3), 4.0 * 0.08), np.full((32, 80, 3), 0.25 * 0.08)]).astype(np.float32)
-    assert auto_exposure_gain(split) == pytest.approx(0.12 / np.exp(0.5 * (np.log(0.3201) + np.log(0.0201))),
-                                                      rel=1e-4)
-
-
-def test_post_scales_by_the_gain_and_keeps_the_conditions_noise():
-    from pipeline.sensors.post import apply_post
-
-    lens, noise = LensConfig(vignetting=0.0, bloom_strength=0.0), SensorNoiseConfig(shot=0.0, read_std=0.01)
+def test_post_scales_by_the_gain_before_the_sensors_noise():
+    lens = LensConfig(vignetting=0.0, bloom_strength=0.0)
+    read_only = replace(exposure_for(ImageSensorConfig(read_noise_e=100.0), 1 / 100, 1.0), shot_scale=0.0)
     image = np.full((40, 50, 3), 0.05, np.float32)
-    plain = apply_post(image, lens, noise, None, np.random.default_rng(3))
-    bright = apply_post(image, lens, noise, None, np.random.default_rng(3), gain=3.0)
+    plain = apply_post(image, lens, None, np.random.default_rng(3), sensor=read_only)
+    bright = apply_post(image, lens, None, np.random.default_rng(3), gain=3.0, sensor=read_only)
     np.testing.assert_allclose(bright - 0.15, plain - 0.05, atol=1e-6)  # same noise draws, scaled image
 
 
@@ -179,13 +157,17 @@ def test_wide_dynamic_range_is_a_power_law_about_the_pivot_that_keeps_hue():
     assert wide_dynamic_range(image, 1.0) is image  # off: untouched
 
 
-def test_post_applies_the_lens_wdr_before_the_noise():
-    lens, noise = LensConfig(vignetting=0.0, bloom_strength=0.0, wdr_gamma=0.5), SensorNoiseConfig(shot=0.0,
-                                                                                                  read_std=0.01)
+def test_post_adds_the_sensors_noise_before_the_wdr_curve():
+    """The sensor reads the image, then the image processor's curve lifts it: the noise is lifted with it."""
+    lens = LensConfig(vignetting=0.0, bloom_strength=0.0, wdr_gamma=0.5)
+    read_only = replace(exposure_for(ImageSensorConfig(read_noise_e=100.0), 1 / 100, 1.0), shot_scale=0.0)
     image = np.full((40, 50, 3), 0.5 / 16, np.float32)  # grey at 1/16 of the pivot: lifted 4x to 1/4 of it
-    plain = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), noise, None, np.random.default_rng(3))
-    lifted = apply_post(image, lens, noise, None, np.random.default_rng(3))
-    np.testing.assert_allclose(lifted - 0.125, plain - 0.5 / 16, atol=1e-6)  # lifted, then the same noise
+    noisy = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), None, np.random.default_rng(3),
+                       sensor=read_only)
+    lifted = apply_post(image, lens, None, np.random.default_rng(3), sensor=read_only)
+    from pipeline.sensors.post import wide_dynamic_range
+
+    np.testing.assert_allclose(lifted, wide_dynamic_range(noisy, 0.5), rtol=1e-5, atol=1e-7)
 
 
 @pytest.mark.parametrize("sigma", [0.4, 0.65, 1.3])
@@ -232,8 +214,8 @@ def test_post_applies_the_cameras_point_spread_function():
     image = np.zeros((40, 40, 3), np.float32)
     image[:, 20:] = 1.0
     lens = LensConfig(vignetting=0.0, bloom_strength=0.0)
-    sharp = apply_post(image, lens, SensorNoiseConfig(), None, None)
-    soft = apply_post(image, lens, SensorNoiseConfig(), None, None, psf_sigma_px=0.65)
+    sharp = apply_post(image, lens, None, None)
+    soft = apply_post(image, lens, None, None, psf_sigma_px=0.65)
     np.testing.assert_array_equal(sharp, image)
     np.testing.assert_allclose(soft, point_spread(image, 0.65))
 
@@ -262,3 +244,22 @@ def test_the_point_spread_function_softens_the_image_and_leaves_the_labels(box_m
     spread = (maximum_filter(rgb, size=(5, 5, 1)) - minimum_filter(rgb, size=(5, 5, 1))).max(axis=2)
     flat = spread <= 2
     assert flat.sum() > 0.5 * diff.size and diff[flat].max() <= 2
+
+
+def test_highlights_beyond_white_keep_their_hue_and_bloom_no_more_than_white():
+    """A red lamp 10x beyond the output's white stays red (scaled to white, channel ratios kept) instead of
+    clipping each channel to white; what is below white is untouched. Its bloom is that of a white pixel."""
+    from pipeline.sensors.post import BLOOM_CEILING, bloom, hold_hue
+
+    image = np.full((20, 30, 3), 0.1, np.float32)
+    image[5, 5] = (40.0, 2.0, 1.0)
+    out = hold_hue(image, BLOOM_CEILING)
+    np.testing.assert_allclose(out[5, 5], np.array([40.0, 2.0, 1.0]) * BLOOM_CEILING / 40.0, rtol=1e-6)
+    mask = np.ones((20, 30), bool)
+    mask[5, 5] = False
+    np.testing.assert_array_equal(out[mask], image[mask])
+    at_white = image.copy()
+    at_white[5, 5] = (BLOOM_CEILING, 2.0, 1.0)
+    glow, glow_at_white = (bloom(x, 1.2, 0.5, 2.0) - x for x in (image, at_white))
+    assert glow.max() > 0.01
+    np.testing.assert_allclose(glow, glow_at_white, rtol=1e-5, atol=1e-5)  # float32 sums near 40 round at 4e-6

@@ -165,7 +165,7 @@ def test_a_record_whose_frames_are_all_black_is_an_error_and_some_black_ones_a_w
     dark = {**night, "headlights": None, "street_lamps": None, "vehicle_lights": {"glow": False},
             "sky": {**night["sky"], "ambient_rgb": [0.0, 0.0, 0.0], "zenith_rgb": [0.0, 0.0, 0.0],
                     "horizon_rgb": [0.0, 0.0, 0.0]},
-            "noise": {"shot": 0.0, "read_std": 0.0, "grain_std": 0.0}, "lens": {**night["lens"], "exposure": 1 / 64}}
+            "lens": {**night["lens"], "exposure": 1 / 64}}
     condition = ConditionConfig.model_validate(dark)
     with pytest.raises(ValueError, match="every frame with visible objects came out black"):
         render(run_21_frames, condition, small_rig, tmp_path / "rec", frames=EVERY_10TH, workers=1, progress=False)

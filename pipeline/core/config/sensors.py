@@ -13,6 +13,7 @@ from pydantic import Field, model_serializer, model_validator
 
 from pipeline.core.config.actor_meshes import ActorMeshConfig
 from pipeline.core.config.base import ConfigModel
+from pipeline.core.photometry import candela_to_intensity
 
 
 class _Model(ConfigModel):
@@ -22,6 +23,41 @@ class _Model(ConfigModel):
 class MountPose(_Model):
     xyz_m: tuple[float, float, float]
     rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+class ImageSensorConfig(_Model):
+    """The camera's image sensor, aperture and auto-exposure (:mod:`pipeline.sensors.exposure`).
+
+    Defaults: onsemi's AR0132AT, an automotive 1/3-inch CMOS sensor (datasheet AR0132AT/D Rev. 9, Table 1: 3.75 um
+    pixels, SNR max 43.9 dB, i.e. a full well of 10^(43.9/10) = 24,500 electrons, and > 115 dB dynamic range in its
+    HDR mode, so that highlights are not clipped here); quantum efficiency and read noise as is typical of such pixels
+    (the datasheet gives neither: a front-side pixel's peak QE is ~0.6; read noise a few electrons); an f/2.0 lens
+    transmitting 90 %. Exposure limits as the issue on physical cameras asks of automotive cameras: 1/10000 to
+    1/30 s (one frame at 30 Hz), analogue gain up to 16x.
+    """
+
+    f_number: float = Field(2.0, ge=0.7, le=22.0, description="lens aperture (f-number)")
+    lens_transmission: float = Field(0.9, gt=0.0, le=1.0, description="share of the light the lens passes")
+    pixel_pitch_um: float = Field(3.75, gt=0.5, le=20.0, description="pixel size, micrometres")
+    quantum_efficiency: float = Field(0.6, gt=0.0, le=1.0, description="electrons per photon within a colour "
+                                      "filter's passband (each filter passes about a third of the visible band)")
+    full_well_e: float = Field(24500.0, gt=100.0, description="electrons of a full pixel at gain 1; the linear "
+                               "image's 1.0 (an HDR sensor: brighter values are kept, not clipped)")
+    read_noise_e: float = Field(4.0, ge=0.0, le=100.0, description="read-out noise, electrons (std)")
+    exposure_time_s: tuple[float, float] = Field((1e-4, 1 / 30), description="shortest and longest exposure time, "
+                                                 "seconds; the auto-exposure lengthens the time first, then the gain")
+    max_gain: float = Field(16.0, ge=1.0, le=256.0, description="largest analogue gain")
+    metering_key: float = Field(0.18, gt=0.0, le=1.0, description="log-average luminance of the linear image that "
+                                "the auto-exposure aims at (times the condition's lens.exposure compensation): 0.18, "
+                                "the normal key of Reinhard et al.'s photographic tone reproduction (2002), mid-grey")
+
+    @model_validator(mode="after")
+    def _check_times(self) -> ImageSensorConfig:
+        lo, hi = self.exposure_time_s
+        if not 0.0 < lo <= hi <= 1.0:
+            raise ValueError(f"exposure_time_s must be (shortest, longest) with 0 < shortest <= longest <= 1 s, got "
+                             f"{self.exposure_time_s}")
+        return self
 
 
 class CameraConfig(_Model):
@@ -42,6 +78,8 @@ class CameraConfig(_Model):
     psf_sigma_px: float = Field(
         0.0, ge=0.0, le=5.0, description="the optics' point-spread function (lens, the sensor's low-pass filter and "
         "demosaicing): a Gaussian of this standard deviation in pixels on the linear image; 0 = perfect optics")
+    sensor: ImageSensorConfig = Field(default_factory=ImageSensorConfig, description="the camera's image sensor and "
+                                      "auto-exposure (pipeline.sensors.exposure)")
     mount: MountPose
 
     @model_validator(mode="after")
@@ -194,6 +232,27 @@ class _ConditionPart(_Model):
         return self
 
 
+class _Light(_ConditionPart):
+    """A light given either in the renderer's units (``intensity``) or in candela (``intensity_cd``)."""
+
+    @model_validator(mode="after")
+    def _from_candela(self) -> _Light:
+        if self.intensity_cd is None:
+            return self
+        # Candela are luminous intensity: the light's colour is scaled to unit luminance (Rec. 709 Y) first.
+        r, g, b = self.color_rgb
+        luminance = 0.2126 * r + 0.7152 * g + 0.0722 * b
+        if luminance <= 0:
+            raise ValueError(f"intensity_cd needs a colour with some luminance, got color_rgb {self.color_rgb}")
+        derived = candela_to_intensity(self.intensity_cd) / luminance
+        # A dumped config holds both; they must agree (a user who gives both and means different things is told).
+        if "intensity" in self.model_fields_set and abs(self.intensity - derived) > 1e-9 * max(derived, 1.0):
+            raise ValueError(f"give intensity (renderer units) or intensity_cd (candela), not both: intensity "
+                             f"{self.intensity} disagrees with intensity_cd {self.intensity_cd} (= {derived:.6g})")
+        object.__setattr__(self, "intensity", derived)
+        return self
+
+
 class SunConfig(_ConditionPart):
     """The sun: direction (azimuth CCW from east = world +x, elevation above the horizon), colour, strength.
 
@@ -228,13 +287,17 @@ class SkyConfig(_ConditionPart):
     ambient_rgb: RGB = _rgb("ambient (sky fill) irradiance on every surface", (0.45, 0.5, 0.6))
 
 
-class HeadlightConfig(_ConditionPart):
+class HeadlightConfig(_Light):
     """Vehicle low beams: elliptical spot cones with a soft edge, aimed slightly down, 1/d^2 fall-off, and a beam
     pattern inside the cone: brightest just below the cut-off, fading downwards and to the sides."""
 
     ego: bool = Field(True, description="the ego's two headlights light the scene")
     others: bool = Field(True, description="other vehicles' headlights light the scene")
-    intensity: float = Field(60.0, ge=0.0, description="on-axis irradiance at 1 m per lamp (x color_rgb)")
+    intensity: float = Field(60.0, ge=0.0, description="on-axis irradiance at 1 m per lamp (x color_rgb), the "
+                             "renderer's units; or give intensity_cd")
+    intensity_cd: float | None = Field(None, ge=0.0, description="the beam's peak luminous intensity per lamp, "
+                                       "candela (sets intensity: pipeline.core.photometry; color_rgb scaled to "
+                                       "luminance 1)")
     color_rgb: RGB = _rgb("headlight colour", (1.0, 0.95, 0.85))
     half_angle_h_deg: float = Field(32.0, gt=0.0, lt=89.0, description="horizontal half-width of the cone, degrees")
     half_angle_v_deg: float = Field(9.0, gt=0.0, lt=89.0, description="half-height of the cone below its axis, degrees")
@@ -260,10 +323,14 @@ class HeadlightConfig(_ConditionPart):
         1.0, ge=0.0, le=1.0, description="share of the peak intensity the beam keeps far to the sides")
 
 
-class StreetLampConfig(_ConditionPart):
+class StreetLampConfig(_Light):
     """Street lamps (positions from the static world): downward spot lights lighting pools below them."""
 
-    intensity: float = Field(40.0, ge=0.0, description="on-axis irradiance at 1 m (x color_rgb)")
+    intensity: float = Field(40.0, ge=0.0, description="on-axis irradiance at 1 m (x color_rgb), the renderer's "
+                             "units; or give intensity_cd")
+    intensity_cd: float | None = Field(None, ge=0.0, description="the lamp's luminous intensity within its cone, "
+                                       "candela (sets intensity: pipeline.core.photometry; color_rgb scaled to "
+                                       "luminance 1)")
     color_rgb: RGB = _rgb("lamp colour (sodium-ish warm by default)", (1.0, 0.75, 0.45))
     half_angle_deg: float = Field(70.0, gt=0.0, lt=89.0, description="half-angle of the downward cone, degrees")
     soft_edge: float = Field(0.5, gt=0.0, le=1.0, description="fraction of the cone radius over which it fades out")
@@ -308,29 +375,18 @@ class RainConfig(_Model):
         return self
 
 
-class SensorNoiseConfig(_Model):
-    """Shot + read noise in linear units after the exposure gain: var = gain*shot*s + (gain*read)^2; grain is
-    spatially correlated luminance noise. Larger exposure (night) therefore means more noise."""
-
-    shot: float = Field(0.0004, ge=0.0, description="shot-noise variance per unit signal at exposure 1")
-    read_std: float = Field(0.002, ge=0.0, description="read-noise std at exposure 1, linear units")
-    grain_std: float = Field(0.0, ge=0.0, description="grain (blurred luminance noise) std at exposure 1")
-    grain_size_px: float = Field(1.2, gt=0.0, le=10.0, description="grain blur sigma, pixels")
-
-
 class LensConfig(_Model):
     """Optics and exposure effects, applied to linear radiance before tone mapping."""
 
-    # Six stops either way of the shipped conditions' 1-2.5: beyond, every frame is black (1e-9 rendered one whose
-    # labels still said ten objects were visible) or white; the render also checks the frames it writes.
-    exposure: float = Field(1.0, ge=1 / 64, le=64.0, description="exposure / gain applied before tone mapping, "
-                            "from 1/64 to 64")
+    # Six stops either way: beyond, every frame is black (1e-9 rendered one whose labels still said ten objects
+    # were visible) or white; the render also checks the frames it writes.
+    exposure: float = Field(1.0, ge=1 / 64, le=64.0, description="exposure compensation, from 1/64 to 64: the "
+                            "camera's auto-exposure aims at its key times this (pipeline.sensors.exposure)")
     vignetting: float = Field(0.2, ge=0.0, lt=1.0, description="fraction of light lost at the image corners")
     bloom_threshold: float = Field(1.5, gt=0.0, description="linear radiance above which light blooms")
     bloom_strength: float = Field(0.0, ge=0.0, description="bloom added (0 = off)")
     bloom_sigma_px: float = Field(6.0, gt=0.0, description="bloom blur sigma, pixels")
     lens_flare: float = Field(0.0, ge=0.0, description="strength of ghosts from bright sources (0 = off)")
-    motion_blur_exposure_s: float = Field(0.0, ge=0.0, le=0.2, description="shutter time for motion blur (0 = off)")
     wdr_gamma: float = Field(1.0, gt=0.0, le=1.0, description="wide-dynamic-range processing: luminance L becomes "
                              "p (L / p)^gamma about the pivot p = 0.5, lifting shadows and holding back highlights "
                              "(1 = off)")
@@ -364,7 +420,6 @@ class ConditionConfig(_Model):
     street_lamps: StreetLampConfig | None = Field(None, description="street-lamp light pools; None = off")
     fog: FogConfig | None = Field(None, description="Koschmieder fog; None = clear air")
     rain: RainConfig | None = Field(None, description="rain; None = dry")
-    noise: SensorNoiseConfig = Field(default_factory=SensorNoiseConfig)
     lens: LensConfig = Field(default_factory=LensConfig)
     lidar: LidarConditionConfig = Field(default_factory=LidarConditionConfig)
 
