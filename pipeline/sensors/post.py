@@ -11,8 +11,8 @@ gives the same image. Effects that need randomness are skipped when no generator
   keep exactly 1 - v.
 - Noise: the sensor's photon shot noise and read noise at the frame's exposure (:mod:`pipeline.sensors.exposure`):
   sigma^2 = shot_scale * max(s, 0) + read_variance per channel and pixel.
-- Motion blur: per-pixel image motion of the static world during the shutter time (from depth and the ego's
-  velocity), averaged over samples along it with ``cv2.remap``.
+- Motion blur: per-pixel image motion during the exposure time (from depth, the ego's velocity and, on a road user,
+  its own), averaged over samples along it with ``cv2.remap``.
 - Wide dynamic range (``wdr_gamma`` < 1): automotive cameras are HDR sensors whose processing compresses a scene's
   range (at night, from unlit verges to lamps) into the output: luminance L becomes p (L / p)^gamma about the pivot
   p = WDR_PIVOT, every channel scaled alike (hue kept): what is darker than the pivot is lifted, what is brighter
@@ -176,7 +176,8 @@ def _add_noise(image, out, shot_scale, read_variance, key, quantiles):
 
 def motion_flow(points_cam: np.ndarray, shift_cam: np.ndarray, fx: float, fy: float) -> np.ndarray:
     """(N, 2) float32 image motion (pixels, pinhole) of (N, 3) optical-frame points when the camera moves by
-    ``shift_cam`` (3,) metres (optical frame); zero for points at infinity or that cross the near plane."""
+    ``shift_cam`` metres (optical frame) relative to them: (3,) for all, or (N, 3), one per point (a moving road
+    user's points move with it); zero for points at infinity or that cross the near plane."""
     p = np.asarray(points_cam, np.float64)
     q = p - np.asarray(shift_cam, np.float64)
     ok = np.isfinite(p).all(axis=1) & (p[:, 2] > 0.1) & (q[:, 2] > 0.1)

@@ -70,6 +70,7 @@ def render_camera(
     street_lights_m: np.ndarray | None = None,
     ego_speed_mps: float = 0.0,
     ego_size_m: tuple[float, float, float] | None = None,
+    actor_velocity_mps: np.ndarray | None = None,
 ) -> CameraFrame:
     """Render ``camera`` on the ego at ``ego_pose`` (ego frame -> world, origin at the ego's box centre).
 
@@ -77,7 +78,8 @@ def render_camera(
     defaults to noon; ``rng`` draws the image noise, rain streaks and drops (none without it; labels never
     depend on it). ``street_lights_m`` (S, 3): the static world's lamp positions
     (:attr:`pipeline.world.static.StaticWorld.street_lights`), lit where the condition has street lamps;
-    ``ego_speed_mps`` (forward) drives motion blur where the condition has a shutter time; ``ego_size_m``
+    ``ego_speed_mps`` (forward) and ``actor_velocity_mps`` ((A, 3) world velocities of the scene's actors; None:
+    they stand) move the image during the exposure (motion blur); ``ego_size_m``
     (length, width, height) places the ego's headlights (a 4.5 x 1.8 x 1.5 m car by default).
     """
     condition = get_condition("noon") if condition is None else condition
@@ -133,10 +135,17 @@ def render_camera(
     gain = exposure.scale / condition.exposure
     shutter_s = exposure.time_s
     flow = None
-    if shutter_s > 0 and ego_speed_mps != 0:
+    if shutter_s > 0 and (ego_speed_mps != 0 or (actor_velocity_mps is not None and np.any(actor_velocity_mps))):
         shift_world = ego_pose.rotation[:, 0] * (ego_speed_mps * shutter_s)
         points = np.where(hits.hit[:, None], dirs_cam * hits.t_m[:, None], np.inf)
-        flow = motion_flow(points, cam_to_world.rotation.T @ shift_world, camera.fx, camera.fy).reshape(h, w, 2)
+        shift_cam = cam_to_world.rotation.T @ shift_world
+        if actor_velocity_mps is not None and len(actor_velocity_mps):
+            # The camera moves relative to a road user by its own shift less the road user's.
+            on_actor = np.flatnonzero(hits.instance_id > 0)
+            shift_cam = np.broadcast_to(shift_cam, points.shape).copy()
+            moved = np.asarray(actor_velocity_mps, np.float64)[hits.actor_index[on_actor]] * shutter_s
+            shift_cam[on_actor] -= moved @ cam_to_world.rotation
+        flow = motion_flow(points, shift_cam, camera.fx, camera.fy).reshape(h, w, 2)
         if float(np.abs(flow).max()) < MIN_BLUR_PX:  # a daylight exposure: no pixel moves visibly
             flow = None
     image = apply_post(radiance, condition.lens, condition.rain, rng, flow=flow,

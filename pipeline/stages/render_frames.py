@@ -30,6 +30,7 @@ from pipeline.core.record_writers.lidar import lidar_label_rows, write_lidar_swe
 from pipeline.core.record_writers.rows import actor_boxes
 from pipeline.core.tables import read_parquet, write_ipc
 from pipeline.sensors.lidar import render_lidar
+from pipeline.sensors.radar import heading_velocity
 from pipeline.sensors.reach import actors_in_reach
 from pipeline.sensors.render import render_camera
 from pipeline.stages import radar_frames
@@ -303,10 +304,11 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
         sweeps.append(sweep)
         labels.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
         lidar_points += sweep.points_per_actor
+    actor_velocity = heading_velocity(others["speed_mps"], others["yaw_rad"]) if cameras else None
     for k, camera in enumerate(cameras):
         cam = render_camera(scene, camera, ego_pose, condition, frame_rng(seed, condition.name, frame, k),
                             street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
-                            ego_size_m=ego_size_m)
+                            ego_size_m=ego_size_m, actor_velocity_mps=actor_velocity)
         frames.append(cam)
         labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
     if radars:
