@@ -44,7 +44,8 @@ from tests.exporters.synthetic_record import build_record
 CASES = [("coco", Compression.ZSTD), ("kitti", Compression.ZSTD), ("yolo", Compression.ZSTD),
          ("mot", Compression.ZSTD), ("kitti-tracking", Compression.ZSTD), ("kitti-depth", Compression.ZSTD),
          ("mcap", Compression.NONE), ("mcap", Compression.ZSTD), ("mcap", Compression.LZ4),
-         ("rosbag2", Compression.NONE), ("rosbag2", Compression.ZSTD), ("nuscenes", Compression.NONE)]
+         ("rosbag2", Compression.NONE), ("rosbag2", Compression.ZSTD), ("nuscenes", Compression.NONE),
+         ("cityscapes", Compression.NONE)]
 LOGS = {"mcap", "rosbag2"}
 
 

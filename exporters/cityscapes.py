@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import logging
 import re
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -88,11 +91,31 @@ def encode_frame(semantic: np.ndarray, instance: np.ndarray, where: str
     return label_ids, instance_ids, instances
 
 
+# Each label id's RGBA colour (alpha 255) as one 32-bit word: one gather per pixel instead of three.
+_RGBA_WORDS = np.concatenate([COLORS.astype(np.uint8), np.full((len(COLORS), 1), 255, np.uint8)], axis=1).view(
+    np.uint32).reshape(-1)
+
+
 def color_image(label_ids: np.ndarray) -> np.ndarray:
     """(H, W, 4) uint8 RGBA: each pixel's label colour, alpha 255."""
-    rgba = np.full((*label_ids.shape, 4), 255, np.uint8)
-    rgba[..., :3] = COLORS[label_ids]
-    return rgba
+    return _RGBA_WORDS[label_ids].view(np.uint8).reshape(*label_ids.shape, 4)
+
+
+WRITE_THREADS = 2
+WAITING_FRAMES = 4  # frames whose images may wait to be written
+
+
+@dataclass
+class _Counts:
+    """What the export wrote, summed over its frames (for export.json, mapping.txt and instances.txt)."""
+
+    cities: dict[str, list[str]]
+    pixels: np.ndarray = field(default_factory=lambda: np.zeros(256, np.int64))
+    mapping: list[str] = field(default_factory=list)
+    instance_lines: list[str] = field(default_factory=list)
+    linked: int = 0
+    frames: int = 0
+    n_instances: int = 0
 
 
 class CityscapesExporter(Exporter):
@@ -111,10 +134,33 @@ class CityscapesExporter(Exporter):
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
-        pixels = np.zeros(256, np.int64)
-        mapping, instance_lines, linked, frames, n_instances = [], [], 0, 0, 0
         cities: dict[str, list[str]] = {s: [] for s in source.split_names}
         progress = tqdm(total=source.n_frames(), desc="cityscapes", unit="frame", disable=not options.progress)
+        # PNG deflate releases the GIL: the images of one frame are written on threads while the next is read and
+        # mapped (each file's bytes are its own, so the order of the writes changes nothing). At most a few frames
+        # wait, and an error of any write ends the export.
+        pool = ThreadPoolExecutor(max_workers=WRITE_THREADS, thread_name_prefix="cityscapes")
+        pending: deque = deque()
+        counts = _Counts(cities)
+        try:
+            self._frames(source, tmp, options, pool, pending, progress, counts)
+            while pending:
+                pending.popleft().result()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+            progress.close()
+        pixels, mapping, instance_lines = counts.pixels, counts.mapping, counts.instance_lines
+        linked, frames, n_instances = counts.linked, counts.frames, counts.n_instances
+        (tmp / "mapping.txt").write_text("".join(mapping))
+        (tmp / "instances.txt").write_text("".join(instance_lines))
+        return {"frames": frames, "cities": cities, "images_linked": int(linked), "images_copied": frames - int(linked),
+                "instances": n_instances, "classes": {c.name.lower(): n for c, n in CITYSCAPES_OF.items()},
+                "pixels_by_label": {label.name: int(pixels[label.id]) for label in LABELS if pixels[label.id]}}
+
+    @staticmethod
+    def _frames(source: ExportSource, tmp: Path, options: ExportOptions, pool: ThreadPoolExecutor, pending: deque,
+                progress, counts: _Counts) -> None:
+        cities = counts.cities
         for src in source.records:
             cam, city, split = camera_of(src, options), city_of(src), safe_name(src.split)
             gt_dir, image_dir = tmp / "gtFine" / split / city, tmp / "leftImg8bit" / split / city
@@ -126,26 +172,23 @@ class CityscapesExporter(Exporter):
                 where = f"{semantic} (frame {frame}, camera {cam.name})"
                 label_ids, instance_ids, instances = encode_frame(
                     src.record.semantic(cam.name, frame), src.record.instance(cam.name, frame), where)
-                write_png(gt_dir / f"{name}_gtFine_labelIds.png", label_ids)
-                write_png(gt_dir / f"{name}_gtFine_instanceIds.png", instance_ids)
-                write_png(gt_dir / f"{name}_gtFine_color.png", color_image(label_ids), "sub")
-                linked += link_or_copy(src.record.image_path(cam.name, "rgb", frame),
-                                       image_dir / f"{name}_leftImg8bit.png", link=options.link_images)
-                pixels += np.bincount(label_ids.reshape(-1), minlength=256)
-                instance_lines += [f"{split} {name} {code} {track} {SemanticClass(ours).name.lower()}\n"
-                                   for code, track, ours in instances]
-                n_instances += len(instances)
-                mapping.append(f"{split} {name} {safe_name(src.info.scenario)} {int(src.info.seed)} "
-                               f"{safe_name(src.info.condition)} {frame} {float(row.time_s):.6f}\n")
-                frames += 1
+                pending.extend([
+                    pool.submit(write_png, gt_dir / f"{name}_gtFine_labelIds.png", label_ids),
+                    pool.submit(write_png, gt_dir / f"{name}_gtFine_instanceIds.png", instance_ids),
+                    pool.submit(write_png, gt_dir / f"{name}_gtFine_color.png", color_image(label_ids), "sub")])
+                while len(pending) > 3 * WAITING_FRAMES:
+                    pending.popleft().result()
+                counts.linked += link_or_copy(src.record.image_path(cam.name, "rgb", frame),
+                                              image_dir / f"{name}_leftImg8bit.png", link=options.link_images)
+                counts.pixels += np.bincount(label_ids.reshape(-1), minlength=256)
+                counts.instance_lines += [f"{split} {name} {code} {track} {SemanticClass(ours).name.lower()}\n"
+                                          for code, track, ours in instances]
+                counts.n_instances += len(instances)
+                counts.mapping.append(f"{split} {name} {safe_name(src.info.scenario)} {int(src.info.seed)} "
+                                      f"{safe_name(src.info.condition)} {frame} {float(row.time_s):.6f}\n")
+                counts.frames += 1
                 progress.update()
             cities[src.split].append(city)
-        progress.close()
-        (tmp / "mapping.txt").write_text("".join(mapping))
-        (tmp / "instances.txt").write_text("".join(instance_lines))
-        return {"frames": frames, "cities": cities, "images_linked": int(linked), "images_copied": frames - int(linked),
-                "instances": n_instances, "classes": {c.name.lower(): n for c, n in CITYSCAPES_OF.items()},
-                "pixels_by_label": {label.name: int(pixels[label.id]) for label in LABELS if pixels[label.id]}}
 
 
 EXPORTER = CityscapesExporter()
