@@ -102,7 +102,11 @@ def render_camera(
     samples = camera.sample_directions
     indirect = camera.config.quality == "realistic"
     texture_rad = 1.0 / camera.fx if indirect else 0.0  # the realistic camera textures the static world
-    metered = None  # the radiance the camera meters: its pixel centres' (so that anti-aliasing moves no exposure)
+    # The camera meters its frame and exposes it within its sensor's limits (pipeline.sensors.exposure), on the pixel
+    # centres' radiance where it has it (so that anti-aliasing moves no exposure); the exposure time blurs motion, the
+    # sensor's shot and read noise follow from the signal and the gain.
+    sensor, compensation = camera.config.sensor, condition.exposure
+    exposure = None
     if len(samples) == 1:
         radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
                                  hits.t_m, hits.hit)
@@ -116,7 +120,7 @@ def render_camera(
             radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w),
                                            sunlit), hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
-            metered = radiance.reshape(h, w, 3).copy()
+            exposure = auto_exposure(radiance.reshape(h, w, 3), sensor, compensation, shaded_with=compensation)
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
         for sample in samples:  # loop over samples; all chosen pixels vectorised
@@ -128,14 +132,12 @@ def render_camera(
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
     radiance = radiance.reshape(h, w, 3)
-    # The camera meters its frame and exposes it within its sensor's limits (pipeline.sensors.exposure); the
-    # exposure time blurs motion, the sensor's shot and read noise follow from the signal and the gain.
-    exposure = auto_exposure(radiance if metered is None else metered, camera.config.sensor, condition.exposure,
-                             shaded_with=condition.exposure)
-    gain = exposure.scale / condition.exposure
+    if exposure is None:
+        exposure = auto_exposure(radiance, sensor, compensation, shaded_with=compensation)
+    gain = exposure.scale / compensation  # the radiance holds the compensation already
     shutter_s = exposure.time_s
     flow = None
-    if shutter_s > 0 and (ego_speed_mps != 0 or (actor_velocity_mps is not None and np.any(actor_velocity_mps))):
+    if ego_speed_mps != 0 or (actor_velocity_mps is not None and np.any(actor_velocity_mps)):
         shift_world = ego_pose.rotation[:, 0] * (ego_speed_mps * shutter_s)
         points = np.where(hits.hit[:, None], dirs_cam * hits.t_m[:, None], np.inf)
         shift_cam = cam_to_world.rotation.T @ shift_world
