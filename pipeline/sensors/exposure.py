@@ -58,11 +58,6 @@ class Exposure:
     shot_scale: float  # variance per unit of image value: gain / full well
     read_variance: float  # (gain * read noise / full well)^2, in the image's units
 
-    @property
-    def electrons_per_unit(self) -> float:
-        """Electrons a pixel holds per unit of radiance (before the gain)."""
-        return self.scale / self.shot_scale
-
 
 def exposure_for(sensor: ImageSensorConfig, time_s: float, gain: float) -> Exposure:
     """The :class:`Exposure` of ``sensor`` at the exposure time ``time_s`` and the analogue gain ``gain``."""
