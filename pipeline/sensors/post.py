@@ -244,7 +244,8 @@ def point_spread(image: np.ndarray, sigma_px: float) -> np.ndarray:
     return out
 
 
-BLOOM_CEILING = 4.0  # the image processor's white (the tone curve's top): brighter light blooms no more than this
+LINEAR_WHITE = 4.0  # the tone curves' top (pipeline.sensors.shading.to_srgb8): brighter linear values come out white
+BLOOM_CEILING = LINEAR_WHITE  # what the camera renders white blooms no more than white
 
 
 def hold_hue(image: np.ndarray, white: float) -> np.ndarray:

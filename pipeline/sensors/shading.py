@@ -21,6 +21,7 @@ from pipeline.core.jit import as_input, kernel
 from pipeline.core.photometry import luminance_to_radiance, lux_to_irradiance
 from pipeline.sensors.indirect import reflections, sky_visibility
 from pipeline.sensors.lights import SpotLights, light_radiance
+from pipeline.sensors.post import LINEAR_WHITE
 from pipeline.sensors.shadows import sun_shares
 from pipeline.sensors.sky import sky_rays
 from pipeline.sensors.sunlight import sky_and_sun
@@ -145,7 +146,7 @@ def _materials() -> dict[str, np.ndarray]:
     return mats
 
 
-def _srgb_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
+def _srgb_lut(size: int = 1 << 16, max_linear: float = LINEAR_WHITE) -> np.ndarray:
     x = np.linspace(0.0, max_linear, size, dtype=np.float64)
     x = np.where(x > 0.8, 0.8 + 0.2 * np.tanh((x - 0.8) / 0.2), x)  # soft shoulder for highlights
     return _encode_srgb(x)
@@ -160,7 +161,7 @@ def _encode_srgb(x: np.ndarray) -> np.ndarray:
 FILMIC_GAIN = 0.6  # scene-linear values are scaled by this before the filmic curve (its mid-grey sits higher)
 
 
-def _filmic_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
+def _filmic_lut(size: int = 1 << 16, max_linear: float = LINEAR_WHITE) -> np.ndarray:
     """A filmic tone curve, as a camera's image processor applies one: a toe that deepens the shadows, a long
     shoulder that rolls highlights off instead of clipping them; Narkowicz's fit of the ACES reference rendering
     transform, y = x (2.51 x + 0.03) / (x (2.43 x + 0.59) + 0.14), of ``FILMIC_GAIN`` times the scene value."""
@@ -169,12 +170,12 @@ def _filmic_lut(size: int = 1 << 16, max_linear: float = 4.0) -> np.ndarray:
 
 
 _LUTS = {"soft": _srgb_lut(), "filmic": _filmic_lut()}
-_LUT_SCALE = (len(_LUTS["soft"]) - 1) / 4.0
+_LUT_SCALE = (len(_LUTS["soft"]) - 1) / LINEAR_WHITE
 TONE_CURVES = tuple(_LUTS)
 
 
 def to_srgb8(linear: np.ndarray, curve: str = "soft") -> np.ndarray:
-    """Linear RGB (any shape (..., 3)) to 8-bit sRGB through a tone ``curve`` (values above 4 clip, NaN is 0):
+    """Linear RGB (any shape (..., 3)) to 8-bit sRGB through a tone ``curve`` (values above LINEAR_WHITE = 4 clip, NaN is 0):
     "soft", linear with a soft shoulder above 0.8, or "filmic" (:func:`_filmic_lut`); a 65536-entry lookup table
     (finer than one 8-bit step everywhere)."""
     if curve not in _LUTS:
