@@ -175,9 +175,9 @@ TONE_CURVES = tuple(_LUTS)
 
 
 def to_srgb8(linear: np.ndarray, curve: str = "soft") -> np.ndarray:
-    """Linear RGB (any shape (..., 3)) to 8-bit sRGB through a tone ``curve`` (values above LINEAR_WHITE = 4 clip, NaN is 0):
-    "soft", linear with a soft shoulder above 0.8, or "filmic" (:func:`_filmic_lut`); a 65536-entry lookup table
-    (finer than one 8-bit step everywhere)."""
+    """Linear RGB (any shape (..., 3)) to 8-bit sRGB through a tone ``curve`` (values above LINEAR_WHITE = 4 clip, NaN
+    is 0): "soft", linear with a soft shoulder above 0.8, or "filmic" (:func:`_filmic_lut`); a 65536-entry lookup
+    table (finer than one 8-bit step everywhere)."""
     if curve not in _LUTS:
         raise ValueError(f"unknown tone curve {curve!r}; known: {', '.join(_LUTS)}")
     x = as_input(linear, np.float32)
