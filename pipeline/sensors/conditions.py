@@ -5,9 +5,11 @@ A condition is a YAML file under configs/conditions/ (or any path) validated int
 from it; :func:`get_condition` does both for a NAME or PATH. Users add a
 condition by adding a YAML file.
 
-Fog (Koschmieder): L = L0 * T + L_fog * (1 - T), T = exp(-beta * d), beta = 3.912 / visibility (the
-distance at which contrast falls to 2 %), with d the exact distance along each ray; rays that hit nothing
-see the fog colour (d = infinity).
+Fog and rain dim the air (:mod:`pipeline.sensors.weather`): L = L0 * T + L_air * (1 - T), T = exp(-beta * d), with
+beta the fog's (3.912 / visibility, the distance at which contrast falls to 2 %) plus the rain's (Marshall-Palmer drops
+at the rain's rate) and d the exact distance along each ray; rays that hit nothing see the airlight L_air (d =
+infinity), the sky's radiance at the horizon unless the fog gives its colour. The LiDAR's two-way extinction comes
+from the same values at its wavelength.
 """
 
 from __future__ import annotations
@@ -32,11 +34,16 @@ from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.post import luminance
 from pipeline.sensors.shadows import sun_disc
-from pipeline.sensors.sky import gradient_params, preetham_params
+from pipeline.sensors.sky import gradient_params, preetham_params, sky_rays
+from pipeline.sensors.weather import KOSCHMIEDER, fog_extinction_per_m, rain_extinction_per_m, road_wetness
 from pipeline.world.actors import Actors
 
-KOSCHMIEDER = 3.912  # -ln(0.02): contrast threshold of 2 %
 SHIPPED = ("morning", "noon", "dusk", "night", "fog", "rain")
+# Fog droplets' forward lobe: a peak of ~lambda / 2r (radii of 5-10 um: 1.5-3 degrees) with a long tail, as the sum of
+# Gaussians (weight, sigma in degrees) that the aureoles of lamps in fog show (a core, then a slow fall-off).
+HALO_LOBES = ((0.5, 1.0), (0.3, 3.0), (0.2, 8.0))
+HALO_FORWARD_SHARE = 0.25  # of a source's scattered light, within that lobe (assumed: not measured)
+HALO_MIN_TRANSMITTANCE = 0.05  # sources seen through less are taken at this (their direct image is gone in the noise)
 
 
 class Condition:
@@ -132,9 +139,18 @@ class Condition:
         return self.config.vehicle_lights.lamp_glow
 
     @property
+    def rain_rate_mm_h(self) -> float:
+        """The rain's rate, mm/h; 0 without rain."""
+        return self.config.rain.rate_mm_h if self.config.rain is not None else 0.0
+
+    @property
     def wetness(self) -> float:
-        """0 dry .. 1 soaked road-like surfaces: the rain's wetness, 0 without rain."""
-        return self.config.rain.wetness if self.config.rain is not None else 0.0
+        """0 dry .. 1 drowned road-like surfaces: the rain's ``wetness``, or the share of the road's texture its water
+        fills at its rate (:func:`pipeline.sensors.weather.road_wetness`); 0 without rain."""
+        rain = self.config.rain
+        if rain is None:
+            return 0.0
+        return rain.wetness if rain.wetness is not None else road_wetness(rain.rate_mm_h)
 
     # -- weather and sensor effects ---------------------------------------------------------------
     @property
@@ -142,10 +158,30 @@ class Condition:
         """Meteorological visibility, metres; None = clear air."""
         return self.config.fog.visibility_m if self.config.fog is not None else None
 
+    def extinction_per_m(self, wavelength_nm: float = 550.0) -> float:
+        """The air's extinction coefficient at ``wavelength_nm``, 1/m: the fog's plus the rain's (0: clear air)."""
+        beta = 0.0
+        if self.fog_visibility_m is not None:
+            beta += fog_extinction_per_m(self.fog_visibility_m, wavelength_nm)
+        return beta + rain_extinction_per_m(self.rain_rate_mm_h)
+
     @property
-    def fog_rgb(self) -> tuple[float, float, float] | None:
-        """Airlight colour, linear RGB (before exposure); None = clear air."""
-        return self.config.fog.color_rgb if self.config.fog is not None else None
+    def visibility_m(self) -> float | None:
+        """The meteorological visibility of fog and rain together, metres (3.912 / extinction); None = clear air."""
+        beta = self.extinction_per_m()
+        return KOSCHMIEDER / beta if beta > 0 else None
+
+    @cached_property
+    def airlight_rgb(self) -> tuple[float, float, float]:
+        """The radiance of an infinitely long ray through the fog or rain, linear RGB before exposure: the fog's
+        ``color_rgb``, else the sky's radiance at the horizon (the mean over azimuths just above it)."""
+        fog = self.config.fog
+        if fog is not None and fog.color_rgb is not None:
+            return fog.color_rgb
+        az = np.radians(np.arange(0.0, 360.0, 15.0))
+        el = np.radians(1.0)
+        dirs = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.full_like(az, np.sin(el))])
+        return tuple(float(v) for v in sky_rays(dirs.astype(np.float32), self.sky_params).mean(axis=0))
 
     @property
     def headlights(self) -> HeadlightConfig | None:
@@ -168,16 +204,45 @@ class Condition:
         return self.config.lidar
 
     def fog(self, radiance: np.ndarray, distance_m: np.ndarray, hit: np.ndarray) -> np.ndarray:
-        """Apply fog to (N, 3) float32 radiance given (N,) distances along the rays and the (N,) hit mask."""
-        if self.fog_visibility_m is None:
+        """Dim (N, 3) float32 radiance through the fog and rain along (N,) distances, given the (N,) hit mask."""
+        beta = self.extinction_per_m()
+        if beta == 0:
             return radiance
-        beta = KOSCHMIEDER / self.fog_visibility_m
         transmittance = np.where(hit, np.exp(-beta * np.where(hit, distance_m, 0.0)), 0.0).astype(np.float32)
-        fog = np.asarray(self.fog_rgb, np.float32) * self.exposure
+        air = np.asarray(self.airlight_rgb, np.float32) * self.exposure
         # Per channel on (N,) arrays: numpy broadcasts over a trailing axis of 3 several times slower.
         channels = cv2.split(np.ascontiguousarray(radiance, np.float32).reshape(-1, 1, 3))
         haze = 1.0 - transmittance
-        return cv2.merge([c.reshape(-1) * transmittance + fog[k] * haze for k, c in enumerate(channels)]).reshape(-1, 3)
+        return cv2.merge([c.reshape(-1) * transmittance + air[k] * haze for k, c in enumerate(channels)]).reshape(-1, 3)
+
+    def halos(self, radiance: np.ndarray, distance_m: np.ndarray, sources: np.ndarray, image_shape: tuple[int, int],
+              fy_px: float) -> None:
+        """Add, in place, to a frame's fogged (H*W, 3) float32 ``radiance`` the light that the fog and rain scatter
+        forwards from its glowing ``sources`` ((H*W,) bool: lamps, lit windows) at (H*W,) ``distance_m``: the haloes
+        round lamps in fog. A source of radiance L0 seen through a transmittance T loses L0 (1 - T) from its direct
+        image; HALO_FORWARD_SHARE of that reaches the camera within the droplets' forward lobe (HALO_LOBES: their
+        diffraction peak and its tail, widened by multiple scattering), the rest joins the airlight."""
+        beta = self.extinction_per_m()
+        if beta == 0 or not sources.any():
+            return
+        h, w = image_shape
+        rows = np.flatnonzero(sources)
+        t = np.maximum(np.exp(-beta * distance_m[rows]), HALO_MIN_TRANSMITTANCE).astype(np.float32)[:, None]
+        air = np.asarray(self.airlight_rgb, np.float32) * np.float32(self.exposure)
+        direct = np.maximum(radiance[rows] - air * (1.0 - t), 0.0) / t  # the source's radiance before the fog
+        layer = np.zeros((h * w, 3), np.float32)
+        layer[rows] = direct * ((1.0 - t) * np.float32(HALO_FORWARD_SHARE))
+        layer = layer.reshape(h, w, 3)
+        small = cv2.resize(layer, (w // 4, h // 4), interpolation=cv2.INTER_AREA)  # the wide lobes at quarter size
+        halo = np.zeros_like(layer)
+        for weight, sigma_deg in HALO_LOBES:
+            sigma = float(fy_px * np.radians(sigma_deg))
+            if sigma < 8.0:
+                halo += np.float32(weight) * cv2.GaussianBlur(layer, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
+            else:
+                wide = cv2.GaussianBlur(small, (0, 0), sigma / 4.0, borderType=cv2.BORDER_CONSTANT)
+                halo += np.float32(weight) * cv2.resize(wide, (w, h), interpolation=cv2.INTER_LINEAR)
+        radiance += halo.reshape(-1, 3)
 
     def frame_lights(
         self,
@@ -199,15 +264,29 @@ class Condition:
         return SpotLights.concatenate(parts)
 
     def lidar(self, lidar: Lidar) -> LidarConfig:
-        """``lidar``'s config under this condition (range, attenuation, noise, drop-out; intensity factor and
-        detection threshold are applied by :func:`pipeline.sensors.lidar.render_lidar`)."""
+        """``lidar``'s config under this condition: the air's two-way extinction at the LiDAR's wavelength (fog and
+        rain, :mod:`pipeline.sensors.weather`) added to its attenuation and shortening its range
+        (:func:`lidar_range_m`), then the condition's ``lidar`` factors (range, attenuation, noise, drop-out; intensity factor and detection threshold are applied by
+        :func:`pipeline.sensors.lidar.render_lidar`)."""
         fx, config = self.lidar_effects, lidar.config
+        beta = self.extinction_per_m(config.wavelength_nm)
         return config.model_copy(update={
-            "range_m": max(config.range_m * fx.range_factor, lidar.range_min_m + 1e-3),
-            "attenuation_per_m": config.attenuation_per_m * fx.attenuation_factor,
+            "range_m": max(lidar_range_m(config.range_m, beta) * fx.range_factor, lidar.range_min_m + 1e-3),
+            "attenuation_per_m": (config.attenuation_per_m + 2.0 * beta) * fx.attenuation_factor,
             "range_noise_std_m": config.range_noise_std_m * fx.noise_factor,
             "dropout": min(0.99, config.dropout + fx.extra_dropout),
         })
+
+
+def lidar_range_m(clear_range_m: float, extinction_per_m: float) -> float:
+    """A LiDAR's range through air of ``extinction_per_m`` (at its wavelength): the distance R at which the target it
+    just detects at ``clear_range_m`` R0 in clear air is just detected again, the return's power ~ exp(-2 beta R) / R^2
+    equal to 1 / R0^2: R = W(beta R0) / beta (W: Lambert's function)."""
+    if extinction_per_m <= 0:
+        return clear_range_m
+    from scipy.special import lambertw
+
+    return float(lambertw(extinction_per_m * clear_range_m).real) / extinction_per_m
 
 
 def get_condition(name_or_path: str | Path) -> Condition:

@@ -1,11 +1,11 @@
 """Image post effects on linear radiance (after exposure, before tone mapping), with OpenCV, seeded.
 
-Order, following the light: motion blur over the shutter time, rain (streaks in the air, drops on the
-lens), lens effects (bloom, flare ghosts, point spread, vignetting), the sensor's noise, then the image processor
-(wide-dynamic-range curve, highlights compressed keeping their hue). Images are (H, W, 3) float32
-linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized Gaussian fields
-from a counter-based generator keyed by one draw of it: :func:`standard_normal`), so the same generator state
-gives the same image. Effects that need randomness are skipped when no generator is given.
+Order, following the light: motion blur over the shutter time, rain (streaks in the air:
+:mod:`pipeline.sensors.rain`; drops on the lens), lens effects (bloom, flare ghosts, point spread, vignetting), the
+sensor's noise, then the image processor (wide-dynamic-range curve, highlights compressed keeping their hue). Images
+are (H, W, 3) float32 linear RGB; every random draw comes from the caller's generator, in a fixed order (image-sized
+Gaussian fields from a counter-based generator keyed by one draw of it: :func:`standard_normal`), so the same
+generator state gives the same image. Effects that need randomness are skipped when no generator is given.
 
 - Vignetting: gain(r) = 1 - v * (r / r_corner)^2 with r the distance from the image centre; the corners
   keep exactly 1 - v.
@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 from scipy.special import ndtri
 
-from pipeline.core.config.sensors import LensConfig, RainConfig
+from pipeline.core.config.sensors import LensConfig
 from pipeline.core.jit import as_input, kernel
 
 if TYPE_CHECKING:
@@ -305,33 +305,6 @@ def lens_flare(image: np.ndarray, strength: float, threshold: float) -> np.ndarr
     return image + cv2.resize(layer, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(strength)
 
 
-def rain_streaks(image: np.ndarray, cfg: RainConfig, sky_level: float, rng: np.random.Generator) -> np.ndarray:
-    """Add seeded rain streaks: anti-aliased lines, motion-blurred along their direction, as light scattered
-    towards the camera (``cfg.streak_brightness`` x ``sky_level``, the mean radiance of the sky)."""
-    h, w = image.shape[:2]
-    n = round(cfg.streaks_per_megapixel * cfg.intensity * h * w / 1e6)
-    if n == 0 or cfg.streak_brightness == 0:
-        return image
-    x, y = rng.uniform(0, w, n), rng.uniform(-0.1 * h, h, n)
-    length = rng.uniform(*cfg.streak_length_px, n)
-    angle = np.radians(cfg.streak_angle_deg + rng.normal(0.0, 2.0, n))
-    level = rng.integers(0, 3, n)  # three brightness levels, one draw call each
-    tip = np.column_stack([x + length * np.sin(angle), y + length * np.cos(angle)])
-    ends = np.stack([np.column_stack([x, y]), tip], axis=1)
-    layer = np.zeros((h, w), np.float32)
-    for lv in range(3):
-        pts = [np.round(e * 16).astype(np.int32) for e in ends[level == lv]]  # 4 fractional bits
-        cv2.polylines(layer, pts, False, (0.35 + 0.325 * lv,), 1, cv2.LINE_AA, 4)
-    k = 9
-    kernel = np.zeros((k, k), np.float32)
-    a = np.radians(cfg.streak_angle_deg)
-    t = np.linspace(-(k // 2), k // 2, 4 * k)
-    kernel[np.round(k // 2 + t * np.cos(a)).astype(int), np.round(k // 2 + t * np.sin(a)).astype(int)] = 1.0
-    layer = cv2.filter2D(layer, -1, kernel / kernel.sum())
-    scale = np.float32(cfg.streak_brightness * cfg.intensity * sky_level * 3.0)
-    return image + per_channel(layer * scale)
-
-
 def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
     """Blurry raindrops on the lens: round soft regions showing a strongly blurred image."""
     if count == 0:
@@ -350,36 +323,38 @@ def rain_drops(image: np.ndarray, count: int, rng: np.random.Generator) -> np.nd
 def apply_post(
     image: np.ndarray,
     lens: LensConfig,
-    rain: RainConfig | None,
     rng: np.random.Generator | None,
     *,
     flow: np.ndarray | None = None,
-    sky_level: float = 0.0,
+    streaks: np.ndarray | None = None,
+    streak_radiance: float = 0.0,
+    lens_drops: int = 0,
     gain: float = 1.0,
     psf_sigma_px: float = 0.0,
     sensor: Exposure | None = None,
 ) -> np.ndarray:
     """All post effects of a condition on an (H, W, 3) float32 linear image (see the module docstring).
 
-    ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``sky_level`` the
-    mean sky radiance after exposure (sets the brightness of rain streaks); ``gain`` scales the image first (the
-    camera's exposure, :mod:`pipeline.sensors.exposure`); ``psf_sigma_px`` the camera's point-spread function
-    (:func:`point_spread`), applied with the other optics, before the sensor; ``sensor`` the frame's
-    :class:`pipeline.sensors.exposure.Exposure`, whose shot and read noise the sensor adds after the optics and
-    before the image processor (None, or no ``rng``: no noise).
+    ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``streaks`` (H, W)
+    float32 the share of each pixel's exposure that falling raindrops cover (:mod:`pipeline.sensors.rain`), whose
+    radiance is ``streak_radiance``; ``lens_drops`` the raindrops on the lens (drawn from ``rng``); ``gain`` scales
+    the image first (the camera's exposure, :mod:`pipeline.sensors.exposure`); ``psf_sigma_px`` the camera's
+    point-spread function (:func:`point_spread`), applied with the other optics, before the sensor; ``sensor`` the
+    frame's :class:`pipeline.sensors.exposure.Exposure`, whose shot and read noise the sensor adds after the optics
+    and before the image processor (None, or no ``rng``: no noise).
     """
     out = np.asarray(image, np.float32)
     if gain != 1.0:
         out = out * np.float32(gain)
-        sky_level *= gain
     if flow is not None:
         out = motion_blur(out, flow)
-    if rain is not None and rng is not None:  # streaks are drawn already blurred by their own fall
-        out = rain_streaks(out, rain, sky_level, rng)
+    if streaks is not None:  # the drops' own motion is their streak: not blurred again
+        cover = per_channel(streaks)
+        out = out * (1.0 - cover) + cover * np.float32(streak_radiance * gain)
     out = bloom(out, lens.bloom_threshold, lens.bloom_strength, lens.bloom_sigma_px)
     out = lens_flare(out, lens.lens_flare, 2.0 * lens.bloom_threshold)
-    if rain is not None and rng is not None:
-        out = rain_drops(out, rain.drops, rng)
+    if lens_drops and rng is not None:
+        out = rain_drops(out, lens_drops, rng)
     out = point_spread(out, psf_sigma_px)
     out = vignette(out, lens.vignetting)
     if sensor is not None and rng is not None:

@@ -71,11 +71,10 @@ RADAR_MATERIALS: dict[str, tuple[float, float]] = {
 
 _PAINT, _CLOTH = material_index("paint"), material_index("cloth")
 
-# Weather near 77 GHz. Rain: specific attenuation k R^a (ITU-R P.838 coefficients at 77 GHz, horizontal); the
-# condition's rain intensity 1 is a downpour of RAIN_RATE_AT_FULL_MM_PER_H. Fog: liquid water content from the
+# Weather near 77 GHz. Rain: specific attenuation k R^a at the condition's rain rate R (ITU-R P.838 coefficients at
+# 77 GHz, horizontal). Fog: liquid water content from the
 # visibility (Eldridge: V_km = 0.024 M^-0.65, M in g/m^3) times ITU-R P.840's specific attenuation near 77 GHz.
 RAIN_K, RAIN_ALPHA = 1.1, 0.71
-RAIN_RATE_AT_FULL_MM_PER_H = 50.0
 FOG_DB_PER_KM_PER_G_M3 = 2.5
 
 
@@ -135,8 +134,8 @@ def material_tables() -> tuple[np.ndarray, np.ndarray]:
 def weather_attenuation_db_per_km(condition: ConditionConfig) -> float:
     """One-way specific attenuation of the radar's signal under ``condition`` (rain and fog), dB per km."""
     alpha = 0.0
-    if condition.rain is not None and condition.rain.intensity > 0:
-        alpha += RAIN_K * (RAIN_RATE_AT_FULL_MM_PER_H * condition.rain.intensity) ** RAIN_ALPHA
+    if condition.rain is not None:
+        alpha += RAIN_K * condition.rain.rate_mm_h ** RAIN_ALPHA
     if condition.fog is not None:
         water_g_m3 = (condition.fog.visibility_m / 1000.0 / 0.024) ** (-1.0 / 0.65)
         alpha += FOG_DB_PER_KM_PER_G_M3 * water_g_m3

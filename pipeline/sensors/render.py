@@ -26,7 +26,8 @@ from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.exposure import auto_exposure
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
 from pipeline.sensors.post import apply_post, motion_flow
-from pipeline.sensors.shading import shade, sky, to_srgb8
+from pipeline.sensors.rain import streak_coverage
+from pipeline.sensors.shading import _materials, shade, sky, to_srgb8
 from pipeline.sensors.shadows import (
     SHADOW_FILTER_DEPTH,
     SHADOW_FILTER_NORMAL_COS,
@@ -34,6 +35,7 @@ from pipeline.sensors.shadows import (
     pixel_shares,
     sun_shares,
 )
+from pipeline.sensors.wet import road_reflections
 from pipeline.world.scene import FrameScene, Hits, make_rays
 
 
@@ -107,6 +109,9 @@ def render_camera(
     # sensor's shot and read noise follow from the signal and the gain.
     sensor, compensation = camera.config.sensor, condition.exposure
     exposure = None
+    # The wet road mirrors the scene (the realistic camera; the fast one adds the sky's sheen in shade).
+    reflection = (road_reflections(scene, rays, hits, condition, lights, (h, w), camera.fy)
+                  if indirect and condition.wetness > 0 else None)
     if len(samples) == 1:
         radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w)),
                                  hits.t_m, hits.hit)
@@ -120,6 +125,8 @@ def render_camera(
             radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w),
                                            sunlit), hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
+            if reflection is not None:
+                reflection.apply(radiance)
             exposure = auto_exposure(radiance.reshape(h, w, 3), sensor, compensation, shaded_with=compensation)
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
@@ -131,6 +138,13 @@ def render_camera(
                                         texture_rad, sunlit=lent), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
+        if reflection is not None:  # the edge pixels' new radiance, on wet road, mirrors too
+            reflection.apply(radiance, where if not camera.config.samples_everywhere else None)
+    if reflection is not None and len(samples) == 1:
+        reflection.apply(radiance)
+    if condition.visibility_m is not None:  # lamps glow through fog and rain
+        glowing = hits.hit & _materials()["glows"][hits.material]
+        condition.halos(radiance, np.where(hits.hit, hits.t_m, np.inf), glowing, (h, w), camera.fy)
     radiance = radiance.reshape(h, w, 3)
     if exposure is None:
         exposure = auto_exposure(radiance, sensor, compensation, shaded_with=compensation)
@@ -150,9 +164,15 @@ def render_camera(
         flow = motion_flow(points, shift_cam, camera.fx, camera.fy).reshape(h, w, 2)
         if float(np.abs(flow).max()) < MIN_BLUR_PX:  # a daylight exposure: no pixel moves visibly
             flow = None
-    image = apply_post(radiance, condition.lens, condition.rain, rng, flow=flow,
-                       sky_level=_sky_level(condition), gain=gain, psf_sigma_px=camera.config.psf_sigma_px,
-                       sensor=exposure)
+    streaks, streak_radiance, rain = None, 0.0, condition.rain
+    if rain is not None and rng is not None:
+        # Drops refract light from a wide cone: their radiance is about the mean of the sky's and the scene's.
+        streak_radiance = 0.5 * (_sky_level(condition) + float(radiance.mean()))
+        streaks = streak_coverage(rain.rate_mm_h, rain.wind_mps, exposure.time_s, camera, cam_to_world,
+                                  ego_pose.rotation[:, 0] * ego_speed_mps, depth.reshape(h, w), rng)
+    image = apply_post(radiance, condition.lens, rng, flow=flow, streaks=streaks, streak_radiance=streak_radiance,
+                       lens_drops=0 if rain is None else rain.drops, gain=gain,
+                       psf_sigma_px=camera.config.psf_sigma_px, sensor=exposure)
     return CameraFrame(
         rgb=to_srgb8(image, "filmic" if indirect else "soft"),
         instance_id=hits.instance_id.reshape(h, w),
@@ -218,10 +238,11 @@ def _lent_sun_shares(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: n
 
 
 def _sky_level(condition: Condition) -> float:
-    """Mean radiance of the sky near the horizon as the camera sees it (fog colour in fog), after exposure: over 8
-    azimuths, the directions' z = 0.1 (a daylight sky is brighter towards the sun; a gradient is the same all round)."""
+    """Mean radiance of the sky near the horizon as the camera sees it (the airlight in fog), with the exposure
+    compensation: over 8 azimuths, the directions' z = 0.1 (a daylight sky is brighter towards the sun; a gradient is
+    the same all round)."""
     if condition.fog_visibility_m is not None:
-        level = float(np.mean(condition.fog_rgb))
+        level = float(np.mean(condition.airlight_rgb))
     else:
         azimuth = np.arange(8) * (np.pi / 4)
         flat = np.sqrt(1.0 - 0.1 ** 2)

@@ -94,7 +94,7 @@ def shade(
                                                                hits.material, hits.normal, hits.color, pixel_angle_rad))
     wet = None
     if condition.wetness > 0:
-        wet, hits, mats = wet_surfaces(hits, mats, condition.wetness)
+        wet, hits, mats = wet_surfaces(hits, mats, condition.wetness, rays)
     sun = condition.sun_direction
     mat = hits.material
     rays = as_input(rays, np.float32)
@@ -131,7 +131,7 @@ def shade(
             out[under_lamp] += hits.color[under_lamp] * (rgb * np.float32(getattr(condition, scale)))
     if lights is not None and len(lights):
         out += light_radiance(scene, rays, hits, lights, hits.color, mats["specular"][mat], mats["shininess"][mat])
-    if wet is not None and len(wet.road):
+    if wet is not None and len(wet.road) and not indirect:  # the realistic camera traces them (wet.road_reflections)
         out[wet.road] += wet_sheen(np.take(rays, wet.road, axis=0), np.take(hits.normal, wet.road, axis=0),
                                    condition.sky_params, condition.wetness)
     if condition.exposure != 1.0:

@@ -44,7 +44,8 @@ def test_every_shipped_yaml_validates():
     ("name: bad\nfog: {visibility: 50.0}\n", "fog.visibility"),
     ("name: bad\nlens: {vignetting: 1.5}\n", "lens.vignetting"),
     ("name: bad\nsky: {ambient_rgb: [0.1, -0.2, 0.1]}\n", "sky"),
-    ("name: bad\nrain: {streak_length_px: [50.0, 10.0]}\n", "rain"),
+    ("name: bad\nrain: {intensity: 0.5}\n", "rain.rate_mm_h"),
+    ("name: bad\nrain: {rate_mm_h: -2.0}\n", "rain.rate_mm_h"),
     ("name: bad\nsky: {model: hosek}\n", "sky.model"),
     ("name: bad\nsky: {model: preetham, turbidity: 1.2}\n", "sky.turbidity"),
     ("name: bad\nsun: {elevation_deg: -5.0}\nsky: {model: preetham}\n", "sky.model"),
@@ -65,9 +66,10 @@ def test_unknown_name_lists_the_shipped_ones():
 
 def test_user_condition_from_any_path(tmp_path: Path):
     path = tmp_path / "storm.yaml"
-    path.write_text("name: storm\nfog: {visibility_m: 40.0}\nrain: {intensity: 1.0}\n")
+    path.write_text("name: storm\nfog: {visibility_m: 40.0}\nrain: {rate_mm_h: 50.0}\n")
     cond = get_condition(path)
-    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.wetness > 0
+    assert cond.name == "storm" and cond.fog_visibility_m == 40.0 and cond.wetness == 1.0  # a drowned road
+    assert cond.visibility_m < 40.0  # the rain dims the air beyond the fog
 
 
 def test_fog_follows_koschmieder():
@@ -92,7 +94,7 @@ def test_fog_contrast_decays_with_the_exact_ray_distance(actors_factory, wall):
     hits = scene.cast_rays(rays)
     clear = shade(scene, rays, hits, fog)
     foggy = fog.fog(clear, hits.t_m, hits.hit)
-    airlight = np.asarray(fog.fog_rgb, np.float32) * fog.exposure
+    airlight = np.asarray(fog.airlight_rgb, np.float32) * fog.exposure
     ok = hits.hit & (np.abs(clear[:, 0] - airlight[0]) > 0.05)
     assert ok.sum() > 1000 and np.ptp(hits.t_m[ok]) > 30.0
     ratio = (foggy[ok, 0] - airlight[0]) / (clear[ok, 0] - airlight[0])
@@ -146,22 +148,22 @@ def test_same_seed_same_noisy_image(actors_factory, wall):
         assert not np.array_equal(a, c)
 
 
-def test_fog_cuts_lidar_range_and_intensity(wall):
+def test_fog_attenuates_the_lidar_twice_over_its_path(wall):
+    # Intensity I0 exp(-a d): fog adds its extinction at 905 nm on the way out and back, 2 beta; beyond some range the
+    # return falls below the detection threshold.
     fog = get_condition("fog")
     lidar = Lidar(lidar_config(channels=8, upper_fov_deg=2.0, lower_fov_deg=-2.0, horizontal_resolution_deg=1.0,
                               dropout=0.0, range_noise_std_m=0.0))
-    near = FrameScene(StaticScene([wall(30.0)]), _no_actors())
+    near = FrameScene(StaticScene([wall(20.0)]), _no_actors())  # within the fog's LiDAR range of 29 m
     clear = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0))
     foggy = render_lidar(near, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)
     assert 0 < len(foggy) < len(clear)  # extra drop-out and the detection threshold lose points
     key_c = clear.column.astype(int) * 8 + clear.ring
     key_f = foggy.column.astype(int) * 8 + foggy.ring
     both = np.isin(key_c, key_f)
-    fx = fog.lidar_effects
-    a = lidar.config.attenuation_per_m
+    beta = KOSCHMIEDER / 80.0  # 80 m of fog: droplets large against 905 nm, the extinction of visible light
     d = np.linalg.norm(clear.points_m[both], axis=1)
-    expected = clear.intensity[both] * fx.intensity_factor * np.exp(-a * (fx.attenuation_factor - 1.0) * d)
-    np.testing.assert_allclose(foggy.intensity, expected, rtol=1e-4)
-    far = FrameScene(StaticScene([wall(0.8 * lidar.config.range_m)]), _no_actors())
+    np.testing.assert_allclose(foggy.intensity, clear.intensity[both] * np.exp(-2.0 * beta * d), rtol=1e-4)
+    far = FrameScene(StaticScene([wall(40.0)]), _no_actors())
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0))) > 0
     assert len(render_lidar(far, lidar, Transform.identity(), np.random.default_rng(0), condition=fog)) == 0

@@ -91,7 +91,7 @@ def measured_variance(level: float, exposure, seed: int = 3) -> float:
     other effect (no vignetting, bloom, range compression)."""
     lens = LensConfig(vignetting=0.0)
     image = np.full((400, 500, 3), level, np.float32)
-    out = apply_post(image, lens, None, np.random.default_rng(seed), sensor=exposure)
+    out = apply_post(image, lens, np.random.default_rng(seed), sensor=exposure)
     return float(np.var(out.astype(np.float64) - level))
 
 

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.core.config.sensors import ImageSensorConfig, LensConfig, RainConfig
+from pipeline.core.config.sensors import ImageSensorConfig, LensConfig
 from pipeline.sensors.exposure import exposure_for
 from pipeline.sensors.post import (
     apply_post,
@@ -17,7 +17,6 @@ from pipeline.sensors.post import (
     motion_flow,
     point_spread,
     psf_taps,
-    rain_streaks,
     sensor_noise,
     standard_normal,
     vignette,
@@ -35,7 +34,7 @@ def test_vignetting_darkens_corners_by_the_configured_factor():
     assert out[H // 2, W // 2, 0] == pytest.approx(1.0, abs=1e-5)
     assert np.all(np.diff(out[H // 2, W // 2:, 0]) <= 0)  # monotone towards the edge
     lens = LensConfig(vignetting=0.3)
-    post = apply_post(image, lens, None, None)
+    post = apply_post(image, lens, None)
     np.testing.assert_allclose(post, out)
 
 
@@ -61,18 +60,24 @@ def test_each_pixel_gets_its_own_sigma_times_one_draw():
     np.testing.assert_allclose(noisy, image + draws * sigma, rtol=1e-5, atol=1e-6)
 
 
-def test_same_seed_same_post_and_rain_only_adds_light():
+def test_same_seed_same_post_and_streaks_blend_towards_the_drops_radiance():
     rng_image = np.random.default_rng(9).random((120, 160, 3)).astype(np.float32) * 0.5
     lens = LensConfig(vignetting=0.2, bloom_strength=0.3, lens_flare=0.1)
-    rain = RainConfig(intensity=1.0, drops=3)
-    a = apply_post(rng_image, lens, rain, np.random.default_rng(3), sensor=EXPOSURE)
-    b = apply_post(rng_image, lens, rain, np.random.default_rng(3), sensor=EXPOSURE)
-    c = apply_post(rng_image, lens, rain, np.random.default_rng(4), sensor=EXPOSURE)
+    a = apply_post(rng_image, lens, np.random.default_rng(3), lens_drops=3, sensor=EXPOSURE)
+    b = apply_post(rng_image, lens, np.random.default_rng(3), lens_drops=3, sensor=EXPOSURE)
+    c = apply_post(rng_image, lens, np.random.default_rng(4), lens_drops=3, sensor=EXPOSURE)
     np.testing.assert_array_equal(a, b)
     assert not np.array_equal(a, c)
-    streaks = rain_streaks(rng_image, rain, 0.4, np.random.default_rng(0))
-    added = streaks - rng_image
-    assert added.min() >= 0.0 and (added > 1e-3).mean() > 0.01  # light scattered by drops, on >1 % of pixels
+    # A pixel covered by drops for a share a of the exposure: (1 - a) of the scene, a of the drops' radiance.
+    plain = LensConfig(vignetting=0.0)
+    cover = np.zeros((120, 160), np.float32)
+    cover[10, 20], cover[30, 40] = 0.25, 1.0
+    out = apply_post(rng_image, plain, None, streaks=cover, streak_radiance=0.8, gain=2.0)
+    ref = apply_post(rng_image, plain, None, gain=2.0)
+    np.testing.assert_allclose(out[10, 20], 0.75 * ref[10, 20] + 0.25 * 1.6, rtol=1e-5)
+    np.testing.assert_allclose(out[30, 40], 1.6, rtol=1e-5)
+    untouched = cover == 0
+    np.testing.assert_array_equal(out[untouched], ref[untouched])
 
 
 def test_motion_flow_closed_form_and_blur():
@@ -137,8 +142,8 @@ def test_post_scales_by_the_gain_before_the_sensors_noise():
     lens = LensConfig(vignetting=0.0, bloom_strength=0.0)
     read_only = replace(exposure_for(ImageSensorConfig(read_noise_e=100.0), 1 / 100, 1.0), shot_scale=0.0)
     image = np.full((40, 50, 3), 0.05, np.float32)
-    plain = apply_post(image, lens, None, np.random.default_rng(3), sensor=read_only)
-    bright = apply_post(image, lens, None, np.random.default_rng(3), gain=3.0, sensor=read_only)
+    plain = apply_post(image, lens, np.random.default_rng(3), sensor=read_only)
+    bright = apply_post(image, lens, np.random.default_rng(3), gain=3.0, sensor=read_only)
     np.testing.assert_allclose(bright - 0.15, plain - 0.05, atol=1e-6)  # same noise draws, scaled image
 
 
@@ -162,9 +167,9 @@ def test_post_adds_the_sensors_noise_before_the_wdr_curve():
     lens = LensConfig(vignetting=0.0, bloom_strength=0.0, wdr_gamma=0.5)
     read_only = replace(exposure_for(ImageSensorConfig(read_noise_e=100.0), 1 / 100, 1.0), shot_scale=0.0)
     image = np.full((40, 50, 3), 0.5 / 16, np.float32)  # grey at 1/16 of the pivot: lifted 4x to 1/4 of it
-    noisy = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), None, np.random.default_rng(3),
+    noisy = apply_post(image, LensConfig(vignetting=0.0, bloom_strength=0.0), np.random.default_rng(3),
                        sensor=read_only)
-    lifted = apply_post(image, lens, None, np.random.default_rng(3), sensor=read_only)
+    lifted = apply_post(image, lens, np.random.default_rng(3), sensor=read_only)
     from pipeline.sensors.post import wide_dynamic_range
 
     np.testing.assert_allclose(lifted, wide_dynamic_range(noisy, 0.5), rtol=1e-5, atol=1e-7)
@@ -214,8 +219,8 @@ def test_post_applies_the_cameras_point_spread_function():
     image = np.zeros((40, 40, 3), np.float32)
     image[:, 20:] = 1.0
     lens = LensConfig(vignetting=0.0, bloom_strength=0.0)
-    sharp = apply_post(image, lens, None, None)
-    soft = apply_post(image, lens, None, None, psf_sigma_px=0.65)
+    sharp = apply_post(image, lens, None)
+    soft = apply_post(image, lens, None, psf_sigma_px=0.65)
     np.testing.assert_array_equal(sharp, image)
     np.testing.assert_allclose(soft, point_spread(image, 0.65))
 

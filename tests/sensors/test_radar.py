@@ -180,7 +180,7 @@ def test_same_seed_same_scan_and_the_cap_keeps_the_strongest(actors_factory, box
 
 
 def test_weather_attenuates_the_snr_two_ways(wall):
-    downpour = ConditionConfig(name="rain", rain={"intensity": 1.0})
+    downpour = ConditionConfig(name="rain", rain={"rate_mm_h": 50.0})
     fog = ConditionConfig(name="fog", fog={"visibility_m": 50.0})
     alpha_rain, alpha_fog = weather_attenuation_db_per_km(downpour), weather_attenuation_db_per_km(fog)
     assert alpha_rain == pytest.approx(1.1 * 50.0 ** 0.71)  # ITU-R P.838 at 77 GHz, 50 mm/h

@@ -39,7 +39,7 @@ def test_wet_paint_mirrors_more_of_the_sky_at_grazing_angles(box_meshes, actors_
     F_coat + w F_water (1 - F_coat), above the dry roof's F_coat; seen straight down, nearly the same."""
     sky = {"zenith_rgb": (1.0, 1.0, 1.0), "horizon_rgb": (1.0, 1.0, 1.0), "ambient_rgb": (0.3, 0.3, 0.3)}
     dry = condition(sun={"elevation_deg": -10.0}, sky=sky)
-    wet = condition(sun={"elevation_deg": -10.0}, sky=sky, rain={"wetness": 0.8})
+    wet = condition(sun={"elevation_deg": -10.0}, sky=sky, rain={"rate_mm_h": 5.0, "wetness": 0.8})
     scene = FrameScene(StaticScene([]), actors_factory([[0.0, 0.0, 0.75]], [[20.0, 20.0, 1.5]]), box_meshes)
     reflectance = {}
     for incidence_deg in (80.0, 0.0):
@@ -67,8 +67,8 @@ def test_wet_paint_is_a_little_darker_and_the_dry_image_is_unchanged(box_meshes,
     rays = np.array([[0.0, 0.0, 5.0, 0.0, 0.0, -1.0]], np.float32)
     hits = scene.cast_rays(rays)
     dry = condition(sun={"elevation_deg": 60.0, "shadows": False})
-    wet = condition(sun={"elevation_deg": 60.0, "shadows": False}, rain={"wetness": 0.5})
-    no_rain = condition(sun={"elevation_deg": 60.0, "shadows": False}, rain={"wetness": 0.0})
+    wet = condition(sun={"elevation_deg": 60.0, "shadows": False}, rain={"rate_mm_h": 5.0, "wetness": 0.5})
+    no_rain = condition(sun={"elevation_deg": 60.0, "shadows": False}, rain={"rate_mm_h": 5.0, "wetness": 0.0})
     ratio = shade(scene, rays, hits, wet)[0] / shade(scene, rays, hits, dry)[0]
     # Diffuse and ambient scale with the albedo; the highlight (sun_rgb * specular) does not: a lower bound.
     assert np.all(ratio < 1.0) and np.all(ratio >= 1.0 - WET_PAINT_DARKENING * 0.5 - 1e-6)

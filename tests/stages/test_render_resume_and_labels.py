@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 from pipeline.core.config import ConditionConfig, load_config
 from pipeline.core.geometry import Transform
 from pipeline.core.record import DatasetRecord
+from pipeline.sensors.conditions import Condition
+from pipeline.sensors.lidar import Lidar
 from pipeline.stages.render import plan_shards, record_rate_hz, render
 from tests.conftest import tree_hashes
 from tests.stages.conftest import EVERY_10TH, kill_render_after
@@ -96,7 +98,8 @@ def test_record_rate_of_uneven_and_single_frames():
 
 def test_lidar_rows_in_fog_follow_the_shortened_range(dense_highway_run, small_rig, tmp_path):
     fog = load_config(ConditionConfig, "fog", "conditions")[0]
-    rig_range, fog_range = small_rig.lidars[0].range_m, small_rig.lidars[0].range_m * fog.lidar.range_factor
+    rig_range = small_rig.lidars[0].range_m
+    fog_range = Condition(fog).lidar(Lidar(small_rig.lidars[0])).range_m
     assert fog_range < rig_range
     out = tmp_path / "fog"
     render(dense_highway_run, fog, small_rig, out, frames=2, workers=1, progress=False)

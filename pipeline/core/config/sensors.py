@@ -104,6 +104,8 @@ class LidarConfig(_Model):
     range_m: float = Field(120.0, gt=0.0)
     rotation_hz: float = Field(10.0, gt=0.0)
     attenuation_per_m: float = Field(0.004, ge=0.0)
+    wavelength_nm: float = Field(905.0, ge=300.0, le=2000.0, description="laser wavelength, nm (the fog's extinction "
+                                 "depends on it: pipeline.sensors.weather)")
     range_noise_std_m: float = Field(0.02, ge=0.0)
     dropout: float = Field(0.02, ge=0.0, lt=1.0, description="chance that a return is lost")
     mount: MountPose
@@ -227,7 +229,7 @@ class _ConditionPart(_Model):
     @model_validator(mode="after")
     def _check_rgb(self) -> _ConditionPart:
         for name in type(self).model_fields:
-            if name.endswith("_rgb") and min(getattr(self, name)) < 0:
+            if name.endswith("_rgb") and getattr(self, name) is not None and min(getattr(self, name)) < 0:
                 raise ValueError(f"{name}: colour channels must be >= 0, got {getattr(self, name)}")
         return self
 
@@ -350,29 +352,25 @@ class VehicleLightConfig(_Model):
 
 
 class FogConfig(_ConditionPart):
-    """Koschmieder fog: T = exp(-3.912 d / visibility_m) with the exact distance d of each ray."""
+    """Koschmieder fog: T = exp(-3.912 d / visibility_m) with the exact distance d of each ray
+    (:mod:`pipeline.sensors.weather`)."""
 
     visibility_m: float = Field(gt=0.0, description="meteorological visibility (2 % contrast), metres")
-    color_rgb: RGB = _rgb("airlight colour (before exposure)", (0.62, 0.65, 0.68))
+    color_rgb: RGB | None = Field(None, description="airlight colour, linear RGB before exposure; None = the sky's "
+                                  "radiance at the horizon (the light the fog scatters is the sky's)")
 
 
 class RainConfig(_Model):
-    """Rain: wet road, image-space streaks (seeded) and, through ``fog``, lower visibility."""
+    """Rain by its rate (:mod:`pipeline.sensors.weather`, :mod:`pipeline.sensors.rain`): Marshall-Palmer drops that
+    dim the air (with any ``fog``), streak across the camera's exposure time and wet the road."""
 
-    intensity: float = Field(0.5, ge=0.0, le=1.0, description="0 dry .. 1 downpour; scales streak count and alpha")
-    wetness: float = Field(0.8, ge=0.0, le=1.0, description="road wetness: darker albedo, stronger specular")
-    streaks_per_megapixel: float = Field(2500.0, ge=0.0, description="streaks at intensity 1 per million pixels")
-    streak_length_px: tuple[float, float] = Field((18.0, 60.0), description="min, max streak length, pixels")
-    streak_angle_deg: float = Field(8.0, ge=-60.0, le=60.0, description="tilt from vertical (wind), degrees")
-    streak_brightness: float = Field(0.25, ge=0.0, description="streak radiance relative to the mean sky")
+    rate_mm_h: float = Field(gt=0.0, le=300.0, description="rainfall rate, mm/h (light < 2.5, moderate 2.5-7.6, "
+                             "heavy > 7.6: the American Meteorological Society's glossary)")
+    wetness: float | None = Field(None, ge=0.0, le=1.0, description="the road's wetness, 0 dry .. 1 a mirror sheet; "
+                                  "None = from the rate (Gallaway's water film depth over the road's texture)")
+    wind_mps: tuple[float, float] = Field((0.0, 0.0), description="horizontal wind (east, north), m/s: drops fall "
+                                          "at their terminal speed plus the wind")
     drops: int = Field(0, ge=0, le=200, description="blurry raindrops on the lens (0 = none)")
-
-    @model_validator(mode="after")
-    def _check_lengths(self) -> RainConfig:
-        lo, hi = self.streak_length_px
-        if not 0.0 < lo <= hi:
-            raise ValueError(f"streak_length_px must be (min, max) with 0 < min <= max, got {self.streak_length_px}")
-        return self
 
 
 class LensConfig(_Model):
