@@ -266,8 +266,8 @@ class Condition:
     def lidar(self, lidar: Lidar) -> LidarConfig:
         """``lidar``'s config under this condition: the air's two-way extinction at the LiDAR's wavelength (fog and
         rain, :mod:`pipeline.sensors.weather`) added to its attenuation and shortening its range
-        (:func:`lidar_range_m`), then the condition's ``lidar`` factors (range, attenuation, noise, drop-out; intensity factor and detection threshold are applied by
-        :func:`pipeline.sensors.lidar.render_lidar`)."""
+        (:func:`lidar_range_m`), then the condition's ``lidar`` factors (range, attenuation, noise, drop-out; intensity
+        factor and detection threshold are applied by :func:`pipeline.sensors.lidar.render_lidar`)."""
         fx, config = self.lidar_effects, lidar.config
         beta = self.extinction_per_m(config.wavelength_nm)
         return config.model_copy(update={
