@@ -30,6 +30,7 @@ from pipeline.core.config.sensors import (
     StreetLampConfig,
 )
 from pipeline.core.geometry import Transform
+from pipeline.core.photometry import clear_sky_sun_lux, lux_to_irradiance
 from pipeline.sensors.lidar import Lidar
 from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_lights, vehicle_headlights
 from pipeline.sensors.post import luminance
@@ -79,10 +80,16 @@ class Condition:
 
     @property
     def sun_rgb(self) -> tuple[float, float, float]:
-        """Sun irradiance, linear RGB: colour x intensity; zero with the sun at or below the horizon."""
+        """Sun irradiance, linear RGB: colour x intensity (or the clear-sky sun's illuminance at the sun's elevation,
+        :func:`pipeline.core.photometry.clear_sky_sun_lux`); zero with the sun at or below the horizon."""
         if self.sun_elevation_deg <= 0:
             return (0.0, 0.0, 0.0)
-        return tuple(float(v) for v in np.asarray(self.config.sun.color_rgb) * self.config.sun.intensity)
+        sun = self.config.sun
+        if sun.intensity is None:  # the clear-sky sun at its elevation, its colour of unit luminance
+            color = np.asarray(sun.color_rgb, np.float64)
+            scale = lux_to_irradiance(clear_sky_sun_lux(self.sun_elevation_deg)) / max(float(luminance(color)), 1e-9)
+            return tuple(float(v) for v in color * scale)
+        return tuple(float(v) for v in np.asarray(sun.color_rgb) * sun.intensity)
 
     @property
     def shadows(self) -> bool:

@@ -11,6 +11,7 @@ import pytest
 from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
+from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.rain import streak_coverage
 from pipeline.sensors.render import render_camera
 from pipeline.sensors.weather import (
@@ -169,3 +170,18 @@ def test_fog_shortens_the_lidar_range_to_where_its_weakest_target_fades():
     assert np.exp(-2 * beta * r) / r ** 2 == pytest.approx(1 / 120.0 ** 2, rel=1e-9)
     assert 25.0 < r < 35.0
     assert lidar_range_m(120.0, 0.0) == 120.0
+
+
+def test_the_clear_sky_sun_by_elevation():
+    from pipeline.core.photometry import SUN_ANCHOR_LUX, air_mass, clear_sky_sun_lux
+
+    assert air_mass(90.0) == pytest.approx(1.0, abs=1e-3)
+    assert air_mass(60.0) == pytest.approx(1.0 / np.sin(np.radians(60.0)), rel=2e-3)  # a plane atmosphere up high
+    assert 14.0 < air_mass(3.0) < 16.0
+    assert clear_sky_sun_lux(65.0) == pytest.approx(SUN_ANCHOR_LUX, rel=0.02)  # the anchor: a high sun, 100 klx
+    assert clear_sky_sun_lux(0.0) == 0.0 and clear_sky_sun_lux(3.0) < 0.06 * clear_sky_sun_lux(65.0)
+    dusk = get_condition("dusk")
+    from pipeline.core.photometry import lux_to_irradiance
+    from pipeline.sensors.post import luminance
+
+    assert float(luminance(np.asarray(dusk.sun_rgb))) == pytest.approx(lux_to_irradiance(clear_sky_sun_lux(3.0)))

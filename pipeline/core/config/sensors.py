@@ -266,7 +266,10 @@ class SunConfig(_ConditionPart):
                                description="CCW from east (world +x; 90 = north), degrees; not a compass bearing")
     elevation_deg: float = Field(45.0, ge=-90.0, le=90.0, description="above the horizon, degrees; <= 0: no sun")
     color_rgb: RGB = _rgb("colour of the sunlight (scaled by intensity)", (1.0, 0.94, 0.85))
-    intensity: float = Field(2.6, ge=0.0, description="irradiance scale; 1 lights white paper to ~1 at exposure 1")
+    intensity: float | None = Field(2.6, ge=0.0, description="irradiance scale; 1 lights white paper to ~1 at "
+                                    "exposure 1 (2.6 = 100 klx: pipeline.core.photometry); None = the clear-sky sun "
+                                    "at its elevation (pipeline.core.photometry.clear_sky_sun_lux), colour_rgb scaled "
+                                    "to luminance 1")
     shadows: bool = Field(True, description="cast shadow rays towards the sun")
     angular_radius_deg: float = Field(0.27, ge=0.0, le=5.0, description="the sun disc's angular radius, degrees "
                                       "(0.27: the real sun; its shadows have penumbrae); 0 = a point: hard shadows")
