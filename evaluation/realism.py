@@ -224,7 +224,8 @@ def realism_metrics(gt: GroundTruth, dt: Detections, *, score_threshold: float, 
 
     Args:
         score_threshold: the detector's operating threshold (recall, precision, objects found).
-        group_by: image attribute of the image groups (rows); ``all`` is every image.
+        group_by: image attribute of the image groups (rows, in the order their first images come in the ground
+            truth, as the records were exported); ``all`` is every image.
         visibility_m: meteorological visibility by image group value (fog, rain), for the transmittance.
         distance_edges_m: lower edges of the distance bins, ascending from 0.
     """
@@ -234,7 +235,9 @@ def realism_metrics(gt: GroundTruth, dt: Detections, *, score_threshold: float, 
         raise InputError(f"distance edges must ascend from 0 without repeats, got {list(distance_edges_m)}")
     visibility_m = dict(visibility_m or {})
     names, image_group = image_groups(gt, group_by)
-    image_sets = {ALL: np.ones(gt.num_images, bool), **{n: image_group == i for i, n in enumerate(names)}}
+    first_seen = np.unique(image_group, return_index=True)[1] if gt.num_images else np.zeros(0, np.int64)
+    image_sets = {ALL: np.ones(gt.num_images, bool),  # then the groups in the order of the images (the export's)
+                  **{names[i]: image_group == i for i in np.argsort(first_seen, kind="stable")}}
     objects = object_index(gt)
     rows, distance, matches = [], [], {}
     for group, categories in CLASS_GROUPS.items():

@@ -193,3 +193,11 @@ def test_output_folder_and_contact_sheets(tmp_path):
     text = (out / "realism.md").read_text()
     assert "| morning |" in text and "missed_vehicles.png" in text
     assert json.loads((out / "metrics.json").read_text())["rows"] == json.loads(json.dumps(m["rows"]))
+
+
+def test_image_groups_keep_the_order_of_their_images():
+    data = coco([{"image_id": 1, "bbox": A}], n_images=3)
+    for image, condition in zip(data["images"], ("noon", "night", "noon"), strict=True):
+        image["condition"] = condition
+    m = metrics_of(data, [])
+    assert list(dict.fromkeys(r["group"] for r in m["rows"])) == ["all", "noon", "night"]
