@@ -10,9 +10,12 @@ Definitions (evaluation/README.md, "Realism"):
   highest IoU, else an ignored one. *Ignored* objects: crowd regions, objects of the other groups (a rider boxed as
   a person is not a false person) and objects whose box height lies outside the height bin. A detection matched to
   an ignored object is neither TP nor FP; an unmatched one is ignored when its own height lies outside the bin
-  (COCO's rule for area ranges). Every detection of the group counts, with no limit per image.
+  (COCO's rule for area ranges), or when it overlaps (IoU >= 0.5) an object that a higher-ranked detection of
+  another of the group's categories matched: the same road user boxed as a car and as a truck (the detector's NMS is
+  class-wise) is one vehicle found, not a false one. A second box of the same category stays a false positive, as in
+  COCO. Every detection of the group counts, with no limit per image.
 - **Height bins** (:data:`HEIGHT_BINS_PX`) are ``[lo, hi)`` on the box height in pixels; ``all`` holds every
-  object (the distance table uses it: far objects are small).
+  object and every detection (the distance table uses it: far objects are small).
 - **AP50**: COCO's 101-point interpolated precision over all the group's detections (whatever scores the results
   hold); **recall** and **precision** count the detections scoring >= the score threshold.
 - **Objects**: an object is one ``track_id`` within one sequence, the images sharing the attributes
@@ -35,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from evaluation.box_iou import box_iou
 from evaluation.coco_ap import sort_detections
 from evaluation.inputs import Detections, GroundTruth, image_groups
 from evaluation.matching import greedy_match
@@ -47,7 +51,7 @@ CLASS_GROUPS: dict[str, tuple[str, ...]] = {
 }
 HEIGHT_BINS_PX: dict[str, tuple[float, float]] = {
     "all": (0.0, np.inf), "30+": (30.0, np.inf), "30-60": (30.0, 60.0), "60+": (60.0, np.inf)}
-REPORTED_HEIGHTS = ("30+", "30-60", "60+")  # the tables' bins; "all" serves the distance table
+REPORTED_HEIGHTS = ("30+", "30-60", "60+", "all")  # "all": every size, every false positive (small ones too)
 DISTANCE_EDGES_M = (0.0, 10.0, 20.0, 30.0, 40.0, 60.0, 80.0, 120.0)
 SEQUENCE_KEYS = ("scenario", "seed", "condition", "camera")
 IOU_THRESHOLD = 0.5
@@ -88,6 +92,22 @@ def group_categories(gt: GroundTruth, names: tuple[str, ...]) -> np.ndarray:
     return np.array([i for i, n in enumerate(gt.category_names) if n in names], dtype=np.int64)
 
 
+def _second_names(dt: Detections, didx: np.ndarray, matched_gt: np.ndarray, gt_boxes: np.ndarray) -> np.ndarray:
+    """(Nd, A) bool: an unmatched detection overlapping (IoU >= 0.5) an object that a higher-ranked detection of
+    another category of the group matched in its image: the same road user boxed under a second name of the group
+    (car and truck), which the detector's class-wise NMS keeps. Only unmatched detections are looked at (a loop over
+    them: a few per image)."""
+    out = np.zeros(matched_gt.shape, bool)
+    image, category = dt.image_index[didx], dt.category_index[didx]
+    first = np.searchsorted(image, image, side="left")  # didx is in (image, rank) order
+    for k, a in zip(*np.nonzero(matched_gt < 0), strict=True):
+        before = np.arange(first[k], k)
+        before = before[(matched_gt[before, a] >= 0) & (category[before] != category[k])]
+        if len(before):
+            out[k, a] = bool((box_iou(dt.bbox[didx[k]][None], gt_boxes[matched_gt[before, a]]) >= IOU_THRESHOLD).any())
+    return out
+
+
 def match_group(gt: GroundTruth, dt: Detections, categories: np.ndarray, score_threshold: float) -> GroupMatch:
     """Match the detections of the categories ``categories`` (indices) to the group's objects, every height bin."""
     in_group = np.isin(gt.category_index, categories) & ~gt.iscrowd
@@ -107,6 +127,7 @@ def match_group(gt: GroundTruth, dt: Detections, categories: np.ndarray, score_t
     hit_counted = counted[np.maximum(matched_gt, 0), bins] if len(gt) else np.zeros_like(matched)
     outside = ~_in_bins(dt.bbox[didx, 3])
     ignored = np.where(matched, ~hit_counted, outside)
+    ignored |= ~matched & ~ignored & _second_names(dt, didx, matched_gt, gt.bbox)
     tp, fp = matched & ~ignored, ~matched & ~ignored
     found = np.zeros(counted.shape, bool)
     r, a = np.nonzero(tp & (dt.score[didx] >= score_threshold)[:, None])

@@ -201,3 +201,22 @@ def test_image_groups_keep_the_order_of_their_images():
         image["condition"] = condition
     m = metrics_of(data, [])
     assert list(dict.fromkeys(r["group"] for r in m["rows"])) == ["all", "noon", "night"]
+
+
+def test_a_road_user_boxed_under_two_names_of_its_group_is_found_once_not_a_false_positive():
+    anns = [{"image_id": 1, "bbox": [0, 0, 60, 40], "track_id": 1}]
+    twice = [det(1, [0, 0, 60, 40], 0.8, category_id=8), det(1, [2, 0, 60, 40], 0.6, category_id=3)]
+    r = row(metrics_of(coco(anns, n_images=1), twice))
+    assert (r["tp"], r["fp"], r["precision"]) == (1, 0, 1.0)
+    same = [det(1, [0, 0, 60, 40], 0.8), det(1, [2, 0, 60, 40], 0.6)]  # a duplicate of one name: COCO's FP
+    r = row(metrics_of(coco(anns, n_images=1), same))
+    assert (r["tp"], r["fp"], r["precision"]) == (1, 1, 0.5)
+
+
+def test_a_small_false_positive_counts_among_all_sizes_only():
+    anns = [{"image_id": 1, "bbox": A, "track_id": 7}, {"image_id": 1, "bbox": [200, 0, 8, 12], "track_id": 8}]
+    results = [det(1, A, 0.9), det(1, [100, 100, 10, 12], 0.8), det(1, [200, 0, 8, 12], 0.7)]
+    m = metrics_of(coco(anns, n_images=1), results)
+    assert (row(m)["tp"], row(m)["fp"], row(m)["gt"]) == (1, 0, 1)  # >= 30 px: the 12 px boxes are ignored
+    every = row(m, height="all")
+    assert (every["tp"], every["fp"], every["gt"], every["precision"]) == (2, 1, 2, pytest.approx(2 / 3))
