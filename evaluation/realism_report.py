@@ -27,10 +27,12 @@ def sheet_name(class_group: str) -> str:
 
 def evaluate_realism(gt: str | Path, detections: str | Path, out: str | Path, *, images: str | Path | None = None,
                      score_threshold: float, group_by: str = "condition",
-                     visibility_m: dict[str, float] | None = None, sheet_limit: int = SHEET_LIMIT) -> dict[str, Any]:
+                     visibility_m: dict[str, float] | None = None, sheet_limit: int = SHEET_LIMIT,
+                     title: str | None = None) -> dict[str, Any]:
     """Score ``detections`` (COCO results) on ``gt`` (COCO instances) and write the realism folder into ``out``
     (not atomically: the CLI is). ``images``: the folder of the images' ``file_name`` (default: the ground
-    truth's folder's ``images/``). Returns the metrics (metrics.json's content)."""
+    truth's folder's ``images/``); ``title``: realism.md's (default: names the detections file). Returns the metrics
+    (metrics.json's content)."""
     gt, out = Path(gt), Path(out)
     images = Path(images) if images is not None else gt.parent / "images"
     g, d, kind, _ = load_inputs(gt, detections)
@@ -52,7 +54,8 @@ def evaluate_realism(gt: str | Path, detections: str | Path, out: str | Path, *,
                          "sheet": sheet_name(group) if sheet is not None else None}
     metrics["missed_objects"] = missed
     distance_plot(out / "recall_by_distance.png", metrics)
-    (out / "realism.md").write_text(realism_markdown(metrics))
+    title = title or f"Realism report: {Path(detections).stem} on {gt.name}"
+    (out / "realism.md").write_text(realism_markdown(metrics, title))
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, sort_keys=True, allow_nan=False) + "\n")
     log.info("wrote realism.md, metrics.json, contact sheets and recall_by_distance.png to %s", out)
     return metrics
