@@ -214,7 +214,7 @@ $(REALISM_OUT)/detections/$(ONNX_NAME).json: $(ONNX) $(REALISM_OUT)/coco
 
 $(R_REPORT): $(REALISM_OUT)/detections/$(ONNX_NAME).json
 	roadsynth evaluate --task realism --gt $(REALISM_OUT)/coco/annotations.json --detections $< \
-		--score-threshold $(R_SCORE) --group-by condition --out $@
+		--score-threshold $(R_SCORE) --group-by condition --group-order $(R_CONDITIONS) --out $@
 	@echo "The realism report: $@/realism.md"
 
 realism-outputs: $(R_REPORT)

@@ -238,15 +238,17 @@ def _distance_rows(gt: GroundTruth, gm: GroupMatch, gt_sel: np.ndarray, visibili
 
 
 def realism_metrics(gt: GroundTruth, dt: Detections, *, score_threshold: float, group_by: str = "condition",
-                    visibility_m: dict[str, float] | None = None,
+                    visibility_m: dict[str, float] | None = None, group_order: list[str] | None = None,
                     distance_edges_m: tuple[float, ...] = DISTANCE_EDGES_M) -> tuple[dict[str, Any], dict]:
     """The realism metrics (metrics.json's content) and, per class group, its :class:`GroupMatch` and the
     object index of each annotation (for the contact sheets of missed objects).
 
     Args:
         score_threshold: the detector's operating threshold (recall, precision, objects found).
-        group_by: image attribute of the image groups (rows, in the order their first images come in the ground
-            truth, as the records were exported); ``all`` is every image.
+        group_by: image attribute of the image groups (rows); ``all`` is every image.
+        group_order: the image groups' order (e.g. morning, noon, dusk, night, fog, rain); groups it does not list
+            come after, in the order of their first image in the ground truth (values it lists that no image has are
+            left out).
         visibility_m: meteorological visibility by image group value (fog, rain), for the transmittance.
         distance_edges_m: lower edges of the distance bins, ascending from 0.
     """
@@ -257,8 +259,9 @@ def realism_metrics(gt: GroundTruth, dt: Detections, *, score_threshold: float, 
     visibility_m = dict(visibility_m or {})
     names, image_group = image_groups(gt, group_by)
     first_seen = np.unique(image_group, return_index=True)[1] if gt.num_images else np.zeros(0, np.int64)
-    image_sets = {ALL: np.ones(gt.num_images, bool),  # then the groups in the order of the images (the export's)
-                  **{names[i]: image_group == i for i in np.argsort(first_seen, kind="stable")}}
+    rank = {v: k for k, v in enumerate(group_order or ())}
+    order = sorted(range(len(names)), key=lambda i: (rank.get(names[i], len(rank)), first_seen[i]))
+    image_sets = {ALL: np.ones(gt.num_images, bool), **{names[i]: image_group == i for i in order}}
     objects = object_index(gt)
     rows, distance, matches = [], [], {}
     for group, categories in CLASS_GROUPS.items():

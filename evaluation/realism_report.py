@@ -28,18 +28,18 @@ def sheet_name(class_group: str) -> str:
 def evaluate_realism(gt: str | Path, detections: str | Path, out: str | Path, *, images: str | Path | None = None,
                      score_threshold: float, group_by: str = "condition",
                      visibility_m: dict[str, float] | None = None, sheet_limit: int = SHEET_LIMIT,
-                     title: str | None = None) -> dict[str, Any]:
+                     group_order: list[str] | None = None, title: str | None = None) -> dict[str, Any]:
     """Score ``detections`` (COCO results) on ``gt`` (COCO instances) and write the realism folder into ``out``
     (not atomically: the CLI is). ``images``: the folder of the images' ``file_name`` (default: the ground
-    truth's folder's ``images/``); ``title``: realism.md's (default: names the detections file). Returns the metrics
-    (metrics.json's content)."""
+    truth's folder's ``images/``); ``group_order``: the rows' order (:func:`evaluation.realism.realism_metrics`);
+    ``title``: realism.md's (default: names the detections file). Returns the metrics (metrics.json's content)."""
     gt, out = Path(gt), Path(out)
     images = Path(images) if images is not None else gt.parent / "images"
     g, d, kind, _ = load_inputs(gt, detections)
     if kind != "coco":
         raise InputError(f"{gt}: the realism gauge reads COCO ground truth (it needs the images and their track ids)")
     metrics, extra = realism_metrics(g, d, score_threshold=score_threshold, group_by=group_by,
-                                     visibility_m=visibility_m)
+                                     visibility_m=visibility_m, group_order=group_order)
     names, image_group = image_groups(g, group_by)
     metrics["luma"] = mean_luma(g, images, image_group, names)
     metrics["detections_not_scored"] = {str(k): v for k, v in sorted(d.not_in_gt.items())}

@@ -58,6 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
     parser.add_argument("--images", type=Path, metavar="DIR",
                         help="--task realism: the folder of the ground truth's images (default: GT folder/images)")
+    parser.add_argument("--group-order", nargs="+", metavar="VALUE",
+                        help="--task realism: the --group-by values' order in the report, e.g. morning noon dusk night "
+                        "(default: as the images come)")
     parser.add_argument("--eval-set", default="all", metavar="SPLIT",
                         help="--task nuscenes-detection: the split of the export's splits.json scored (default: "
                         "%(default)s, every scene)")
@@ -161,12 +164,14 @@ def main_realism(args: argparse.Namespace) -> int:
     visibility = condition_visibility(values)
     with atomic_output_dir(args.out) as tmp:
         metrics = evaluate_realism(args.gt, args.detections, tmp, images=args.images,
-                                   score_threshold=args.score_threshold, group_by=group_by, visibility_m=visibility)
+                                   score_threshold=args.score_threshold, group_by=group_by, visibility_m=visibility,
+                                   group_order=args.group_order)
         write_meta(tmp, stage="evaluate", config={
             "task": "realism", "gt": str(args.gt), "detections": str(args.detections),
             "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections),
             "images": None if args.images is None else str(args.images), "group_by": group_by,
-            "score_threshold": args.score_threshold, "visibility_m": visibility}, seed=None)
+            "score_threshold": args.score_threshold, "visibility_m": visibility, "group_order": args.group_order},
+            seed=None)
     for row in metrics["rows"]:
         if row["group"] == "all" and row["height_px"] == "30+":
             log.info("%s >= 30 px: AP50 %s recall %s precision %s (%d boxes, %d objects)", row["class_group"],
@@ -175,8 +180,9 @@ def main_realism(args: argparse.Namespace) -> int:
 
 
 def main(args: argparse.Namespace) -> int:
-    if getattr(args, "images", None) is not None and getattr(args, "task", "detection") != "realism":
-        raise ValueError(f"--images applies to --task realism only, not {args.task}")
+    for flag in ("images", "group_order"):
+        if getattr(args, flag, None) is not None and getattr(args, "task", "detection") != "realism":
+            raise ValueError(f"--{flag.replace('_', '-')} applies to --task realism only, not {args.task}")
     if getattr(args, "task", "detection") == "realism":
         return main_realism(args)
     if getattr(args, "eval_set", "all") != "all" and getattr(args, "task", "detection") != "nuscenes-detection":

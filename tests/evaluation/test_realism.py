@@ -220,3 +220,11 @@ def test_a_small_false_positive_counts_among_all_sizes_only():
     assert (row(m)["tp"], row(m)["fp"], row(m)["gt"]) == (1, 0, 1)  # >= 30 px: the 12 px boxes are ignored
     every = row(m, height="all")
     assert (every["tp"], every["fp"], every["gt"], every["precision"]) == (2, 1, 2, pytest.approx(2 / 3))
+
+
+def test_image_groups_in_a_given_order_then_as_their_images_come():
+    data = coco([{"image_id": 1, "bbox": A}], n_images=3)
+    for image, condition in zip(data["images"], ("dusk", "rain", "morning"), strict=True):
+        image["condition"] = condition
+    m = metrics_of(data, [], group_order=["morning", "night", "dusk"])
+    assert list(dict.fromkeys(r["group"] for r in m["rows"])) == ["all", "morning", "dusk", "rain"]
