@@ -15,7 +15,8 @@ from pipeline.core.digests import path_sha256
 from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_json, write_meta
 
 INPUT_ARGS = ("gt", "detections", "calib", "images")
-HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
+HELP = ("score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown; "
+        "the realism gauge")
 log = logging.getLogger(__name__)
 TASKS = ("detection", "tracking", "nuscenes-detection", "segmentation", "realism")
 
