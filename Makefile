@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 export DVC_NO_ANALYTICS := 1
 export PATH := $(abspath $(BIN)):$(PATH)
 
-.PHONY: demo test setup setup-dev system-deps lint bench clean-data paper paper-outputs
+.PHONY: demo test setup setup-dev system-deps lint bench clean-data paper paper-outputs realism realism-outputs
 
 demo: setup
 	$(BIN)/dvc repro
@@ -74,6 +74,24 @@ clean-data:
 	rm -rf data
 
 # ---------------------------------------------------------------------------------------------------
+# What the experiments below share: a field of an experiment file ($(1): the file, $(2): the field; a list comes
+# out separated by spaces), and the rules that simulate a run ($(1): the output folder, $(2) scenario, $(3) seed,
+# $(4) simulate's options, $(5) the experiment file) and render a record ($(1) the output folder, $(2) scenario,
+# $(3) seed, $(4) condition, $(5) rig, $(6) frames).
+experiment_get = $(shell $(BIN)/python -c "import yaml; v = yaml.safe_load(open('$(1)'))['$(2)']; print(*v) if isinstance(v, list) else print(v)")
+empty :=
+space := $(empty) $(empty)
+
+define sim_rule
+$(1)/sim/$(2)-$(3): $(5)
+	roadsynth simulate --scenario $(2) --seed $(3) $(4) --no-progress --out $$@
+endef
+define record_rule
+$(1)/records/$(2)-$(3)-$(4): $(1)/sim/$(2)-$(3)
+	roadsynth render --sim $$< --condition $(4) --rig $(5) --frames $(6) --no-progress --out $$@
+endef
+
+# ---------------------------------------------------------------------------------------------------
 # The paper's experiment (Li, Kusari & LeBlanc, Table 1) as one command:
 #
 #     make paper ONNX=path/to/detector.onnx
@@ -102,29 +120,20 @@ ifneq ($(filter paper-outputs,$(MAKECMDGOALS)),)
 ifeq ($(strip $(ONNX)),)
 $(error give the ONNX detector: make paper ONNX=path/to/detector.onnx)
 endif
-paper_get = $(shell $(BIN)/python -c "import yaml; v = yaml.safe_load(open('$(PAPER)'))['$(1)']; print(*v) if isinstance(v, list) else print(v)")
+paper_get = $(call experiment_get,$(PAPER),$(1))
 P_SCENARIOS := $(call paper_get,scenarios)
 P_SEEDS := $(call paper_get,seeds)
 P_CONDITIONS := $(call paper_get,conditions)
 P_IOUS := $(call paper_get,iou_thresholds)
 PAPER_RIG ?= $(call paper_get,rig)
 P_SIM_ARGS := --vehicles $(call paper_get,vehicles) --warmup $(call paper_get,warmup_s) --duration $(call paper_get,duration_s)
-empty :=
-space := $(empty) $(empty)
 P_SPLITS := test=$(subst $(space),+,$(foreach s,$(P_SCENARIOS),$(s):$(lastword $(P_SEEDS)))),train=*
 P_RECORDS := $(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(foreach c,$(P_CONDITIONS),$(PAPER_OUT)/records/$(s)-$(n)-$(c))))
 P_GT := $(PAPER_OUT)/coco/annotations_test.json
 
-define paper_record
-$(PAPER_OUT)/records/$(1)-$(2)-$(3): $(PAPER_OUT)/sim/$(1)-$(2)
-	roadsynth render --sim $$< --condition $(3) --rig $(PAPER_RIG) --frames $(PAPER_FRAMES) --no-progress --out $$@
-endef
-define paper_sim
-$(PAPER_OUT)/sim/$(1)-$(2): $(PAPER)
-	roadsynth simulate --scenario $(1) --seed $(2) $(P_SIM_ARGS) --no-progress --out $$@
-endef
-$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(eval $(call paper_sim,$(s),$(n)))))
-$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(foreach c,$(P_CONDITIONS),$(eval $(call paper_record,$(s),$(n),$(c))))))
+$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(eval $(call sim_rule,$(PAPER_OUT),$(s),$(n),$(P_SIM_ARGS),$(PAPER)))))
+$(foreach s,$(P_SCENARIOS),$(foreach n,$(P_SEEDS),$(foreach c,$(P_CONDITIONS),\
+	$(eval $(call record_rule,$(PAPER_OUT),$(s),$(n),$(c),$(PAPER_RIG),$(PAPER_FRAMES))))))
 
 $(PAPER_OUT)/coco: $(P_RECORDS)
 	roadsynth export --dataset $(PAPER_OUT)/records --format coco --splits "$(P_SPLITS)" --no-progress --out $@
@@ -151,4 +160,62 @@ $(PAPER_OUT)/report: $(PAPER_OUT)/eval/baseline $(PAPER_OUT)/eval/$(ONNX_NAME)
 	@echo "Table 1, ours beside the paper's: $@/report.md"
 
 paper-outputs: $(PAPER_OUT)/report
+endif
+
+# ---------------------------------------------------------------------------------------------------
+# The realism gauge (issue 39, docs/realism.md) as one command:
+#
+#     make realism ONNX=path/to/detector.onnx
+#
+# reads $(REALISM) (scenarios, held-out seeds, the six conditions, rig, vehicles, warm-up, duration, frames per
+# record, the detector's score threshold), simulates every (scenario, seed), renders every condition, exports COCO,
+# runs the ONNX detector (`detect --onnx`, COCO classes mapped by the 80-class table) on every frame and scores it
+# with `roadsynth evaluate --task realism` into $(REALISM_OUT)/report/$(ONNX_NAME)/: realism.md (AP50, recall,
+# precision and recall per object by class group, condition and box height; recall by distance beside the fog's
+# transmittance; mean luma; objects per frame), metrics.json, missed_<group>.png (contact sheets of the objects it
+# missed) and recall_by_distance.png. REALISM_FRAMES overrides the frames per record (a small run: REALISM_FRAMES=10
+# REALISM_OUT=data/realism-small); REALISM_SEEDS, REALISM_CONDITIONS and REALISM_SCENARIOS the matrix.
+REALISM ?= configs/experiments/realism.yaml
+REALISM_OUT ?= data/realism
+REALISM_FRAMES ?=
+REALISM_RIG ?=
+REALISM_SEEDS ?=
+REALISM_CONDITIONS ?=
+REALISM_SCENARIOS ?=
+
+realism: setup
+	$(MAKE) --no-print-directory realism-outputs ONNX="$(ONNX)"
+
+ifneq ($(filter realism-outputs,$(MAKECMDGOALS)),)
+ifeq ($(strip $(ONNX)),)
+$(error give the ONNX detector: make realism ONNX=path/to/detector.onnx)
+endif
+realism_get = $(call experiment_get,$(REALISM),$(1))
+R_SCENARIOS := $(or $(REALISM_SCENARIOS),$(call realism_get,scenarios))
+R_SEEDS := $(or $(REALISM_SEEDS),$(call realism_get,seeds))
+R_CONDITIONS := $(or $(REALISM_CONDITIONS),$(call realism_get,conditions))
+R_FRAMES := $(or $(REALISM_FRAMES),$(call realism_get,frames))
+R_RIG := $(or $(REALISM_RIG),$(call realism_get,rig))
+R_SCORE := $(call realism_get,score_threshold)
+R_SIM_ARGS := --vehicles $(call realism_get,vehicles) --warmup $(call realism_get,warmup_s) \
+	--duration $(call realism_get,duration_s)
+R_RECORDS := $(foreach s,$(R_SCENARIOS),$(foreach n,$(R_SEEDS),$(foreach c,$(R_CONDITIONS),$(REALISM_OUT)/records/$(s)-$(n)-$(c))))
+R_REPORT := $(REALISM_OUT)/report/$(ONNX_NAME)
+
+$(foreach s,$(R_SCENARIOS),$(foreach n,$(R_SEEDS),$(eval $(call sim_rule,$(REALISM_OUT),$(s),$(n),$(R_SIM_ARGS),$(REALISM)))))
+$(foreach s,$(R_SCENARIOS),$(foreach n,$(R_SEEDS),$(foreach c,$(R_CONDITIONS),\
+	$(eval $(call record_rule,$(REALISM_OUT),$(s),$(n),$(c),$(R_RIG),$(R_FRAMES))))))
+
+$(REALISM_OUT)/coco: $(R_RECORDS)
+	roadsynth export $(foreach r,$(R_RECORDS),--dataset $(r)) --format coco --no-progress --out $@
+
+$(REALISM_OUT)/detections/$(ONNX_NAME).json: $(ONNX) $(REALISM_OUT)/coco
+	roadsynth detect --onnx $(ONNX) --coco $(REALISM_OUT)/coco --no-progress $(ONNX_OPTIONS) --out $@
+
+$(R_REPORT): $(REALISM_OUT)/detections/$(ONNX_NAME).json
+	roadsynth evaluate --task realism --gt $(REALISM_OUT)/coco/annotations.json --detections $< \
+		--score-threshold $(R_SCORE) --group-by condition --group-order $(R_CONDITIONS) --out $@
+	@echo "The realism report: $@/realism.md"
+
+realism-outputs: $(R_REPORT)
 endif

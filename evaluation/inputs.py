@@ -7,8 +7,8 @@ Conventions:
   is converted on reading (``w = x2 - x1``).
 - Images and categories are referred to by *index* (``image_index``, ``category_index``) into the
   record's sorted ``image_ids`` / ``category_ids``; the original ids are kept for output.
-- Optional per-annotation attributes (``distance_m``, ``occlusion``) come with an explicit validity mask,
-  never a sentinel value.
+- Optional per-annotation attributes (``distance_m``, ``occlusion``, ``track_id``) come with an explicit
+  validity mask, never a sentinel value.
 - ``--group-by KEY`` groups images by their attribute ``KEY`` (:func:`image_groups`): one group per
   distinct value as text, :data:`MISSING_GROUP` for images without it. The table, the PR curves and the
   COCO stats per group all group this way.
@@ -46,6 +46,9 @@ class GroundTruth:
         distance_valid: (N,) bool.
         occlusion: (N,) object array of occlusion bin labels (str); meaningful where ``occlusion_valid``.
         occlusion_valid: (N,) bool.
+        track_id: (N,) int64 the object's identity across the images of one sequence (COCO's optional
+            ``track_id``, as roadsynth's export writes it); meaningful where ``track_valid``.
+        track_valid: (N,) bool.
     """
 
     source: str
@@ -63,6 +66,8 @@ class GroundTruth:
     distance_valid: np.ndarray
     occlusion: np.ndarray
     occlusion_valid: np.ndarray
+    track_id: np.ndarray
+    track_valid: np.ndarray
 
     @property
     def num_images(self) -> int:
@@ -86,7 +91,7 @@ class GroundTruth:
             image_index=new_index[self.image_index[ann]], category_index=self.category_index[ann],
             bbox=self.bbox[ann], area=self.area[ann], iscrowd=self.iscrowd[ann], distance_m=self.distance_m[ann],
             distance_valid=self.distance_valid[ann], occlusion=self.occlusion[ann],
-            occlusion_valid=self.occlusion_valid[ann])
+            occlusion_valid=self.occlusion_valid[ann], track_id=self.track_id[ann], track_valid=self.track_valid[ann])
 
 
 @dataclasses.dataclass(frozen=True)

@@ -92,6 +92,17 @@ def _crowd(annotations: list[Any], path: str) -> np.ndarray:
     return np.array(values, dtype=bool) if values else np.zeros(0, bool)
 
 
+def _track_ids(annotations: list[Any], path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) int64 optional ``track_id`` (an integer >= 0: one object across the frames of a sequence) and its mask."""
+    values, present = number_column(annotations, "track_id", path, "annotations", default=None, minimum=0.0)
+    fractional = present & ((values != np.floor(values)) | (values >= 2.0**63))
+    if fractional.any():
+        i = int(np.argmax(fractional))
+        raise InputError(f"{where(path, 'annotations', i)}: field 'track_id' is {annotations[i]['track_id']!r} "
+                         "(expected an integer >= 0)")
+    return np.where(present, values, 0).astype(np.int64), present
+
+
 def ground_truth_from_dict(data: Any, path: str = "<ground truth>") -> GroundTruth:
     """Validate a parsed COCO instances dict and convert it to a :class:`GroundTruth`."""
     if not isinstance(data, dict):
@@ -120,6 +131,7 @@ def ground_truth_from_dict(data: Any, path: str = "<ground truth>") -> GroundTru
     distance, distance_valid = number_column(annotations, "distance_m", path, "annotations", default=None,
                                              minimum=0.0)
     occlusion, occlusion_valid = occlusion_levels([a.get("occlusion") for a in annotations], path, "annotations")
+    track_id, track_valid = _track_ids(annotations, path)
     log.debug("%s: %d images, %d categories, %d annotations", path, len(image_ids), len(cat_ids), len(ann_ids))
     return GroundTruth(
         source=str(path),
@@ -137,6 +149,8 @@ def ground_truth_from_dict(data: Any, path: str = "<ground truth>") -> GroundTru
         distance_valid=distance_valid,
         occlusion=occlusion,
         occlusion_valid=occlusion_valid,
+        track_id=track_id,
+        track_valid=track_valid,
     )
 
 

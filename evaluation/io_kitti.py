@@ -116,6 +116,7 @@ def _ground_truth(frames: dict, stems: list[str], names: list[str], cat_of: dict
         distance_valid=np.concatenate(dvalid) if dvalid else np.zeros(0, bool),
         occlusion=np.concatenate(occ) if occ else np.zeros(0, object),
         occlusion_valid=np.concatenate(ovalid) if ovalid else np.zeros(0, bool),
+        track_id=np.zeros(n, np.int64), track_valid=np.zeros(n, bool),  # label_2 has no track ids
     )
 
 

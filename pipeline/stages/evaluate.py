@@ -14,10 +14,11 @@ from pathlib import Path
 from pipeline.core.digests import path_sha256
 from pipeline.stages.common import Flatten, atomic_output_dir, float_list, write_json, write_meta
 
-INPUT_ARGS = ("gt", "detections", "calib")
-HELP = "score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown"
+INPUT_ARGS = ("gt", "detections", "calib", "images")
+HELP = ("score detections against ground truth: precision/recall by IoU, COCO AP, KITTI AP, error breakdown; "
+        "the realism gauge")
 log = logging.getLogger(__name__)
-TASKS = ("detection", "tracking", "nuscenes-detection", "segmentation")
+TASKS = ("detection", "tracking", "nuscenes-detection", "segmentation", "realism")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,7 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "HOTA, MOTA, IDF1 by TrackEval), or 3D detections by the nuScenes devkit (--task "
                         "nuscenes-detection: --gt a nuScenes export, --detections a submission JSON; mAP, NDS), or "
                         "semantic segmentation by cityscapesscripts (--task segmentation: --gt a Cityscapes export or "
-                        "gtFine folder, --detections a folder of label id PNGs; IoU, iIoU)")
+                        "gtFine folder, --detections a folder of label id PNGs; IoU, iIoU), or the realism gauge "
+                        "(--task realism: a COCO export and results; AP50, recall, precision and recall per object "
+                        "by class group, --group-by (default condition) and box height, recall by distance beside "
+                        "the fog's transmittance, mean luma, contact sheets of missed objects)")
     parser.add_argument("--gt", type=Path, required=True, help="COCO instances JSON, or a KITTI label_2 directory "
                         "(tracking: a MOT gt.txt, a sequence folder or a folder of sequences; segmentation: a "
                         "Cityscapes export, its gtFine folder or a split of it)")
@@ -53,13 +57,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(port: float32 rotated IoU), or with the devkit's known defects fixed (exact)")
     parser.add_argument("--calib", type=Path, metavar="DIR", help="KITTI calib directory (optional)")
     parser.add_argument("--png", action="store_true", help="also render the plot data as PNG (imports matplotlib)")
+    parser.add_argument("--images", type=Path, metavar="DIR",
+                        help="--task realism: the folder of the ground truth's images (default: GT folder/images)")
+    parser.add_argument("--group-order", nargs="+", metavar="VALUE",
+                        help="--task realism: the --group-by values' order in the report, e.g. morning noon dusk night "
+                        "(default: as the images come)")
     parser.add_argument("--eval-set", default="all", metavar="SPLIT",
                         help="--task nuscenes-detection: the split of the export's splits.json scored (default: "
                         "%(default)s, every scene)")
 
 
-def refuse_detection_options(args: argparse.Namespace) -> None:
-    """Fail when an option of --task detection is given to another task: it would be ignored without a word."""
+def refuse_detection_options(args: argparse.Namespace, allowed: tuple[str, ...] = ()) -> None:
+    """Fail when an option of --task detection is given to another task (but ``allowed``): it would be ignored
+    without a word."""
     from evaluation.api import METRICS
     from evaluation.table import DEFAULT_IOU_THRESHOLDS, DEFAULT_SCORE_THRESHOLD
 
@@ -67,7 +77,7 @@ def refuse_detection_options(args: argparse.Namespace) -> None:
                       "--score-threshold": args.score_threshold != DEFAULT_SCORE_THRESHOLD,
                       "--kitti-mode": args.kitti_mode != "official", "--calib": args.calib is not None,
                       "--png": args.png, "--metrics": args.metrics != ",".join(METRICS)}
-    given = [flag for flag, changed in detection_only.items() if changed]
+    given = [flag for flag, changed in detection_only.items() if changed and flag not in allowed]
     if given:
         raise ValueError(f"{', '.join(given)} apply to --task detection only, not {args.task}")
 
@@ -125,7 +135,57 @@ def main_segmentation(args: argparse.Namespace) -> int:
     return 0
 
 
+def condition_visibility(values: list[str]) -> dict[str, float]:
+    """Meteorological visibility (metres) of each of ``values`` that names a condition config with fog: the
+    configs the records were rendered from (configs/conditions/)."""
+    from pipeline.core.config import ConditionConfig
+    from pipeline.core.config.loading import available_names, load_config
+
+    known = set(available_names("conditions"))
+    out = {}
+    for value in values:
+        if value in known:
+            fog = load_config(ConditionConfig, value, "conditions")[0].fog
+            if fog is not None:
+                out[value] = float(fog.visibility_m)
+    return out
+
+
+def main_realism(args: argparse.Namespace) -> int:
+    """--task realism: the realism gauge (evaluation.realism_report) into realism.md, metrics.json, contact sheets
+    of missed objects and the plot of recall by distance."""
+    import json
+
+    from evaluation.realism_report import evaluate_realism
+
+    refuse_detection_options(args, allowed=("--score-threshold", "--group-by"))
+    group_by = args.group_by or "condition"
+    values = sorted({str(img.get(group_by)) for img in json.loads(args.gt.read_text()).get("images", [])}) \
+        if group_by == "condition" and args.gt.is_file() else []
+    visibility = condition_visibility(values)
+    with atomic_output_dir(args.out) as tmp:
+        metrics = evaluate_realism(args.gt, args.detections, tmp, images=args.images,
+                                   score_threshold=args.score_threshold, group_by=group_by, visibility_m=visibility,
+                                   group_order=args.group_order)
+        write_meta(tmp, stage="evaluate", config={
+            "task": "realism", "gt": str(args.gt), "detections": str(args.detections),
+            "gt_sha256": path_sha256(args.gt), "detections_sha256": path_sha256(args.detections),
+            "images": None if args.images is None else str(args.images), "group_by": group_by,
+            "score_threshold": args.score_threshold, "visibility_m": visibility, "group_order": args.group_order},
+            seed=None)
+    for row in metrics["rows"]:
+        if row["group"] == "all" and row["height_px"] == "30+":
+            log.info("%s >= 30 px: AP50 %s recall %s precision %s (%d boxes, %d objects)", row["class_group"],
+                     row["ap50"], row["recall"], row["precision"], row["gt"], row["objects"])
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
+    for flag in ("images", "group_order"):
+        if getattr(args, flag, None) is not None and getattr(args, "task", "detection") != "realism":
+            raise ValueError(f"--{flag.replace('_', '-')} applies to --task realism only, not {args.task}")
+    if getattr(args, "task", "detection") == "realism":
+        return main_realism(args)
     if getattr(args, "eval_set", "all") != "all" and getattr(args, "task", "detection") != "nuscenes-detection":
         raise ValueError(f"--eval-set applies to --task nuscenes-detection only, not {args.task}")
     if getattr(args, "task", "detection") == "tracking":

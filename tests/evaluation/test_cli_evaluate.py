@@ -61,3 +61,28 @@ def test_png_plots_and_matplotlib_only_when_asked(tmp_path):
             in run.stderr
         ignored = json.loads((tmp_path / name / "metrics.json").read_text())["ignored"]
         assert ignored["detections_by_category_not_in_gt"] == {"44": 1}
+
+
+def test_cli_realism_task(tmp_path, capsys):
+    import cv2
+    import numpy as np
+
+    gt = {**GT, "images": [{"id": 1, "file_name": "1.png", "condition": "fog"}],
+          "annotations": [{**GT["annotations"][0], "bbox": [0, 0, 20, 40], "track_id": 4, "distance_m": 30.0}]}
+    (tmp_path / "images").mkdir()
+    cv2.imwrite(str(tmp_path / "images" / "1.png"), np.zeros((60, 60, 3), np.uint8))
+    (tmp_path / "gt.json").write_text(json.dumps(gt))
+    (tmp_path / "res.json").write_text("[]")
+    args = ["evaluate", "--task", "realism", "--gt", str(tmp_path / "gt.json"), "--detections",
+            str(tmp_path / "res.json"), "--score-threshold", "0.3"]
+    assert main([*args, "--out", str(tmp_path / "realism")]) == 0
+    out = tmp_path / "realism"
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["distance"]["visibility_m"] == {"fog": 80.0}  # the fog condition's config
+    assert metrics["missed_objects"]["vehicles"]["missed"] == 1 and (out / "missed_vehicles.png").is_file()
+    assert json.loads((out / "meta.json").read_text())["config"]["task"] == "realism"
+    assert main([*args, "--out", str(tmp_path / "other"), "--iou", "0.7"]) == 2
+    assert "--iou apply to --task detection only, not realism" in capsys.readouterr().err
+    assert main(["evaluate", "--gt", str(tmp_path / "gt.json"), "--detections", str(tmp_path / "res.json"),
+                 "--out", str(tmp_path / "third"), "--images", str(tmp_path / "images")]) == 2
+    assert "--images applies to --task realism only" in capsys.readouterr().err

@@ -21,6 +21,8 @@ class ExperimentConfig(ConfigModel):
     duration_s: float = Field(20.0, gt=0.0)
     frames: int | None = Field(None, ge=1, description="frames rendered per run (None: all recorded)")
     iou_thresholds: list[float] = Field([0.5, 0.6, 0.7, 0.8], min_length=1)
+    score_threshold: float | None = Field(None, ge=0.0, le=1.0, description="the detector's operating threshold "
+                                          "of the evaluation (None: `roadsynth evaluate`'s default)")
 
     @field_validator("seeds")
     @classmethod
