@@ -136,18 +136,19 @@ def main_segmentation(args: argparse.Namespace) -> int:
 
 
 def condition_visibility(values: list[str]) -> dict[str, float]:
-    """Meteorological visibility (metres) of each of ``values`` that names a condition config with fog: the
-    configs the records were rendered from (configs/conditions/)."""
-    from pipeline.core.config import ConditionConfig
-    from pipeline.core.config.loading import available_names, load_config
+    """Meteorological visibility (metres) of each of ``values`` that names a condition config with fog or rain (their
+    extinctions together: :attr:`pipeline.sensors.conditions.Condition.visibility_m`): the configs the records were
+    rendered from (configs/conditions/)."""
+    from pipeline.core.config.loading import available_names
+    from pipeline.sensors.conditions import get_condition
 
     known = set(available_names("conditions"))
     out = {}
     for value in values:
         if value in known:
-            fog = load_config(ConditionConfig, value, "conditions")[0].fog
-            if fog is not None:
-                out[value] = float(fog.visibility_m)
+            visibility = get_condition(value).visibility_m
+            if visibility is not None:
+                out[value] = float(visibility)
     return out
 
 
