@@ -137,18 +137,21 @@ def main_segmentation(args: argparse.Namespace) -> int:
 
 def condition_visibility(values: list[str]) -> dict[str, float]:
     """Meteorological visibility (metres) of each of ``values`` that names a condition config with fog or rain (their
-    extinctions together: :attr:`pipeline.sensors.conditions.Condition.visibility_m`): the configs the records were
+    extinctions together, as :attr:`pipeline.sensors.conditions.Condition.visibility_m` has it): the configs the records were
     rendered from (configs/conditions/)."""
-    from pipeline.core.config.loading import available_names
-    from pipeline.sensors.conditions import get_condition
+    from pipeline.core.config import ConditionConfig
+    from pipeline.core.config.loading import available_names, load_config
+    from pipeline.sensors.weather import KOSCHMIEDER, fog_extinction_per_m, rain_extinction_per_m
 
     known = set(available_names("conditions"))
     out = {}
     for value in values:
         if value in known:
-            visibility = get_condition(value).visibility_m
-            if visibility is not None:
-                out[value] = float(visibility)
+            config = load_config(ConditionConfig, value, "conditions")[0]
+            beta = 0.0 if config.fog is None else fog_extinction_per_m(config.fog.visibility_m)
+            beta += 0.0 if config.rain is None else rain_extinction_per_m(config.rain.rate_mm_h)
+            if beta > 0:
+                out[value] = KOSCHMIEDER / beta
     return out
 
 
