@@ -27,6 +27,7 @@ from pipeline.core.config import load_config
 from pipeline.core.config.closedloop import ClosedLoopConfig
 from pipeline.envs.closedloop_metrics import METRICS, EpisodeLog, compare, episode_metrics
 from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+from pipeline.stages.executor import ExecutorSpec
 
 log = logging.getLogger(__name__)
 
@@ -40,10 +41,14 @@ _COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from pipeline.stages.executor import add_executor_arguments
+
     parser.add_argument("config", help="a closed-loop config NAME (configs/closedloop/) or YAML PATH")
     parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
-    parser.add_argument("--record", action="store_true", help="also record every episode as a simulated run")
+    parser.add_argument("--record", action="store_true", help="also record every episode as a simulated run (with "
+                        "--executor ray, --out must be on storage every worker shares)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_executor_arguments(parser)
 
 
 def load_detector(spec: str, config_file: Path):
@@ -111,28 +116,41 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
         env.close()
 
 
+def episode_row(config: ClosedLoopConfig, config_file: Path, scenario: str, seed: int, condition: str, mode: str,
+                record: Path | None) -> dict:
+    """One episode as a row of metrics.json: a task of :func:`closedloop`, here or on a Ray worker (which loads the
+    detector itself: a session does not travel)."""
+    detector = load_detector(config.detector, config_file) if mode == "perceived" else None
+    episode, reason = run_episode(config, scenario, seed, condition, detector, record)
+    return {"scenario": Path(scenario).stem, "seed": seed, "condition": Path(condition).stem, "mode": mode,
+            "end": reason, "steps": len(episode.speed_mps), "metrics": episode_metrics(episode)}
+
+
 def closedloop(config: ClosedLoopConfig, config_file: Path, out: Path, *, record: bool = False,
-               progress: bool = True) -> dict:
-    """Run every episode twice and write the outputs into ``out`` (see the module docstring); returns metrics."""
+               progress: bool = True, executor: ExecutorSpec | None = None) -> dict:
+    """Run every episode twice and write the outputs into ``out`` (see the module docstring); returns metrics.
+    ``executor``: where the episodes run (:mod:`pipeline.stages.executor`: here, one after the other, by default; on
+    Ray, each in a fresh worker process, as libsumo runs one simulation per process); the rows keep the config's
+    order either way, so the outputs are the same."""
     from tqdm import tqdm
 
     from pipeline.stages.common import atomic_output_dir, write_json, write_meta
+    from pipeline.stages.executor import Task, run_tasks
 
-    detector = load_detector(config.detector, config_file)
+    executor = executor or ExecutorSpec("local")
+    load_detector(config.detector, config_file)  # a missing or bad detector fails before any episode runs
     episodes = [(s, n, c) for s in config.scenarios for n in config.seeds for c in config.conditions]
-    rows = []
     with atomic_output_dir(out) as tmp:
-        bar = tqdm(total=2 * len(episodes), disable=not progress, desc="closed-loop episodes", unit="episode")
+        tasks = []
         for scenario, seed, condition in episodes:
             for mode in MODES:
                 name = f"{Path(scenario).stem}-{seed}-{Path(condition).stem}-{mode}"
-                episode, reason = run_episode(config, scenario, seed, condition,
-                                              detector if mode == "perceived" else None,
-                                              tmp / "episodes" / name if record else None)
-                rows.append({"scenario": Path(scenario).stem, "seed": seed, "condition": Path(condition).stem,
-                             "mode": mode, "end": reason, "steps": len(episode.speed_mps),
-                             "metrics": episode_metrics(episode)})
-                bar.update()
+                tasks.append(Task(name, episode_row, (config, config_file, scenario, seed, condition, mode,
+                                                      tmp / "episodes" / name if record else None),
+                                  fresh_process=True))
+        bar = tqdm(total=len(tasks), disable=not progress, desc="closed-loop episodes", unit="episode")
+        rows = run_tasks(tasks, executor, on_done=lambda i, row: bar.update(), hint="nothing was written",
+                         noun="episodes")
         bar.close()
         comparisons = _comparisons(rows)
         metrics = {"episodes": rows, "comparisons": comparisons, "metric_names": list(METRICS)}
@@ -221,8 +239,11 @@ def _plots(comparisons: dict[str, list[dict]], folder: Path) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from pipeline.stages.executor import executor_from_args
+
     config, path = load_config(ClosedLoopConfig, args.config, "closedloop")
-    metrics = closedloop(config, path, args.out, record=args.record, progress=not args.no_progress)
+    metrics = closedloop(config, path, args.out, record=args.record, progress=not args.no_progress,
+                         executor=executor_from_args(args))
     for key, table in metrics["comparisons"].items():
         if "/" not in key:
             brief = {c["metric"]: c["difference"] for c in table}

@@ -90,3 +90,20 @@ def test_a_bad_config_value_is_refused(tmp_path, capsys):
     assert "onnx:PATH" in capsys.readouterr().err
     config.write_text(yaml.safe_dump({**TINY, "agent": "ppo"}))
     assert cli_main(["closedloop", str(config), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_on_ray_the_episodes_give_the_local_runs_metrics(run):
+    # Each episode in a fresh Ray worker process: the same rows, in the config's order, as one after the other here.
+    ray = pytest.importorskip("ray")
+    root, out = run
+    if ray.is_initialized():
+        ray.shutdown()
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        on_ray = root / "on-ray"
+        assert cli_main(["closedloop", str(root / "tiny.yaml"), "--out", str(on_ray), "--executor", "ray",
+                         "--no-progress"]) == 0
+    finally:
+        ray.shutdown()
+    local, remote = (json.loads((d / "metrics.json").read_text()) for d in (out, on_ray))
+    assert remote["episodes"] == local["episodes"] and remote["comparisons"] == local["comparisons"]
