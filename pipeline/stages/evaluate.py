@@ -137,8 +137,8 @@ def main_segmentation(args: argparse.Namespace) -> int:
 
 def condition_visibility(values: list[str]) -> dict[str, float]:
     """Meteorological visibility (metres) of each of ``values`` that names a condition config with fog or rain (their
-    extinctions together, as :attr:`pipeline.sensors.conditions.Condition.visibility_m` has it): the configs the records were
-    rendered from (configs/conditions/)."""
+    extinctions together, as :attr:`pipeline.sensors.conditions.Condition.visibility_m` has it): the configs the
+    records were rendered from (configs/conditions/)."""
     from pipeline.core.config import ConditionConfig
     from pipeline.core.config.loading import available_names, load_config
     from pipeline.sensors.weather import KOSCHMIEDER, fog_extinction_per_m, rain_extinction_per_m
