@@ -312,6 +312,10 @@ class ActorMeshes:
         family = self.family_codes(actors)
         return self._family_first_model[family] + actors.pose % self._family_poses[family]
 
+    def family_poses(self, family: int) -> int:
+        """How many poses family ``family`` (an index into :attr:`families`) has."""
+        return int(self._family_poses[family])
+
     def family_models(self, family: np.ndarray, pose: np.ndarray) -> np.ndarray:
         """(N,) int64 the models of families ``family`` (N,) in poses ``pose`` (N,) (modulo each one's count)."""
         family = np.asarray(family, np.int64)

@@ -126,27 +126,14 @@ def stride_m(speed_mps: np.ndarray, stature_m: np.ndarray) -> np.ndarray:
     return 2.3 * leg * (v * v / (G_MPS2 * leg)) ** 0.3
 
 
-def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, stature_m: np.ndarray,
-               offset: np.ndarray) -> np.ndarray:
-    """(N,) int64 each row's pose index (:func:`person_pose`) for N trajectory rows of any number of people.
-
-    A walking person's gait phase is the integral of speed / stride over time since the first row of their track
-    (rows sorted by time within each track, trapezoids between rows), plus their own ``offset`` in [0, 1); a person
-    slower than STANDING_BELOW_MPS stands, the weight shifting every WEIGHT_SHIFT_S from one leg to the other. A
-    function of the whole trajectory, so each frame's pose is the same however the frames are split among shards.
-
-    Args:
-        track_id, time_s, speed_mps, stature_m, offset: (N,) per row (``offset`` and ``stature_m`` constant over
-            a track).
-    """
-    track_id, time_s = np.asarray(track_id), np.asarray(time_s, float)
-    speed, stature, offset = (np.asarray(a, float) for a in (speed_mps, stature_m, offset))
+def cycle_phase(track_id: np.ndarray, time_s: np.ndarray, rate_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cycles completed since each track's first row: the integral of ``rate_hz`` (N,) cycles per second over
+    ``time_s`` (trapezoids between a track's rows in time order). Returns (N,) float64 cycles and the (N,) int64 order
+    that sorts the rows by (track, time)."""
+    track_id, t, rate = np.asarray(track_id), np.asarray(time_s, float), np.asarray(rate_hz, float)
     n = len(track_id)
-    order = np.lexsort((time_s, track_id))
-    tid, t, v = track_id[order], time_s[order], speed[order]
-    rate = np.zeros(n)
-    walking = v >= STANDING_BELOW_MPS
-    rate[walking] = v[walking] / stride_m(v[walking], stature[order][walking])  # cycles per second
+    order = np.lexsort((t, track_id))
+    tid, t, rate = track_id[order], t[order], rate[order]
     first = np.ones(n, bool)
     first[1:] = tid[1:] != tid[:-1]
     step = np.zeros(n)
@@ -154,10 +141,38 @@ def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, 
     step[first] = 0.0
     total = np.cumsum(step)
     start = np.maximum.accumulate(np.where(first, np.arange(n), 0))
-    cycles = total - total[start] + offset[order]
-    walk = np.floor(np.mod(cycles, 1.0) * WALK_PHASES).astype(np.int64) % WALK_PHASES
-    shift = np.floor(t / WEIGHT_SHIFT_S + 3.0 * offset[order]).astype(np.int64)
-    stand = WALK_PHASES + np.mod(shift, STAND_POSES)
-    out = np.empty(n, np.int64)
-    out[order] = np.where(walking, walk, stand)
-    return out
+    cycles = np.empty(n)
+    cycles[order] = total - total[start]
+    return cycles, order
+
+
+def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, stature_m: np.ndarray,
+               offset: np.ndarray) -> np.ndarray:
+    """(N,) int64 each row's pose index (:func:`person_pose`) for N trajectory rows of any number of people.
+
+    A walking person's gait phase is the integral of speed / stride over time since the first row of their track
+    (:func:`cycle_phase`), plus their own ``offset`` in [0, 1); a person slower than STANDING_BELOW_MPS stands, the
+    weight shifting every WEIGHT_SHIFT_S from one leg to the other. A function of the whole trajectory, so each
+    frame's pose is the same however the frames are split among shards.
+
+    Args:
+        track_id, time_s, speed_mps, stature_m, offset: (N,) per row (``offset`` and ``stature_m`` constant over
+            a track).
+    """
+    speed, stature, offset = (np.asarray(a, float) for a in (speed_mps, stature_m, offset))
+    rate = np.zeros(len(speed))
+    walking = speed >= STANDING_BELOW_MPS
+    rate[walking] = speed[walking] / stride_m(speed[walking], stature[walking])  # cycles per second
+    cycles, _ = cycle_phase(track_id, time_s, rate)
+    walk = np.floor(np.mod(cycles + offset, 1.0) * WALK_PHASES).astype(np.int64) % WALK_PHASES
+    shift = np.floor(np.asarray(time_s, float) / WEIGHT_SHIFT_S + 3.0 * offset).astype(np.int64)
+    return np.where(walking, walk, WALK_PHASES + np.mod(shift, STAND_POSES))
+
+
+def crank_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, development_m: float, phases: int,
+                offset: np.ndarray) -> np.ndarray:
+    """(N,) int64 each row's crank pose (0 .. phases - 1) of N rows of bicycles: the crank turns once per
+    ``development_m`` ridden (the integral of speed), from each one's own ``offset`` (N,) in [0, 1); stopped, the
+    cranks stay where they were."""
+    cycles, _ = cycle_phase(track_id, time_s, np.maximum(np.asarray(speed_mps, float), 0.0) / development_m)
+    return np.floor(np.mod(cycles + np.asarray(offset, float), 1.0) * phases).astype(np.int64) % phases

@@ -8,7 +8,9 @@ MODEL_STATURE_M, and the centre where the mesh's centre lies when its pelvis is 
 on the ground. Since a placed actor is its model's unit-box mesh mapped onto its box (:mod:`pipeline.world.actors`),
 the mesh fills the box exactly in every frame: the 3D label, the 2D boxes, masks, depth and occlusion all come from
 the posed body. Other actors of the body-sized classes (users' pedestrian models) keep SUMO's height and take their
-model's depth (:meth:`pipeline.world.actors.ActorMeshes.body_lengths`).
+model's depth (:meth:`pipeline.world.actors.ActorMeshes.body_lengths`). A bicycle
+(:class:`pipeline.world.two_wheelers.BicycleFamily`) keeps its simulated box and gets the crank pose of the distance
+it rode (:func:`pipeline.world.gait.crank_poses`): its rider pedals in phase with its speed.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actors import ActorMeshes, Actors
-from pipeline.world.gait import MODEL_STATURE_M, gait_poses
+from pipeline.world.gait import MODEL_STATURE_M, crank_poses, gait_poses
 from pipeline.world.people import person_statures
 
 
@@ -34,7 +36,7 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
 
     Returns:
         (R) boxes: people's posed, others' with the length of :meth:`ActorMeshes.body_lengths`; (R,) int64 pose
-        (0 for rows that are not people).
+        (a person's gait pose, a bicycle's crank pose; 0 for the others).
     """
     row_actor = np.asarray(row_actor, np.int64)
     center, size, yaw = boxes.center.copy(), boxes.size.copy(), boxes.yaw_rad.copy()
@@ -42,13 +44,22 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
     pose = np.zeros(len(row_actor), np.int64)
     family = meshes.family_codes(actors)
     group = np.array([getattr(meshes.families[f], "group", "") for f in family], object)
+    offset = (actors.variant.astype(np.float64) % 65536.0) / 65536.0  # each one's own phase
+    development = np.array([getattr(meshes.families[f], "development_m", 0.0) for f in family])
+    pedalled = np.flatnonzero(np.isin(row_actor, np.flatnonzero(development > 0)))
+    if len(pedalled):  # a bicycle's cranks turn with the distance ridden; its box stays as simulated
+        a = row_actor[pedalled]
+        for d in np.unique(development[a]):
+            at = pedalled[development[a] == d]
+            phases = int(meshes.family_poses(family[row_actor[at[0]]]))
+            pose[at] = crank_poses(actors.track_id[row_actor[at]], time_s[at], speed_mps[at], d, phases,
+                                   offset[row_actor[at]])
     people = np.flatnonzero(group != "")
     rows = np.flatnonzero(np.isin(row_actor, people))
     if not len(rows):
         return Boxes3D(center, size, yaw), pose
     stature = np.zeros(len(actors))
     stature[people] = person_statures(group[people], actors.track_id[people], seed)
-    offset = (actors.variant.astype(np.float64) % 65536.0) / 65536.0  # each person's own phase
     a = row_actor[rows]
     pose[rows] = gait_poses(actors.track_id[a], time_s[rows], speed_mps[rows], stature[a], offset[a])
     model = meshes.family_models(family[a], pose[rows])

@@ -145,3 +145,23 @@ def test_every_family_is_picked_and_others_keep_their_boxes():
     out, pose = posed_boxes(MESHES, actors, np.arange(people + 1), np.zeros(people + 1), np.ones(people + 1), boxes, 9)
     np.testing.assert_array_equal(out.size[-1], [4.5, 1.8, 1.5])
     assert pose[-1] == 0 and MESHES.model_class[MESHES.model_codes(actors)[-1]] == ObjectClass.CAR
+
+
+def test_a_bicycles_cranks_turn_with_the_distance_ridden():
+    """At 5 m/s a bicycle with a 5 m development turns its cranks once a second: over 2 s sampled at 10 Hz every
+    pose appears, in order; stopped, the cranks stay; its box stays as simulated."""
+    from pipeline.world.gait import crank_poses
+    from pipeline.world.two_wheelers import CRANK_PHASES, DEVELOPMENT_M
+
+    t = np.arange(0.0, 2.0, 0.1)
+    pose = crank_poses(np.full(len(t), 3), t, np.full(len(t), DEVELOPMENT_M), DEVELOPMENT_M, CRANK_PHASES,
+                       np.full(len(t), 0.01))
+    np.testing.assert_array_equal(pose, np.floor(np.mod(t + 0.01, 1.0) * CRANK_PHASES))
+    stopped = crank_poses(np.full(len(t), 3), t, np.zeros(len(t)), DEVELOPMENT_M, CRANK_PHASES, np.full(len(t), 0.3))
+    assert set(stopped.tolist()) == {2}
+    boxes = Boxes3D(np.zeros((len(t), 3)), np.tile([1.75, 0.65, 1.7], (len(t), 1)), np.zeros(len(t)))
+    bike = Actors([3], ["bicycle"], Boxes3D(np.zeros((1, 3)), [[1.75, 0.65, 1.7]], np.zeros(1)), np.zeros((1, 3)),
+                  variant=[0])
+    out, got = posed_boxes(MESHES, bike, np.zeros(len(t), np.int64), t, np.full(len(t), DEVELOPMENT_M), boxes, 1)
+    np.testing.assert_array_equal(out.size, boxes.size)
+    assert len(set(got.tolist())) == CRANK_PHASES
