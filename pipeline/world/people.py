@@ -20,9 +20,10 @@ its model's head is scaled by ``head_scale``.
 
 What they wear (the outfits below, one per family): the top, coat or dress is ``garment``, the actor's own colour
 (:data:`pipeline.traffic.demand.CLOTHES` draws it per person); trousers, jeans, skirts, shoes, hair and skin are
-fabric, leather, hair and skin materials (:mod:`pipeline.world.materials`). Over the 24 families: jeans 8, dark
-trousers 6, a skirt or dress 4, shorts 2; a coat 6, a hoodie 3; long hair 8, a knitted hat 2; a backpack 5, a shoulder
-bag 4, a shopping bag 3; light, medium and dark skin 14, 6, 4; black, brown, blond and grey hair 9, 8, 4, 3.
+fabric, leather, hair and skin materials (:mod:`pipeline.world.materials`). Over the 24 families: jeans 8, other
+trousers 10 (black 6, grey 2, navy 1, beige 1), a skirt or dress 4, shorts 2; a coat 5, a hood (hoodie, parka) 4;
+long hair 8, a knitted hat 2; a backpack 6, a shoulder bag 3, a bag in the hand 3; light, medium and dark skin 16, 5,
+3; black, brown, blond and grey hair 11, 6, 4, 3.
 """
 
 from __future__ import annotations
