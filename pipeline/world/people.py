@@ -5,17 +5,17 @@ Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, 
 a stature of :data:`pipeline.world.gait.MODEL_STATURE_M`; normalised to each actor's box later). A family is a
 :class:`PersonFamily`: one mesh per pose (:func:`pipeline.world.gait.person_pose`), picked per frame from the
 distance the person walked (:func:`pipeline.world.gait.gait_poses`); the render sizes each person's box to its posed
-mesh at the person's stature (:func:`person_statures`, :meth:`pipeline.world.actors.ActorMeshes.posed_boxes`).
+mesh at the person's stature (:func:`person_statures`, :func:`pipeline.world.posed_people.posed_boxes`).
 
 Who: the families are 10 of men, 10 of women, 2 of teenagers and 2 of children, so that an actor's family (picked
 uniformly by its variant) makes about 83 % adults, 8 % teenagers (13-17) and 8 % children (6-12): our estimate of a
 weekday city street, where children are fewer than their ~15 % of Europe's population. Statures
-(:data:`STATURE_M`): adults from the mean heights of north-western European adults in NCD Risk Factor Collaboration,
-"A century of trends in adult human height", eLife 5:e13410 (2016) (men born 1980-1996 ~1.78-1.80 m, women
-~1.65-1.67 m in NL, DE, UK, FR averaged lower: we take 1.76 m and 1.63 m), with the within-country spread of national
-surveys (SD ~7 cm, e.g. the Health Survey for England); teenagers and children from the WHO 2007 growth reference
-(median height at 6 y 1.16 m, 9 y 1.33 m, 12 y 1.50 m, 15 y ~1.66 m, sexes averaged) with the reference's spread
-(SD ~5-7 cm). A child's head is large for its stature (head height ~0.2 m at 1.3 m against an adult's 0.23 m at 1.75):
+(:data:`STATURE_M`): adults 1.76 m (men) and 1.63 m (women), between the means that NCD Risk Factor Collaboration,
+"A century of trends in adult human height", eLife 5:e13410 (2016), gives north-western Europeans born in the 1950s
+(about 1.75 and 1.62 m) and in the 1990s (about 1.79 and 1.66 m), as a street's adults span those ages; SD ~7 cm, the
+within-country spread of national surveys (e.g. the Health Survey for England); teenagers and children from the WHO
+2007 growth reference (median height at 6 y 1.16 m, 9 y 1.33 m, 12 y 1.50 m, 15 y ~1.66 m, sexes averaged) with
+the reference's spread (SD ~5-7 cm). A child's head is large for its stature (head height ~0.2 m at 1.3 m against an adult's 0.23 m at 1.75):
 its model's head is scaled by ``head_scale``.
 
 What they wear (the outfits below, one per family): the top, coat or dress is ``garment``, the actor's own colour
