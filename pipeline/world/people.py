@@ -15,8 +15,8 @@ weekday city street, where children are fewer than their ~15 % of Europe's popul
 (about 1.75 and 1.62 m) and in the 1990s (about 1.79 and 1.66 m), as a street's adults span those ages; SD ~7 cm, the
 within-country spread of national surveys (e.g. the Health Survey for England); teenagers and children from the WHO
 2007 growth reference (median height at 6 y 1.16 m, 9 y 1.33 m, 12 y 1.50 m, 15 y ~1.66 m, sexes averaged) with
-the reference's spread (SD ~5-7 cm). A child's head is large for its stature (head height ~0.2 m at 1.3 m against an adult's 0.23 m at 1.75):
-its model's head is scaled by ``head_scale``.
+the reference's spread (SD ~5-7 cm). A child's head is large for its stature (head height ~0.2 m at 1.3 m against
+an adult's 0.23 m at 1.75): its model's head is scaled by ``head_scale``.
 
 What they wear (the outfits below, one per family): the top, coat or dress is ``garment``, the actor's own colour
 (:data:`pipeline.traffic.demand.CLOTHES` draws it per person); trousers, jeans, skirts, shoes, hair and skin are
