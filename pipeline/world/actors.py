@@ -5,7 +5,9 @@ Conventions:
 - Each class has several body families (:data:`pipeline.world.actor_shapes.FAMILIES`: sedan, hatchback, estate,
   SUV, coupé, pickup for cars, and so on); an actor's *model* is one of its class's families, picked by its
   ``variant`` (a per-actor random number the render draws from the run's seed) among the families that suit its
-  length (:meth:`ActorMeshes.model_codes`), so the same actor keeps its body in every frame.
+  length (:meth:`ActorMeshes.model_codes`), so the same actor keeps its body in every frame. A family may have
+  several poses (people through the walk cycle, a bicycle's cranks: :mod:`pipeline.world.people`,
+  :mod:`pipeline.world.two_wheelers`), one canonical mesh each; :attr:`Actors.pose` picks the frame's.
 - A model's canonical mesh lives in the *unit box frame*: centre at the origin, x forward, y left,
   z up, and its vertices span exactly [-0.5, 0.5] on every axis (it touches all six faces). Placing it
   is the affine map ``p_world = R(yaw) @ diag(length, width, height) @ p_unit + centre``, so the placed
@@ -196,7 +198,10 @@ class ActorMeshes:
             extra models.
         model_class: (M,) the class of each model; model_names: (M,) its family's or model's name ("sedan", ...;
             the class's name for an override given as a bare mesh); model_extent: (M,) its size in metres as
-            modelled, (3,) each (a given model's :attr:`Model.extent_m`).
+            modelled, (3,) each (a given model's :attr:`Model.extent_m`); model_low: (M,) its lowest corner as
+            modelled, (3,) each (zeros for a given model); model_pose: (M,) its pose within its family.
+        families: every family slot (the built-in families, in FAMILIES order, then the given models), each with
+            its models at consecutive indices, one per pose (:func:`family_poses`).
         scene_cache: per-model scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
