@@ -167,9 +167,12 @@ def _carried(p: Pose, outfit: Outfit, axis: np.ndarray) -> list[Part]:
         parts.append(ellipsoid(centre, (0.13, 0.045, 0.11), outfit.shoulder_bag, n=12, m=6))
         parts.append(capsule(p.shoulders[0] + [0.0, -0.05, 0.02], centre + [0.0, 0.0, 0.08], 0.012, 0.012,
                              outfit.shoulder_bag, n=6, rings=1))
-    if outfit.hand_bag is not None:  # handles in the fist, the bag hanging below the hand
-        grip = p.wrists[1] + 0.09 * p.hands[1]
-        parts.append(ellipsoid(grip + [0.0, -0.02, -0.19], (0.16, 0.06, 0.17), outfit.hand_bag, n=12, m=6))
+    if outfit.hand_bag is not None:  # a shopping bag hanging from the fist on its two handles: flat, upright, 0.34 m
+        grip = p.wrists[1] + 0.09 * p.hands[1]  # wide, 0.36 m tall
+        top, bottom = grip + [0.0, -0.02, -0.1], grip + [0.0, -0.02, -0.46]
+        parts.append(sweep([bottom, top], [[0.17, 0.055], [0.17, 0.055]], outfit.hand_bag, n=16, ref=(1.0, 0.0, 0.0)))
+        parts += [capsule(grip, top + [dx, 0.0, 0.0], 0.008, 0.008, outfit.hand_bag, n=6, rings=1)
+                  for dx in (-0.08, 0.08)]
     return parts
 
 
