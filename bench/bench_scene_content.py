@@ -3,8 +3,10 @@
 Prints, per record and then per (scenario, condition): frames, vehicles (car/van/truck/bus) with a tight box
 >= 30 px tall per frame (mean, and the share of frames with at least 2), the number of distinct vehicles that
 are >= 30 px tall in some frame (one car waiting ahead at a red light fills many frames: ../shared/REALISM.md),
-cyclists and pedestrians >= 30 px per frame, and the near-duplicate frame rate (definitions:
-pipeline/core/scene_content.py). Target (issue 23): at least 2 vehicles >= 30 px per urban frame on average.
+cyclists and pedestrians >= 30 px per frame, the distinct pedestrians >= 30 px and >= 60 px (twice the height) tall
+in some frame, and the near-duplicate frame rate (definitions: pipeline/core/scene_content.py). Targets: at least 2
+vehicles >= 30 px per urban frame on average (issue 23); at least 20 distinct people >= 30 px in an urban morning run
+of 60 frames, some >= 60 px (issue 40).
 
     python bench/bench_scene_content.py RECORD [RECORD ...] [--min-height 30] [--camera front]
 
@@ -34,13 +36,17 @@ def measure(record: Path, min_height_px: float, camera: str | None) -> dict[str,
     counts = counts[counts["sensor"] == camera]
     cam = labels[(labels["sensor"] == camera) & labels["visible"] & labels["cls"].isin(VEHICLE_CLASSES)]
     distinct = cam.loc[(cam["y2"] - cam["y1"]) >= min_height_px, "track_id"].nunique()
+    people = labels[(labels["sensor"] == camera) & labels["visible"] & (labels["cls"] == "pedestrian")]
+    tall_people = people.loc[(people["y2"] - people["y1"]) >= min_height_px, "track_id"]
+    taller_people = people.loc[(people["y2"] - people["y1"]) >= 2.0 * min_height_px, "track_id"]
     ego_travel = float(frames.sort_values("frame")[["ego_x_m", "ego_y_m"]].diff().pow(2).sum(axis=1).pow(0.5).sum())
     return {"record": f"{record.parent.name}/{record.name}", "scenario": info["scenario"], "seed": info["seed"],
             "condition": info["condition"],
             "frames": len(frames), "veh_per_frame": counts["vehicles"].mean(),
             "frames_ge2_veh": (counts["vehicles"] >= 2).mean(), "distinct_veh": distinct,
             "cyc_per_frame": counts["cycles"].mean(),
-            "ped_per_frame": counts["pedestrians"].mean(),
+            "ped_per_frame": counts["pedestrians"].mean(), "distinct_ped": tall_people.nunique(),
+            "distinct_ped_2x": taller_people.nunique(),
             "near_dup_rate": near_duplicate_rate(frames, labels, camera), "ego_travel_m": ego_travel}
 
 
@@ -61,7 +67,8 @@ def main() -> None:
         w["dups"] = rows["near_dup_rate"] * (rows["frames"] - 1)
         g = w.groupby(["scenario", "condition"]).sum(numeric_only=True)
         runs = rows.groupby(["scenario", "condition"]).size()
-        out = pd.DataFrame({"records": runs, "frames": g["frames"], "distinct_veh": g["distinct_veh"]})
+        out = pd.DataFrame({"records": runs, "frames": g["frames"], "distinct_veh": g["distinct_veh"],
+                            "distinct_ped": g["distinct_ped"], "distinct_ped_2x": g["distinct_ped_2x"]})
         for c in ("veh_per_frame", "frames_ge2_veh", "cyc_per_frame", "ped_per_frame"):
             out[c] = g[c] / g["frames"]
         out["near_dup_rate"] = g["dups"] / (g["frames"] - runs)

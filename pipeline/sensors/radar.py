@@ -45,7 +45,7 @@ from pipeline.core.classes import SemanticClass
 from pipeline.core.config.sensors import ConditionConfig, RadarConfig
 from pipeline.core.geometry import Transform
 from pipeline.world.actors import Actors
-from pipeline.world.materials import MATERIAL_NAMES, material_index
+from pipeline.world.materials import MATERIAL_NAMES, PERSON_MATERIALS, material_index
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 SPECULAR_EXPONENT = 8.0  # glint lobe: cos^8 falls to a half at 23 degrees off the normal
@@ -66,7 +66,7 @@ RADAR_MATERIALS: dict[str, tuple[float, float]] = {
     "cargo": (0.3, 8.0), "lamp": (0.3, 4.0), "glass": (0.1, 1.0), "rubber": (0.05, 0.0), "trim": (0.1, 0.5),
     "headlight": (0.1, 1.0), "taillight": (0.1, 1.0), "reflector_red": (0.1, 1.0), "reflector_white": (0.1, 1.0),
     "marker_lamp": (0.1, 1.0),
-    "skin": (0.15, 0.1), "cloth": (0.15, 0.1),
+    **{name: (0.15, 0.1) for name in PERSON_MATERIALS},
 }
 
 _PAINT, _CLOTH = material_index("paint"), material_index("cloth")

@@ -52,8 +52,8 @@ from pipeline.stages.common import (
 from pipeline.stages.executor import ExecutorSpec, add_executor_arguments, executor_from_args
 from pipeline.stages.render_cluster import connected, render_shards_on_ray, warm_up
 from pipeline.stages.render_frames import (
-    ACTOR_COLUMNS,
     SHARD_FORMAT,
+    SIMULATED_COLUMNS,
     ShardJob,
     remembered_world,
     render_shard,
@@ -279,7 +279,7 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
     rig_actor_meshes(rig)  # read the rig's mesh files now: a bad one fails before any work, and workers inherit them
     seed = int(sim_meta["seed"])
     trajectories = read_parquet(sim_dir / "trajectories.parquet")
-    missing = [c for c in ("frame", "is_ego", "time_s", *ACTOR_COLUMNS) if c not in trajectories.columns]
+    missing = [c for c in ("frame", "is_ego", "time_s", *SIMULATED_COLUMNS) if c not in trajectories.columns]
     if missing:
         raise ValueError(f"{sim_dir / 'trajectories.parquet'}: no column {', '.join(missing)} (an older simulate "
                          "output?); make the run again with `roadsynth simulate`")

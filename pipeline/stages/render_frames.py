@@ -37,6 +37,7 @@ from pipeline.stages import radar_frames
 from pipeline.stages.rig import build_actor_meshes, build_sensors
 from pipeline.world.actors import ActorMeshes, Actors, actor_variants, srgb8_to_linear
 from pipeline.world.materials import material_index
+from pipeline.world.posed_people import posed_boxes
 from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
 
@@ -91,7 +92,8 @@ class SignalState:
 
 
 ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad", "color_r",
-                 "color_g", "color_b", "braking", "speed_mps", "parked")
+                 "color_g", "color_b", "braking", "speed_mps", "parked", "pose")
+SIMULATED_COLUMNS = ACTOR_COLUMNS[:-1]  # what simulate records; body_sized_trajectories adds the pose
 
 
 class Trajectories:
@@ -111,21 +113,26 @@ class Trajectories:
 
 
 def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
-    """The trajectories with every actor's box length as its body is proportioned
-    (:meth:`ActorMeshes.body_lengths`: pedestrians); the camera, the LiDAR, the label rows and so the exports all
-    see that box."""
+    """The trajectories with every actor's box as its body fills it, and a ``pose`` column
+    (:func:`pipeline.world.posed_people.posed_boxes`: a person's box is its posed body's at its stature, in each
+    row; the others keep theirs, but for a pedestrian model's depth); the camera, the LiDAR, the label rows and so
+    the exports all see that box."""
     _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
-    cols = {c: table[c].to_numpy()[first] for c in ACTOR_COLUMNS}  # an actor's class and size hold for its track
-    length = meshes.body_lengths(_actors(cols, seed))[inverse.reshape(-1)]
-    if np.array_equal(length, table["length_m"].to_numpy()):
-        return table
-    return table.assign(length_m=length)
+    cols = {c: table[c].to_numpy()[first] for c in SIMULATED_COLUMNS}  # an actor's class and size hold for its track
+    rows = {c: table[c].to_numpy() for c in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")}
+    boxes, pose = posed_boxes(meshes, _actors(cols, seed), inverse.reshape(-1), table["time_s"].to_numpy(),
+                              table["speed_mps"].to_numpy(), actor_boxes(rows), seed)
+    posed = {"x_m": boxes.center[:, 0], "y_m": boxes.center[:, 1], "z_m": boxes.center[:, 2],
+             "length_m": boxes.size[:, 0], "width_m": boxes.size[:, 1], "height_m": boxes.size[:, 2]}
+    changed = {c: v for c, v in posed.items() if not np.array_equal(v, rows[c])}
+    return table.assign(**changed, pose=pose)
 
 
 def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:
     color = srgb8_to_linear(np.column_stack([cols["color_r"], cols["color_g"], cols["color_b"]]))
     return Actors(cols["track_id"], cols["cls"].tolist(), actor_boxes(cols), color, cols["braking"],
-                  actor_variants(cols["track_id"], seed), lights_on=~cols["parked"].astype(bool))
+                  actor_variants(cols["track_id"], seed), lights_on=~cols["parked"].astype(bool),
+                  pose=cols.get("pose"))
 
 
 def _shard_type(dtype: str) -> pa.DataType:

@@ -46,8 +46,20 @@ _GUI_SHAPE = {
 DRIVER_FIELDS = tuple(DriverModel.model_fields)
 # SUMO's default pedestrian type (DEFAULT_PEDTYPE): its length is the body depth.
 PEDESTRIAN_SIZE_M = {"length_m": 0.215, "width_m": 0.478, "height_m": 1.719}
-_CLOTHES = np.array([[40, 40, 60], [120, 30, 30], [30, 80, 140], [200, 180, 150], [60, 90, 50], [20, 20, 20],
-                     [180, 120, 40], [150, 150, 160]], dtype=np.uint8)
+# The colour of a pedestrian's top, coat or dress (sRGB; the render's ``garment``) and its share. Our estimate of
+# what people wear over their clothes in a European city outside summer, not a survey: dark outerwear dominates
+# (black 26 %, navy 12 %, dark grey 10 %), then greys, white and cream, beige and camel, blues, browns, olive, reds,
+# and a few bright colours. Trousers, skirts, shoes and hair are the body family's (pipeline/world/people.py).
+CLOTHES = np.array([[25, 25, 28], [60, 60, 64], [120, 120, 125], [28, 36, 64], [50, 80, 140], [140, 170, 200],
+                    [225, 222, 212], [190, 160, 115], [95, 65, 45], [85, 90, 55], [130, 30, 40], [220, 170, 40],
+                    [210, 120, 140], [200, 40, 40]], dtype=np.uint8)
+CLOTHES_SHARES = np.array([0.26, 0.10, 0.07, 0.12, 0.06, 0.04, 0.07, 0.07, 0.05, 0.05, 0.05, 0.02, 0.02, 0.02])
+# Standing pedestrians come alone, in twos or in threes with these shares of groups: our estimate for a weekday
+# street (most people in city streets walk in groups of 2-3 or alone: Moussaid et al., "The walking behaviour of
+# pedestrian social groups and its impact on crowd dynamics", PLoS ONE 5(4): e10047, 2010).
+STANDING_GROUPS = (1, 2, 3)
+STANDING_GROUP_SHARES = (0.5, 0.35, 0.15)
+STANDING_SPACING_M = 0.75  # between the members of a standing group, along the sidewalk
 
 
 class DemandError(ValueError):
@@ -170,26 +182,75 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
 
 def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
                  rng: np.random.Generator) -> pd.DataFrame:
-    if config.pedestrians == 0:
-        return pd.DataFrame({"person_id": pd.Series(dtype=str), "depart_s": pd.Series(dtype=float),
-                             "route": pd.Series(dtype=str), "speed_mps": pd.Series(dtype=float),
-                             **{f"color_{c}": pd.Series(dtype=np.uint8) for c in "rgb"}})
+    """One row per person: person_id, depart_s, route, speed_mps, color_r/g/b, and for those who stand first (after
+    the ``pedestrians`` walkers, ``standing_pedestrians`` more) the sidewalk lane, the position on it and how long
+    they stand (stop_lane, stop_pos_m, stop_s; "" and NaN for walkers)."""
+    columns = {"person_id": str, "depart_s": float, "route": str, "speed_mps": float, "color_r": np.uint8,
+               "color_g": np.uint8, "color_b": np.uint8, "stop_lane": str, "stop_pos_m": float, "stop_s": float}
+    total = config.pedestrians + config.standing_pedestrians
+    if total == 0:
+        return pd.DataFrame({c: pd.Series(dtype=t) for c, t in columns.items()})
     # Walks start and end anywhere (not on the fringe like vehicles'): people come out of the buildings, and
     # a walker covers only ~100 m during the warm-up, so fringe origins would leave the inner streets empty.
-    walks = _random_routes(net_file, config.pedestrians, seed + 1, 50.0, work, prefix="ped",
+    walks = _random_routes(net_file, total, seed + 1, 50.0, work, prefix="ped",
                            extra=["--pedestrians", "--max-distance", "1500"], fringe_factor="1")
-    if len(walks) < config.pedestrians:
-        raise DemandError(f"{net_file}: only {len(walks)} valid walks for {config.pedestrians} pedestrians "
+    if len(walks) < total:
+        raise DemandError(f"{net_file}: only {len(walks)} valid walks for {total} pedestrians "
                           "(does the network have sidewalks?)")
     n = config.pedestrians
-    clothes = _CLOTHES[rng.integers(0, len(_CLOTHES), size=n)]
-    return pd.DataFrame({
+    clothes = CLOTHES[rng.choice(len(CLOTHES), size=total, p=CLOTHES_SHARES)]
+    walkers = pd.DataFrame({
         "person_id": [f"ped{i:04d}" for i in range(n)],
         "depart_s": np.round(np.sort(rng.uniform(0.0, config.depart_window_s, size=n)), 2),
         "route": [" ".join(edges) for _, edges in walks[:n]],
         "speed_mps": config.pedestrian_speed_mps.sample(rng, n),
-        "color_r": clothes[:, 0], "color_g": clothes[:, 1], "color_b": clothes[:, 2],
+        "stop_lane": "", "stop_pos_m": np.nan, "stop_s": np.nan,
     })
+    standing = _standing(config, _sidewalks(net_file), walks[n:total], rng)
+    persons = pd.concat([walkers, standing], ignore_index=True)
+    persons["color_r"], persons["color_g"], persons["color_b"] = clothes.T
+    return persons[list(columns)].astype({c: t for c, t in columns.items() if t is not str})
+
+
+def _sidewalks(net_file: Path) -> dict[str, tuple[str, float]]:
+    """Edge id -> (its sidewalk lane's id, that lane's length in metres) for the network's edges with a sidewalk."""
+    out = {}
+    for edge in ET.parse(net_file).getroot().iter("edge"):
+        if edge.get("function") not in (None, "normal"):
+            continue
+        for lane in edge.iter("lane"):
+            if lane.get("allow") == "pedestrian":
+                out[edge.get("id")] = (lane.get("id"), float(lane.get("length")))
+                break
+    return out
+
+
+def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float]], walks: list[tuple[str, list[str]]],
+              rng: np.random.Generator) -> pd.DataFrame:
+    """The standing pedestrians, in groups (STANDING_GROUPS): each group stands side by side, STANDING_SPACING_M
+    apart, at a random place on the sidewalk of its first walk's first edge, from a common departure for a common
+    time, then walks that route together at the slowest member's speed."""
+    rows = []
+    k = 0
+    while k < config.standing_pedestrians:
+        size = min(int(rng.choice(STANDING_GROUPS, p=STANDING_GROUP_SHARES)), config.standing_pedestrians - k)
+        _, edges = walks[k]
+        lane, length_m = sidewalks.get(edges[0], ("", 0.0))
+        span = STANDING_SPACING_M * (size - 1)
+        if length_m < span + 6.0:  # no room for the group on this sidewalk: they walk instead
+            lane, pos = "", np.full(size, np.nan)
+        else:
+            pos = rng.uniform(3.0, length_m - 3.0 - span) + STANDING_SPACING_M * np.arange(size)
+        depart = round(float(rng.uniform(0.0, config.depart_window_s)), 2)
+        stand = float(config.standing_s.sample(rng, 1)[0]) if lane else np.nan
+        speed = float(config.pedestrian_speed_mps.sample(rng, size).min())
+        for j in range(size):
+            rows.append({"person_id": f"ped{config.pedestrians + k + j:04d}", "depart_s": depart,
+                         "route": " ".join(edges), "speed_mps": speed, "stop_lane": lane,
+                         "stop_pos_m": round(float(pos[j]), 2), "stop_s": round(stand, 1)})
+        k += size
+    return pd.DataFrame(rows, columns=["person_id", "depart_s", "route", "speed_mps", "stop_lane", "stop_pos_m",
+                                       "stop_s"])
 
 
 def _g(x: float) -> str:
@@ -226,6 +287,10 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, dep
             veh = ET.SubElement(root, "vehicle", id=ident, type=f"t_{ident}", depart=f"{depart:.2f}",
                                 departLane="best", departSpeed="max", departPos=depart_pos)
             ET.SubElement(veh, "route", edges=row.route)
+        elif row.stop_lane:  # stands at stop_pos_m on its first edge's sidewalk, then walks
+            person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}", departPos=_g(row.stop_pos_m))
+            ET.SubElement(person, "stop", lane=row.stop_lane, endPos=_g(row.stop_pos_m), duration=_g(row.stop_s))
+            ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))
         else:
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}")
             ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))

@@ -5,7 +5,9 @@ Conventions:
 - Each class has several body families (:data:`pipeline.world.actor_shapes.FAMILIES`: sedan, hatchback, estate,
   SUV, coupé, pickup for cars, and so on); an actor's *model* is one of its class's families, picked by its
   ``variant`` (a per-actor random number the render draws from the run's seed) among the families that suit its
-  length (:meth:`ActorMeshes.model_codes`), so the same actor keeps its body in every frame.
+  length (:meth:`ActorMeshes.model_codes`), so the same actor keeps its body in every frame. A family may have
+  several poses (people through the walk cycle, a bicycle's cranks: :mod:`pipeline.world.people`,
+  :mod:`pipeline.world.two_wheelers`), one canonical mesh each; :attr:`Actors.pose` picks the frame's.
 - A model's canonical mesh lives in the *unit box frame*: centre at the origin, x forward, y left,
   z up, and its vertices span exactly [-0.5, 0.5] on every axis (it touches all six faces). Placing it
   is the affine map ``p_world = R(yaw) @ diag(length, width, height) @ p_unit + centre``, so the placed
@@ -48,6 +50,9 @@ class Actors:
         lights_on: (N,) bool, the vehicle's lamps (head and tail lamps, side markers, the plate lamp, its low beams)
             are switched on where the condition turns vehicle lights on (dusk, night); all True by default. A parked
             vehicle's are off.
+        pose: (N,) int64 the pose of the actor's family to show (a family of several poses: a person's phase of the
+            walk cycle, :func:`pipeline.world.gait.gait_poses`), taken modulo the family's number of poses; 0 (the
+            default) is each family's first.
     """
 
     track_id: np.ndarray
@@ -57,6 +62,7 @@ class Actors:
     brake: np.ndarray = field(default=None)  # type: ignore[assignment]
     variant: np.ndarray = field(default=None)  # type: ignore[assignment]
     lights_on: np.ndarray = field(default=None)  # type: ignore[assignment]
+    pose: np.ndarray = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         n = len(self.boxes)
@@ -66,12 +72,16 @@ class Actors:
         brake = np.zeros(n, bool) if self.brake is None else np.asarray(self.brake, dtype=bool).reshape(-1)
         variant = np.zeros(n, np.uint32) if self.variant is None else np.asarray(self.variant, np.uint32).reshape(-1)
         lights_on = np.ones(n, bool) if self.lights_on is None else np.asarray(self.lights_on, bool).reshape(-1)
-        if not (len(track_id) == len(classes) == len(color) == len(brake) == len(variant) == len(lights_on) == n):
+        pose = np.zeros(n, np.int64) if self.pose is None else np.asarray(self.pose, np.int64).reshape(-1)
+        if not (len(track_id) == len(classes) == len(color) == len(brake) == len(variant) == len(lights_on)
+                == len(pose) == n):
             raise ValueError(
                 f"actor arrays differ in length: track_id {len(track_id)}, object_class {len(classes)}, "
                 f"boxes {n}, color_rgb {len(color)}, brake {len(brake)}, variant {len(variant)}, "
-                f"lights_on {len(lights_on)}"
+                f"lights_on {len(lights_on)}, pose {len(pose)}"
             )
+        if n and pose.min() < 0:
+            raise ValueError("pose must be >= 0")
         if n and (track_id.min() <= 0 or len(np.unique(track_id)) != n):
             raise ValueError("track ids must be positive and unique (0 means static / nothing)")
         if n and (color.min() < 0.0 or color.max() > 1.0):
@@ -82,6 +92,7 @@ class Actors:
         object.__setattr__(self, "brake", brake)
         object.__setattr__(self, "variant", variant)
         object.__setattr__(self, "lights_on", lights_on)
+        object.__setattr__(self, "pose", pose)
 
     def __len__(self) -> int:
         return len(self.track_id)
@@ -128,19 +139,33 @@ def normalise_to_unit_box(mesh: Mesh) -> Mesh:
 
 
 @functools.cache
-def _family(family) -> tuple[Mesh, np.ndarray]:
-    mesh = family()
-    return normalise_to_unit_box(mesh), mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)
+def _family(family, pose: int = 0) -> tuple[Mesh, np.ndarray, np.ndarray]:
+    mesh = family(pose) if family_poses(family) > 1 else family()
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    return normalise_to_unit_box(mesh), hi - lo, lo
 
 
-def family_mesh(family) -> Mesh:
-    """The built-in procedural mesh of one body family in the unit box frame (vertices span exactly [-0.5, 0.5]^3)."""
-    return _family(family)[0]
+def family_poses(family) -> int:
+    """How many poses a body family has (a :class:`pipeline.world.people.PersonFamily`'s ``poses``; 1 for the
+    others, which take no argument)."""
+    return int(getattr(family, "poses", 1))
 
 
-def family_extent(family) -> np.ndarray:
+def family_mesh(family, pose: int = 0) -> Mesh:
+    """The built-in procedural mesh of one body family (in one of its poses) in the unit box frame (vertices span
+    exactly [-0.5, 0.5]^3)."""
+    return _family(family, pose)[0]
+
+
+def family_extent(family, pose: int = 0) -> np.ndarray:
     """(3,) float64 the family's size in metres as modelled (what its unit-box mesh was scaled by)."""
-    return _family(family)[1]
+    return _family(family, pose)[1]
+
+
+def family_low(family, pose: int = 0) -> np.ndarray:
+    """(3,) float64 the lowest corner of the family's mesh as modelled, metres, in its modelling frame (a person's:
+    the pelvis above x = y = 0, the ground at z = 0)."""
+    return _family(family, pose)[2]
 
 
 def canonical_mesh(object_class: ObjectClass) -> Mesh:
@@ -173,7 +198,10 @@ class ActorMeshes:
             extra models.
         model_class: (M,) the class of each model; model_names: (M,) its family's or model's name ("sedan", ...;
             the class's name for an override given as a bare mesh); model_extent: (M,) its size in metres as
-            modelled, (3,) each (a given model's :attr:`Model.extent_m`).
+            modelled, (3,) each (a given model's :attr:`Model.extent_m`); model_low: (M,) its lowest corner as
+            modelled, (3,) each (zeros for a given model); model_pose: (M,) its pose within its family.
+        families: every family slot (the built-in families, in FAMILIES order, then the given models), each with
+            its models at consecutive indices, one per pose (:func:`family_poses`).
         scene_cache: per-model scenes and triangle tables, owned by the renderer (pipeline.world.scene).
     """
 
@@ -194,34 +222,49 @@ class ActorMeshes:
         self.model_class: list[ObjectClass] = []
         self.model_names: list[str] = []
         self.model_extent: list[np.ndarray] = []
+        self.model_low: list[np.ndarray] = []  # as modelled (family_low); zeros for a given model
+        self.model_pose: list[int] = []
+        self.families: list[object] = []  # per family slot: the built-in family, or the given Model
         self._known_extent: list[bool] = []  # per model: its extent is as modelled (not the unit box's stand-in)
-        # Per class code: the first model index, and each model's (low, high) suitable length in metres.
+        # Per class code: its first family slot, and each of its families' (low, high) suitable length in metres.
         self._first = np.zeros(len(ObjectClass), np.int64)
         self._suits: list[np.ndarray] = []
+        first_model, poses = [], []  # per family slot
         for code, object_class in enumerate(ObjectClass):
-            self._first[code] = len(self.models)
-            if object_class in replaced:
-                meshes, suits, names, extents = [], [], [], []
-            else:
-                families = FAMILIES[object_class]
-                meshes = [family_mesh(f) for f in families]
-                suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in families]
-                names = [f.__name__ for f in families]
-                extents = [family_extent(f) for f in families]
-            known = [True] * len(meshes)
+            self._first[code] = len(self.families)
+            builtin = () if object_class in replaced else FAMILIES[object_class]
+            suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in builtin]
+            for family in builtin:
+                first_model.append(len(self.models))
+                poses.append(family_poses(family))
+                self.families.append(family)
+                for pose in range(family_poses(family)):
+                    self._add_model(object_class, family_mesh(family, pose), family.__name__,
+                                    family_extent(family, pose), family_low(family, pose), pose, True)
             for model in replaced.get(object_class, []) + added.get(object_class, []):
-                meshes, suits, names = [*meshes, model.mesh], [*suits, (0.0, np.inf)], [*names, model.name]
-                extents = [*extents, np.ones(3) if model.extent_m is None else np.asarray(model.extent_m, float)]
-                known.append(model.extent_m is not None)
-            self._known_extent += known
-            self.model_names += names
-            self.model_extent += extents
-            self.models += meshes
-            self.model_class += [object_class] * len(meshes)
-            self._suits.append(np.asarray(suits, np.float64))
+                first_model.append(len(self.models))
+                poses.append(1)
+                self.families.append(model)
+                suits.append((0.0, np.inf))
+                extent = np.ones(3) if model.extent_m is None else np.asarray(model.extent_m, float)
+                self._add_model(object_class, model.mesh, model.name, extent, None, 0, model.extent_m is not None)
+            self._suits.append(np.asarray(suits, np.float64).reshape(-1, 2))
+        self._family_first_model = np.asarray(first_model, np.int64)
+        self._family_poses = np.asarray(poses, np.int64)
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
         self._hulls: dict[int, np.ndarray] = {}
         self._corners: dict[int, np.ndarray] = {}
+
+    def _add_model(self, object_class: ObjectClass, mesh: Mesh, name: str, extent: np.ndarray,
+                   low: np.ndarray | None, pose: int, known: bool) -> None:
+        """Append one model (a family's pose, or a given model: ``low`` None)."""
+        self.models.append(mesh)
+        self.model_class.append(object_class)
+        self.model_names.append(name)
+        self.model_extent.append(extent)
+        self.model_low.append(np.zeros(3) if low is None else low)
+        self.model_pose.append(pose)
+        self._known_extent.append(known)
 
     def corner_normals(self, model: int) -> np.ndarray:
         """(T, 3, 3) float32 smooth shading normals per triangle corner of a model, unit-box frame
@@ -250,8 +293,8 @@ class ActorMeshes:
         """The class's first model."""
         return self.models[int(self._first[list(ObjectClass).index(ObjectClass(object_class))])]
 
-    def model_codes(self, actors: Actors) -> np.ndarray:
-        """(N,) int64 each actor's model (index into :attr:`models`): among its class's families whose length range
+    def family_codes(self, actors: Actors) -> np.ndarray:
+        """(N,) int64 each actor's family (index into :attr:`families`): among its class's families whose length range
         holds the actor's length (all of them where none does), the one at ``variant`` modulo their number."""
         codes = actors.class_codes
         out = np.zeros(len(actors), np.int64)
@@ -267,6 +310,21 @@ class ActorMeshes:
             family = np.argmax(ok & (rank == pick[:, None]), axis=1)
             out[idx] = self._first[code] + family
         return out
+
+    def model_codes(self, actors: Actors) -> np.ndarray:
+        """(N,) int64 each actor's model (index into :attr:`models`): its family's (:meth:`family_codes`) mesh in
+        the actor's ``pose`` (modulo the family's number of poses)."""
+        family = self.family_codes(actors)
+        return self._family_first_model[family] + actors.pose % self._family_poses[family]
+
+    def family_poses(self, family: int) -> int:
+        """How many poses family ``family`` (an index into :attr:`families`) has."""
+        return int(self._family_poses[family])
+
+    def family_models(self, family: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """(N,) int64 the models of families ``family`` (N,) in poses ``pose`` (N,) (modulo each one's count)."""
+        family = np.asarray(family, np.int64)
+        return self._family_first_model[family] + np.asarray(pose, np.int64) % self._family_poses[family]
 
     def body_lengths(self, actors: Actors) -> np.ndarray:
         """(N,) float64 the actors' box lengths as their bodies are proportioned. SUMO's length of a pedestrian

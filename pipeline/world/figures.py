@@ -83,13 +83,18 @@ def pose(pelvis, chest, head, ankles, feet, wrists, hands, knee_dir=(1.0, 0.0, 0
 
 @dataclass(frozen=True)
 class Outfit:
-    """Materials of a figure's regions; ``None`` leaves a part out.
+    """Materials of a figure's regions and what it wears and carries; ``None`` leaves a part out.
 
     Attributes:
         top: torso and upper arms; sleeves: forearms (``skin`` for short sleeves); trousers: hips and thighs;
         shins: lower legs (``skin`` for shorts or a skirt); shoes; hair (a cap over the back and top of the head);
         helmet: a full-face helmet with a dark visor (``None``: no helmet); coat_m: a coat in ``top`` down to
         this height above the pelvis (negative: below it), or ``None``; girth: scales limb and torso radii.
+        skin: the skin's material; long_hair: hair down to the shoulders; hat: a knitted hat (beanie) in this
+        material; hood: a hood lying on the back of the neck, in ``top``; skirt_m: a skirt (in ``trousers``) from the
+        waist down to this height above the pelvis (negative), or ``None``; backpack, shoulder_bag, hand_bag: a
+        backpack, a bag at the right hip on a strap, a bag carried in the right hand, in these materials;
+        head_scale: the head's size relative to an adult's (children's heads are larger for their stature).
     """
 
     top: str = "paint"
@@ -101,25 +106,39 @@ class Outfit:
     helmet: str | None = None
     coat_m: float | None = None
     girth: float = 1.0
+    skin: str = "skin"
+    long_hair: bool = False
+    hat: str | None = None
+    hood: bool = False
+    skirt_m: float | None = None
+    backpack: str | None = None
+    shoulder_bag: str | None = None
+    hand_bag: str | None = None
+    head_scale: float = 1.0
 
 
 def figure(p: Pose, outfit: Outfit = Outfit()) -> list[Part]:
-    """The figure's parts: torso, neck, head (hair or helmet), arms with hands, legs with shoes."""
-    g = outfit.girth
+    """The figure's parts: torso, neck, head (hair, hat or helmet), arms with hands, legs with shoes, and what it
+    wears over them and carries."""
+    g, skin = outfit.girth, outfit.skin
     up = p.chest - p.pelvis
+    axis = up / np.linalg.norm(up)
     s, half_w, half_d = (np.array(col) for col in zip(*_TORSO, strict=True))
     centres = p.pelvis + s[:, None] * up
     mid = 0.5 * (s[1:] + s[:-1])
     torso_mats = [outfit.trousers if m < _WAIST_S else outfit.top for m in mid]
     parts = [sweep(centres, g * np.column_stack([half_w, half_d]), torso_mats, n=12)]
-    if outfit.coat_m is not None:  # a flared coat skirt from the waist down
-        axis = up / np.linalg.norm(up)
-        top_c, foot_c = p.pelvis + 0.3 * up, p.pelvis + outfit.coat_m * axis
-        parts.append(sweep([top_c, 0.5 * (top_c + foot_c), foot_c, foot_c - 0.02 * axis],
-                           g * np.array([[0.155, 0.105], [0.175, 0.12], [0.2, 0.14], [0.0, 0.0]]), outfit.top, n=14))
+    for hem_m, material, flare in ((outfit.coat_m, outfit.top, 0.2), (outfit.skirt_m, outfit.trousers, 0.23)):
+        if hem_m is not None:  # a flared coat skirt or a skirt from the waist down
+            top_c, foot_c = p.pelvis + (0.3 if material == outfit.top else 0.16) * up, p.pelvis + hem_m * axis
+            parts.append(sweep([top_c, 0.5 * (top_c + foot_c), foot_c, foot_c - 0.02 * axis],
+                               g * np.array([[0.155, 0.105], [0.175, 0.12], [flare, 0.7 * flare], [0.0, 0.0]]),
+                               material, n=14))
     neck_top = p.head - [0.0, 0.0, 0.08]
-    parts.append(capsule(p.chest + 0.02 * up, neck_top, 0.05 * g, 0.045 * g, "skin", n=8, rings=2))
+    parts.append(capsule(p.chest + 0.02 * up, neck_top, 0.05 * g, 0.045 * g, skin, n=8, rings=2))
     parts += _head(p.head, outfit)
+    if outfit.hood:  # the hood of a hoodie or parka, lying on the upper back below the head
+        parts.append(ellipsoid(p.chest + [-0.1, 0.0, 0.03], (0.07, 0.13, 0.09), outfit.top, n=12, m=6))
     for i in range(2):
         thigh = p.hips[i] + 0.5 * (p.knees[i] - p.hips[i])
         calf = p.knees[i] + 0.35 * (p.ankles[i] - p.knees[i])
@@ -131,18 +150,50 @@ def figure(p: Pose, outfit: Outfit = Outfit()) -> list[Part]:
         parts.append(limb([p.shoulders[i], elbow, wrist], g * np.array([0.058, 0.047, 0.035]),
                           [outfit.top, outfit.sleeves], n=8))
         hand_c = wrist + 0.07 * p.hands[i]
-        parts.append(ellipsoid(hand_c, (0.028, 0.045, 0.085), "skin", n=8, m=6, axis=p.hands[i], ref=(0, 1, 0)))
+        parts.append(ellipsoid(hand_c, (0.028, 0.045, 0.085), skin, n=8, m=6, axis=p.hands[i], ref=(0, 1, 0)))
+    parts += _carried(p, outfit, axis)
+    return parts
+
+
+def _carried(p: Pose, outfit: Outfit, axis: np.ndarray) -> list[Part]:
+    """A backpack on the upper back, a bag on a strap at the right hip, a bag hanging from the right hand."""
+    parts = []
+    g = outfit.girth
+    if outfit.backpack is not None:
+        centre = p.pelvis + 0.62 * (p.chest - p.pelvis) + [-(0.11 * g + 0.09), 0.0, 0.0]
+        parts.append(ellipsoid(centre, (0.085, 0.15, 0.21), outfit.backpack, n=12, m=6, axis=axis))
+    if outfit.shoulder_bag is not None:
+        centre = p.hips[1] + [0.0, -0.1 * g - 0.06, 0.08]
+        parts.append(ellipsoid(centre, (0.13, 0.045, 0.11), outfit.shoulder_bag, n=12, m=6))
+        parts.append(capsule(p.shoulders[0] + [0.0, -0.05, 0.02], centre + [0.0, 0.0, 0.08], 0.012, 0.012,
+                             outfit.shoulder_bag, n=6, rings=1))
+    if outfit.hand_bag is not None:  # a shopping bag hanging from the fist on its two handles: flat, upright, 0.34 m
+        grip = p.wrists[1] + 0.09 * p.hands[1]  # wide, 0.36 m tall
+        top, bottom = grip + [0.0, -0.02, -0.1], grip + [0.0, -0.02, -0.46]
+        parts.append(sweep([bottom, top], [[0.17, 0.055], [0.17, 0.055]], outfit.hand_bag, n=16, ref=(1.0, 0.0, 0.0)))
+        parts += [capsule(grip, top + [dx, 0.0, 0.0], 0.008, 0.008, outfit.hand_bag, n=6, rings=1)
+                  for dx in (-0.08, 0.08)]
     return parts
 
 
 def _head(centre: np.ndarray, outfit: Outfit) -> list[Part]:
-    """Skin head (a bit deeper than wide); a hair cap over its back and top, or a full-face helmet and visor."""
-    parts = [ellipsoid(centre, (0.1, 0.078, 0.117), "skin", n=12, m=8)]
+    """Skin head (a bit deeper than wide); a hair cap over its back and top (down to the shoulders for long hair), a
+    knitted hat over the hair, or a full-face helmet and visor."""
+    k = outfit.head_scale
+    parts = [ellipsoid(centre, (0.1 * k, 0.078 * k, 0.117 * k), outfit.skin, n=12, m=8)]
     if outfit.helmet is not None:
         parts.append(ellipsoid(centre + [-0.01, 0.0, 0.025], (0.145, 0.125, 0.145), outfit.helmet, n=14, m=8))
         parts.append(ellipsoid(centre + [0.06, 0.0, 0.035], (0.1, 0.105, 0.055), "glass", n=14, m=6))
-    elif outfit.hair is not None:
-        parts.append(ellipsoid(centre + [-0.022, 0.0, 0.022], (0.098, 0.084, 0.108), outfit.hair, n=12, m=8))
+        return parts
+    if outfit.hair is not None:
+        parts.append(ellipsoid(centre + k * np.array([-0.022, 0.0, 0.022]), (0.098 * k, 0.084 * k, 0.108 * k),
+                               outfit.hair, n=12, m=8))
+        if outfit.long_hair:
+            parts.append(ellipsoid(centre + k * np.array([-0.05, 0.0, -0.06]), (0.07 * k, 0.085 * k, 0.15 * k),
+                                   outfit.hair, n=12, m=6))
+    if outfit.hat is not None:
+        parts.append(ellipsoid(centre + k * np.array([-0.012, 0.0, 0.05]), (0.104 * k, 0.09 * k, 0.095 * k),
+                               outfit.hat, n=12, m=8))
     return parts
 
 

@@ -2,9 +2,9 @@
 
 :meth:`pipeline.world.scene.FrameScene.cast_rays` casts every ray against the static world and some against the
 frame's actors; :func:`resolve_hits` keeps the nearer hit of each ray and reads the hit triangle's semantic class,
-material and albedo (an actor's paint: its own colour), and turns the normal towards the ray's origin. In numpy
-this took a dozen image-sized temporaries; compiled (:mod:`pipeline.core.jit`), one
-pass over the rays. :func:`spread_cast` puts a cast of some of the rays back in place among all of them.
+material and albedo (an actor's paint or garment: its own colour), and turns the normal towards the ray's origin. In
+numpy this took a dozen image-sized temporaries; compiled (:mod:`pipeline.core.jit`), one pass over the rays.
+:func:`spread_cast` puts a cast of some of the rays back in place among all of them.
 """
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ from pipeline.core.jit import kernel
 
 @kernel("void(float32[:, ::1], float32[::1], uint32[::1], float32[:, ::1], uint8[::1], int32[::1], float32[:, ::1], "
         "int64[::1], float32[::1], uint32[::1], float32[:, ::1], int32[::1], uint8[::1], int32[::1], int32[::1], "
-        "float32[:, ::1], int64, "
+        "float32[:, ::1], bool_[::1], "
         "bool_[::1], int32[::1], int32[::1], uint8[::1], int32[::1], float32[:, ::1])")
 def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo,
                  sub, t_actor, prim_actor, normal_actor, hit_actor, actor_semantic, actor_material, track_id,
-                 actor_color, paint,
+                 actor_color, tinted,
                  hit, instance_id, actor_index, semantic, material, color):
     """Merge the casts of N rays and fill their attributes, in place.
 
@@ -34,7 +34,7 @@ def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo
             (the normal in the world frame), hit_actor (K,) int32 the actor hit (position in the frame's actors).
         actor_semantic, actor_material: (U,) uint8 and int32 per actor triangle (as numbered in ``prim_actor``).
         track_id: (A,) int32 per actor; actor_color: (A, 3) float32 linear colour, which replaces the albedo of
-            material ``paint``.
+            the materials where ``tinted`` ((M,) bool) is set (``paint``, ``garment``).
         hit, instance_id, actor_index, semantic, material, color: outputs, (N,) bool, int32, int32, uint8, int32
             and (N, 3) float32 arrays of zeros (False): written where a ray hit (instance id and actor index where
             it hit an actor), left as they are elsewhere.
@@ -61,7 +61,7 @@ def resolve_hits(rays, t, prim, normal, static_semantic, static_material, albedo
             material[i] = m
             for k in range(3):
                 normal[i, k] = normal_actor[j, k]
-                color[i, k] = actor_color[a, k] if m == paint else albedo[m, k]
+                color[i, k] = actor_color[a, k] if tinted[m] else albedo[m, k]
     for i in range(t.size):
         if normal[i, 0] * rays[i, 3] + normal[i, 1] * rays[i, 4] + normal[i, 2] * rays[i, 5] > 0:
             for k in range(3):

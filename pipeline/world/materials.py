@@ -114,9 +114,39 @@ MATERIALS: dict[str, Material] = {
     # Appended by the curtainsider semi-trailers (pipeline/world/actor_shapes.py): a PVC-coated polyester curtain,
     # matte, a light blue-grey (bright in the LiDAR's near infrared, as light fabrics are).
     "tarpaulin": Material((0.50, 0.53, 0.58), specular=0.08, shininess=12.0, reflectivity=0.5),
+    # Appended by the people (pipeline/world/people.py, figures.py): matte fabrics, leather, hair and skin. Diffuse
+    # albedos of clothing in the visible lie between ~0.02 (black cloth) and ~0.6 (white cotton); dyed fabrics are
+    # bright in the near infrared whatever their visible colour (the LiDAR's 905 nm), black ones less so. Skin: light,
+    # medium and dark tones, albedos from spectrophotometry of the inner arm across the Fitzpatrick scale (reflectance
+    # at 550 nm ~0.45, ~0.25, ~0.08). ``garment`` takes the actor's colour (its per-person top, coat or dress), as
+    # ``paint`` does a vehicle's, but matte (no clear coat: no highlight, no mirror).
+    "garment": Material((0.5, 0.5, 0.5), specular=0.03, shininess=8.0, reflectivity=0.45),
+    "denim": Material((0.05, 0.08, 0.16), specular=0.02, shininess=8.0, reflectivity=0.45),
+    "denim_light": Material((0.17, 0.23, 0.36), specular=0.02, shininess=8.0, reflectivity=0.5),
+    "fabric_black": Material((0.022, 0.022, 0.026), specular=0.03, shininess=8.0, reflectivity=0.2),
+    "fabric_grey": Material((0.16, 0.16, 0.17), specular=0.02, shininess=8.0, reflectivity=0.4),
+    "fabric_navy": Material((0.022, 0.03, 0.075), specular=0.02, shininess=8.0, reflectivity=0.35),
+    "fabric_beige": Material((0.42, 0.34, 0.22), specular=0.02, shininess=8.0, reflectivity=0.55),
+    "fabric_brown": Material((0.11, 0.065, 0.04), specular=0.02, shininess=8.0, reflectivity=0.45),
+    "fabric_olive": Material((0.085, 0.095, 0.045), specular=0.02, shininess=8.0, reflectivity=0.45),
+    "fabric_white": Material((0.62, 0.62, 0.6), specular=0.02, shininess=8.0, reflectivity=0.65),
+    "fabric_red": Material((0.36, 0.03, 0.04), specular=0.02, shininess=8.0, reflectivity=0.5),
+    "leather": Material((0.035, 0.025, 0.02), specular=0.25, shininess=32.0, reflectivity=0.15),
+    "sneaker_white": Material((0.6, 0.6, 0.58), specular=0.1, shininess=16.0, reflectivity=0.6),
+    "hair_black": Material((0.018, 0.015, 0.013), specular=0.15, shininess=24.0, reflectivity=0.15),
+    "hair_brown": Material((0.07, 0.04, 0.024), specular=0.15, shininess=24.0, reflectivity=0.25),
+    "hair_blond": Material((0.33, 0.24, 0.12), specular=0.15, shininess=24.0, reflectivity=0.4),
+    "hair_grey": Material((0.3, 0.3, 0.3), specular=0.15, shininess=24.0, reflectivity=0.4),
+    "skin_medium": Material((0.36, 0.23, 0.15), reflectivity=0.3),
+    "skin_dark": Material((0.12, 0.07, 0.045), reflectivity=0.25),
 }
 
 MATERIAL_NAMES: tuple[str, ...] = tuple(MATERIALS)
+# Materials whose colour is the actor's (Actors.color_rgb) rather than the table's albedo.
+TINTED_MATERIALS = ("paint", "garment")
+# What people are made of (the radar scatters off them as off cloth and skin: pipeline/sensors/radar.py).
+PERSON_MATERIALS = ("skin", "cloth", *(n for n in MATERIALS if n.startswith(("fabric_", "denim", "hair_", "skin_"))),
+                    "garment", "leather", "sneaker_white")
 
 
 def material_index(name: str) -> int:

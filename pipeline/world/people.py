@@ -1,70 +1,142 @@
-"""Pedestrian body families: people walking and standing, in a few builds and outfits (:mod:`.figures`).
+"""Pedestrian body families: people of several ages, builds and outfits, each posed through the walk cycle and
+standing (:mod:`.gait`, :mod:`.figures`).
 
 Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, z up, ground at z = 0, metres at
-a stature of 1.75 m; normalised to each actor's box later). SUMO's pedestrian box is 0.215 m deep; the render
-gives each person the depth of its own model at its height instead (:meth:`pipeline.world.actors.ActorMeshes.
-body_lengths`), so a stride is not squeezed.
+a stature of :data:`pipeline.world.gait.MODEL_STATURE_M`; normalised to each actor's box later). A family is a
+:class:`PersonFamily`: one mesh per pose (:func:`pipeline.world.gait.person_pose`), picked per frame from the
+distance the person walked (:func:`pipeline.world.gait.gait_poses`); the render sizes each person's box to its posed
+mesh at the person's stature (:func:`person_statures`, :func:`pipeline.world.posed_people.posed_boxes`).
+
+Who: the families are 10 of men, 10 of women, 2 of teenagers and 2 of children, so that an actor's family (picked
+uniformly by its variant) makes about 83 % adults, 8 % teenagers (13-17) and 8 % children (6-12): our estimate of a
+weekday city street, where children are fewer than their ~15 % of Europe's population. Statures
+(:data:`STATURE_M`): adults 1.76 m (men) and 1.63 m (women), between the means that NCD Risk Factor Collaboration,
+"A century of trends in adult human height", eLife 5:e13410 (2016), gives north-western Europeans born in the 1950s
+(about 1.75 and 1.62 m) and in the 1990s (about 1.79 and 1.66 m), as a street's adults span those ages; SD ~7 cm, the
+within-country spread of national surveys (e.g. the Health Survey for England); teenagers and children from the WHO
+2007 growth reference (median height at 6 y 1.16 m, 9 y 1.33 m, 12 y 1.50 m, 15 y ~1.66 m, sexes averaged) with
+the reference's spread (SD ~5-7 cm). A child's head is large for its stature (head height ~0.2 m at 1.3 m against
+an adult's 0.23 m at 1.75): its model's head is scaled by ``head_scale``.
+
+What they wear (the outfits below, one per family): the top, coat or dress is ``garment``, the actor's own colour
+(:data:`pipeline.traffic.demand.CLOTHES` draws it per person); trousers, jeans, skirts, shoes, hair and skin are
+fabric, leather, hair and skin materials (:mod:`pipeline.world.materials`). Over the 24 families: jeans 8, other
+trousers 10 (black 6, grey 2, navy 1, beige 1), a skirt or dress 4, shorts 2; a coat 5, a hood (hoodie, parka) 4;
+long hair 8, a knitted hat 2; a backpack 6, a shoulder bag 3, a bag in the hand 3; light, medium and dark skin 16, 5,
+3; black, brown, blond and grey hair 11, 6, 4, 3.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
-from pipeline.world.figures import SHIN_M, THIGH_M, Outfit, figure, pose
+from pipeline.world.figures import Outfit, figure
+from pipeline.world.gait import STAND_POSES, WALK_PHASES, person_pose
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import merge
 
 
-def _standing(stance_m: float = 0.11, lean: float = 0.0):
-    """Upright, feet a little apart and turned out, arms hanging with a slight bend."""
-    return pose(pelvis=(0.0, 0.0, 0.92), chest=(lean, 0.0, 1.44), head=(0.015 + 1.2 * lean, 0.0, 1.635),
-                ankles=[(0.0, stance_m, 0.085), (0.0, -stance_m, 0.085)],
-                feet=[(1.0, 0.18, 0.0), (1.0, -0.18, 0.0)],
-                wrists=[(0.03, 0.225, 0.86), (0.03, -0.225, 0.86)],
-                hands=[(0.15, 0.02, -1.0), (0.15, -0.02, -1.0)], elbow_dir=(-1.0, 0.3, 0.0))
+@dataclass(frozen=True)
+class PersonFamily:
+    """A person's body and outfit in every pose: calling it with a pose index builds that pose's mesh.
+
+    Attributes:
+        name: the family's name; group: "man", "woman", "teen" or "child" (its stature's distribution,
+            :data:`STATURE_M`); outfit: what the figure wears and carries; lean_deg: the trunk's forward lean walking.
+    """
+
+    name: str
+    group: str
+    outfit: Outfit
+    lean_deg: float = 3.0
+
+    poses = WALK_PHASES + STAND_POSES
+
+    @property
+    def __name__(self) -> str:
+        return self.name
+
+    def __call__(self, pose: int = 0) -> Mesh:
+        """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground."""
+        mesh = merge(figure(person_pose(pose, self.lean_deg), self.outfit), ObjectClass.PEDESTRIAN)
+        lowest = mesh.vertices[:, 2].min()
+        return Mesh(mesh.vertices - [0.0, 0.0, lowest], mesh.triangles, mesh.material, mesh.semantic)
 
 
-def _leg(thigh_deg: float, knee_deg: float) -> np.ndarray:
-    """(x, z) of the ankle from the hip joint, the thigh ``thigh_deg`` forward of vertical and the knee bent by
-    ``knee_deg`` (the shin swings back by that much)."""
-    t, s = np.radians(thigh_deg), np.radians(thigh_deg - knee_deg)
-    return np.array([THIGH_M * np.sin(t) + SHIN_M * np.sin(s), -THIGH_M * np.cos(t) - SHIN_M * np.cos(s)])
+def _o(trousers: str, shins: str | None = None, shoes: str = "trim", hair: str = "hair_black", **kw) -> Outfit:
+    """An outfit with a ``garment`` top (the actor's colour) and sleeves unless given."""
+    kw.setdefault("top", "garment")
+    kw.setdefault("sleeves", kw["top"])
+    return Outfit(trousers=trousers, shins=trousers if shins is None else shins, shoes=shoes, hair=hair, **kw)
 
 
-def _walking(thigh_deg: float = 18.0, trail_deg: float = -9.0):
-    """Mid-stride at double support, just after the left heel strikes: the left leg ahead and almost straight, its
-    foot toe up; the right leg behind, knee bent, on its toes; arms swinging opposite to the legs; the pelvis at its
-    lowest (the leading ankle 10 cm up)."""
-    lead, trail = _leg(thigh_deg, 4.0), _leg(trail_deg, 32.0)
-    hip_z = 0.1 - lead[1]
-    return pose(pelvis=(0.0, 0.0, hip_z), chest=(0.03, 0.0, hip_z + 0.52), head=(0.05, 0.0, hip_z + 0.715),
-                ankles=[(lead[0], 0.085, hip_z + lead[1]), (trail[0], -0.085, hip_z + trail[1])],
-                feet=[(1.0, 0.05, 0.3), (1.0, -0.05, -0.75)],
-                wrists=[(-0.14, 0.22, hip_z - 0.02), (0.2, -0.2, hip_z + 0.03)],
-                hands=[(-0.3, 0.0, -1.0), (0.5, 0.0, -1.0)],
-                knee_dir=(1.0, 0.0, 0.0), elbow_dir=[(-1.0, 0.3, 0.0), (-1.0, -0.2, -0.5)])
+# Stature (m) per group: (mean, SD, low, high); children's mean is drawn from their age (CHILD_AGE_HEIGHT_M).
+STATURE_M = {"man": (1.76, 0.07, 1.55, 2.02), "woman": (1.63, 0.065, 1.45, 1.86), "teen": (1.65, 0.08, 1.45, 1.88),
+             "child": (0.0, 0.055, 1.05, 1.6)}
+CHILD_AGE_HEIGHT_M = ((6.0, 1.16), (9.0, 1.33), (12.0, 1.50))  # WHO 2007 reference medians, sexes averaged
+
+FAMILIES = (
+    PersonFamily("man_jeans", "man", _o("denim", shoes="sneaker_white", hair="hair_brown")),
+    PersonFamily("man_suit_coat", "man", _o("fabric_black", shoes="leather", coat_m=-0.42, girth=1.05), 2.0),
+    PersonFamily("man_chinos_backpack", "man", _o("fabric_beige", backpack="fabric_black", hair="hair_blond")),
+    PersonFamily("man_hoodie", "man", _o("fabric_black", hood=True, shoes="sneaker_white", girth=0.95)),
+    PersonFamily("man_summer", "man", _o("fabric_olive", "skin", sleeves="skin", skin="skin_medium", girth=0.92)),
+    PersonFamily("man_heavy_jacket", "man", _o("denim", girth=1.15, hair="hair_grey", shoulder_bag="leather"), 4.0),
+    PersonFamily("man_grey_trousers", "man", _o("fabric_grey", skin="skin_dark", backpack="fabric_navy")),
+    PersonFamily("man_parka_hat", "man", _o("fabric_navy", coat_m=-0.3, hat="fabric_grey", hood=True, girth=1.08)),
+    PersonFamily("man_shopping", "man", _o("denim_light", hand_bag="fabric_white", hair="hair_grey"), 5.0),
+    PersonFamily("man_dark", "man", _o("fabric_black", skin="skin_dark", shoes="sneaker_white", girth=1.0)),
+    PersonFamily("woman_jeans", "woman", _o("denim", long_hair=True, hair="hair_brown", shoulder_bag="leather",
+                                            girth=0.9)),
+    PersonFamily("woman_coat", "woman", _o("fabric_black", coat_m=-0.5, long_hair=True, hair="hair_blond",
+                                           girth=0.92)),
+    PersonFamily("woman_skirt", "woman", _o("fabric_navy", "skin", skirt_m=-0.38, hair="hair_brown", girth=0.88)),
+    PersonFamily("woman_dress", "woman", _o("garment", "skin", skirt_m=-0.45, long_hair=True, shoes="leather",
+                                            girth=0.88)),
+    PersonFamily("woman_trousers_bag", "woman", _o("fabric_black", hair="hair_black", skin="skin_medium",
+                                                   shoulder_bag="fabric_brown", girth=0.9)),
+    PersonFamily("woman_shopping", "woman", _o("denim_light", long_hair=True, hair="hair_black", hand_bag="fabric_red",
+                                               girth=0.95)),
+    PersonFamily("woman_parka", "woman", _o("fabric_black", coat_m=-0.35, hood=True, hair="hair_brown",
+                                            skin="skin_dark", girth=0.95)),
+    PersonFamily("woman_backpack", "woman", _o("denim", long_hair=True, hair="hair_blond", backpack="fabric_grey",
+                                               shoes="sneaker_white", girth=0.88)),
+    PersonFamily("woman_older", "woman", _o("fabric_grey", coat_m=-0.45, hair="hair_grey", hand_bag="leather",
+                                            girth=1.05), 5.0),
+    PersonFamily("woman_skirt_hat", "woman", _o("fabric_brown", "fabric_black", skirt_m=-0.4, hat="fabric_red",
+                                                long_hair=True, skin="skin_medium", girth=0.9)),
+    PersonFamily("teen_hoodie", "teen", _o("denim", hood=True, backpack="fabric_black", shoes="sneaker_white",
+                                           skin="skin_medium", girth=0.88, head_scale=1.05)),
+    PersonFamily("teen_shorts", "teen", _o("fabric_grey", "skin", sleeves="skin", long_hair=True, hair="hair_brown",
+                                           backpack="fabric_red", girth=0.85, head_scale=1.05)),
+    PersonFamily("child_jeans", "child", _o("denim", hair="hair_blond", backpack="fabric_red", shoes="sneaker_white",
+                                            girth=0.85, head_scale=1.18), 2.0),
+    PersonFamily("child_skirt", "child", _o("fabric_navy", "fabric_grey", skirt_m=-0.33, long_hair=True,
+                                            hair="hair_brown", skin="skin_medium", girth=0.85, head_scale=1.18), 2.0),
+)
+PEDESTRIANS = FAMILIES
 
 
-def pedestrian() -> Mesh:
-    """A person walking mid-stride: long-sleeved top (paint), trousers (cloth), dark shoes and hair."""
-    return merge(figure(_walking()), ObjectClass.PEDESTRIAN)
+def person_statures(group: np.ndarray, track_id: np.ndarray, seed: int) -> np.ndarray:
+    """(N,) float64 statures in metres for N people of ``group`` (names of :data:`STATURE_M`), one draw per person
+    from ``numpy.random.default_rng([seed, STATURE_TAG, track id])`` (the same in every frame and shard), truncated
+    to the group's range by redrawing."""
+    out = np.zeros(len(track_id))
+    for i, (g, t) in enumerate(zip(np.asarray(group).tolist(), np.asarray(track_id).tolist(), strict=True)):
+        rng = np.random.default_rng([int(seed), STATURE_TAG, int(t)])
+        mean, sd, low, high = STATURE_M[g]
+        if g == "child":
+            age, height = zip(*CHILD_AGE_HEIGHT_M, strict=True)
+            mean = float(np.interp(rng.uniform(age[0], age[-1]), age, height))
+        for _ in range(100):
+            out[i] = mean + sd * rng.standard_normal()
+            if low <= out[i] <= high:
+                break
+        out[i] = min(max(out[i], low), high)
+    return out
 
 
-def pedestrian_standing() -> Mesh:
-    """A person standing, feet apart: top (paint), trousers, shoes, hair."""
-    return merge(figure(_standing()), ObjectClass.PEDESTRIAN)
-
-
-def pedestrian_coat() -> Mesh:
-    """A heavier-built person standing in a thigh-length coat (paint) over dark trousers."""
-    return merge(figure(_standing(0.1, lean=0.01), Outfit(trousers="trim", shins="trim", shoes="rubber",
-                                                           coat_m=-0.3, girth=1.12)), ObjectClass.PEDESTRIAN)
-
-
-def pedestrian_summer() -> Mesh:
-    """A slim person walking in short sleeves and shorts: forearms and shins bare (skin)."""
-    return merge(figure(_walking(15.0, -8.0), Outfit(sleeves="skin", shins="skin", girth=0.92)), ObjectClass.PEDESTRIAN)
-
-
-PEDESTRIANS = (pedestrian, pedestrian_standing, pedestrian_coat, pedestrian_summer)
+STATURE_TAG = 0x57A7

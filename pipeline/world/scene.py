@@ -50,7 +50,7 @@ from pipeline.world.actor_casts import (
 )
 from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
-from pipeline.world.materials import material_arrays, material_index
+from pipeline.world.materials import TINTED_MATERIALS, material_arrays, material_index
 from pipeline.world.mesh import Mesh, triangle_bounds
 from pipeline.world.sunmap import SunMap, along_sun, sun_slope
 
@@ -401,7 +401,8 @@ class FrameScene:
         self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
-        self._paint = material_index("paint")
+        tinted = [material_index(n) for n in TINTED_MATERIALS]  # their colour is the actor's
+        self._tinted = as_input(np.isin(np.arange(len(mats["albedo"])), tinted), np.bool_)
         self._actor_color = as_input(actors.color_rgb, np.float32)
         # Precompute the inverse placement of each actor: p_unit = A^-1 (p - centre).
         affine = unit_to_world(actors.boxes)
@@ -443,7 +444,7 @@ class FrameScene:
         resolve_hits(rays, t, prim, normal, as_input(static.triangle_semantic, np.uint8),
                      as_input(static.triangle_material, np.int32), self._albedo, sub, t_actor, prim_actor,
                      normal_actor, hit_actor, tables.semantic, tables.material,
-                     as_input(self.actors.track_id, np.int32), self._actor_color, self._paint,
+                     as_input(self.actors.track_id, np.int32), self._actor_color, self._tinted,
                      hit, instance_id, actor_index, semantic, material, color)
         return Hits(t, hit, instance_id, actor_index, semantic, material, normal, color)
 

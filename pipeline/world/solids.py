@@ -62,19 +62,20 @@ def sweep(centres, radii, material: str | Sequence[str], n: int = 10, ref=(0.0, 
         verts.extend([c[i]] if pole[i] else ring[i])
     j, j1 = np.arange(n), (np.arange(n) + 1) % n
     tris, mats = [], []
+    codes = [material_index(name) for name in names]  # looked up once per interval, not per triangle
     for i in range(k if loop else k - 1):
         a, b, cc, d = index[i, j], index[i, j1], index[(i + 1) % k, j], index[(i + 1) % k, j1]
         tris += [np.stack([a, b, cc], -1), np.stack([b, d, cc], -1)]
-        mats += [names[i]] * (2 * n)
+        mats += [codes[i]] * (2 * n)
     if not loop:
-        for i, name, order in ((0, names[0], (j1, j)), (k - 1, names[-1], (j, j1))):
+        for i, name, order in ((0, codes[0], (j1, j)), (k - 1, codes[-1], (j, j1))):
             if not pole[i]:
                 verts.append(c[i])
                 tris.append(np.stack([np.full(n, len(verts) - 1), index[i, order[0]], index[i, order[1]]], -1))
                 mats += [name] * n
     verts = np.asarray(verts)
     tris = np.concatenate(tris)
-    mat = np.array([material_index(m) for m in mats], np.int32)
+    mat = np.array(mats, np.int32)
     keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
     tris, mat = tris[keep], mat[keep]
     if signed_volume(verts, tris) < 0:  # a left-handed path frame (never for (u, v, t) as built; kept as a guard)

@@ -8,6 +8,8 @@ seats and lamps are ellipsoids, so no two parts share a flat face.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
@@ -41,9 +43,17 @@ def _tubes(points: dict[str, tuple[float, float, float]], pairs: list[tuple[str,
     return [capsule(points[a], points[b], radius, radius, material, n=8, rings=1) for a, b in pairs]
 
 
-def _bicycle(sport: bool) -> list[Part]:
+DEVELOPMENT_M = 5.0  # distance a bicycle travels per crank turn: a mid gear (e.g. 42/18 on a 2.1 m tyre: 4.9 m)
+CRANK_M = 0.17  # crank arm length
+CRANK_PHASES = 8  # poses per crank turn (:class:`BicycleFamily`)
+
+
+def _bicycle(sport: bool, crank_rad: float = np.radians(25.0), rider: Outfit | None = None) -> list[Part]:
     """A 1.75 m bicycle: 0.34 m wheels 1.06 m apart, diamond (sport) or step-through (city) frame in paint, saddle,
-    bars, cranks, and its rider upright (city) or leaning low over drop bars (sport, with a helmet)."""
+    bars, cranks at ``crank_rad`` (the right crank, from forward, counter-clockwise seen from the left), a white lamp
+    on the bars and a red lamp and reflector under the saddle (lit with the lights at night, as the law asks, e.g.
+    StVZO 67 and UK RVLR 1989), pedal reflectors; and its rider, feet on the pedals, upright (city) or leaning low
+    over drop bars (sport, with a helmet)."""
     ax = 0.53
     pts = {"bb": (-0.05, 0.0, 0.3), "rear": (-ax, 0.0, 0.34), "front": (ax, 0.0, 0.34),
            "st": (-0.2, 0.0, 0.82 if sport else 0.72), "ht": (0.36, 0.0, 0.84 if sport else 0.8),
@@ -61,7 +71,10 @@ def _bicycle(sport: bool) -> list[Part]:
              cylinder(pts["st"], (-0.23, 0.0, saddle_z - 0.02), 0.014, "metal", 8),
              ellipsoid((-0.22, 0.0, saddle_z), (0.13, 0.075, 0.03), "trim", 10, 6),
              capsule(pts["ht"], (0.34 if sport else 0.31, 0.0, bar_z + 0.02), 0.016, 0.016, "metal", 8, 1),
-             cylinder((-0.05, -0.08, 0.3), (-0.05, 0.08, 0.3), 0.1, "metal", 16)]  # chainring and axle
+             cylinder((-0.05, -0.08, 0.3), (-0.05, 0.08, 0.3), 0.1, "metal", 16),  # chainring and axle
+             ellipsoid((0.415, 0.0, 0.72), (0.035, 0.04, 0.03), "headlight", 10, 6),  # front lamp on the head tube
+             ellipsoid((-0.25, 0.0, saddle_z - 0.09), (0.02, 0.035, 0.025), "taillight", 10, 6),  # on the seat post
+             ellipsoid((-0.245, 0.0, saddle_z - 0.16), (0.012, 0.04, 0.03), "reflector_red", 10, 6)]
     if sport:
         bar = [(bar_x - 0.1, 0.2, bar_z - 0.12), (bar_x + 0.02, 0.2, bar_z - 0.08), (bar_x - 0.06, 0.2, bar_z),
                (bar_x - 0.08, 0.0, bar_z + 0.01), (bar_x - 0.06, -0.2, bar_z), (bar_x + 0.02, -0.2, bar_z - 0.08),
@@ -71,26 +84,54 @@ def _bicycle(sport: bool) -> list[Part]:
                (bar_x - 0.02, -0.24, bar_z), (bar_x - 0.12, -0.3, bar_z)]
     parts.append(limb(bar, np.full(len(bar), 0.013), "trim", n=8, ref=(1.0, 0.0, 0.0)))
     hips = (-0.22, 0.0, saddle_z + 0.07)
-    crank = np.radians(25.0)
-    pedals = [(-0.05 + 0.17 * np.cos(crank), 0.13, 0.3 + 0.17 * np.sin(crank)),
-              (-0.05 - 0.17 * np.cos(crank), -0.13, 0.3 - 0.17 * np.sin(crank))]
+    pedals = []
+    for side, angle in ((1.0, crank_rad + np.pi), (-1.0, crank_rad)):  # left crank opposite the right one
+        pedal = np.array([-0.05 + CRANK_M * np.cos(angle), side * 0.13, 0.3 + CRANK_M * np.sin(angle)])
+        parts.append(capsule((-0.05, side * 0.1, 0.3), pedal - [0.0, side * 0.03, 0.0], 0.012, 0.012, "metal", 6, 1))
+        parts.append(ellipsoid(pedal, (0.05, 0.045, 0.012), "trim", 8, 4))
+        parts.append(ellipsoid(pedal + [0.0, side * 0.047, 0.0], (0.025, 0.006, 0.008), "reflector_white", 8, 4))
+        pedals.append(pedal)
     lean = np.radians(48.0 if sport else 18.0)
     chest = np.add(hips, 0.52 * np.array([np.sin(lean), 0.0, np.cos(lean)]))
     head = chest + ([0.13, 0.0, 0.14] if sport else [0.05, 0.0, 0.19])
     grip = (bar_x - 0.04, 0.2, bar_z) if sport else (bar_x - 0.1, 0.28, bar_z)
-    rider = pose(hips, chest, head, ankles=[np.add(p, (0.0, 0.0, 0.08)) for p in pedals],
-                 feet=[(1.0, 0.0, -0.2), (1.0, 0.0, -0.2)],
-                 wrists=[np.add(grip, (-0.05, 0.0, 0.02)), np.add(grip, (-0.05, -2 * grip[1], 0.02))],
-                 hands=[(1.0, 0.0, -0.3), (1.0, 0.0, -0.3)], elbow_dir=(-0.3, 0.0, -1.0))
-    outfit = Outfit(trousers="trim", shins="skin", sleeves="skin") if sport else Outfit()
-    parts += figure(rider, outfit)
+    # The ball of the foot on the pedal: the ankle above and behind it, the sole pitched with the crank's angle.
+    ankles = [p + [-0.07, 0.0, 0.075] for p in pedals]
+    rider_pose = pose(hips, chest, head, ankles=ankles, feet=[(1.0, 0.0, -0.25), (1.0, 0.0, -0.25)],
+                      wrists=[np.add(grip, (-0.05, 0.0, 0.02)), np.add(grip, (-0.05, -2 * grip[1], 0.02))],
+                      hands=[(1.0, 0.0, -0.3), (1.0, 0.0, -0.3)], elbow_dir=(-0.3, 0.0, -1.0))
+    if rider is None:
+        rider = Outfit(top="garment", sleeves="skin", trousers="fabric_black", shins="skin") if sport else \
+            Outfit(top="garment", sleeves="garment", trousers="denim", shins="denim")
+    parts += figure(rider_pose, rider)
     if sport:
         parts.append(ellipsoid(head + [-0.02, 0.0, 0.045], (0.15, 0.105, 0.1), "paint", 12, 6))
     return parts
 
 
+@dataclass(frozen=True)
+class BicycleFamily:
+    """A bicycle and its rider through a crank turn: calling it with pose k builds the crank at k / CRANK_PHASES of
+    a turn (:func:`crank_poses` picks the pose from the distance ridden)."""
+
+    name: str
+    sport: bool
+    rider: Outfit
+
+    poses = CRANK_PHASES
+    development_m = DEVELOPMENT_M
+
+    @property
+    def __name__(self) -> str:
+        return self.name
+
+    def __call__(self, pose: int = 0) -> Mesh:
+        crank = 2.0 * np.pi * (pose % CRANK_PHASES) / CRANK_PHASES
+        return merge(_bicycle(self.sport, crank, self.rider), ObjectClass.BICYCLE)
+
+
 def bicycle() -> Mesh:
-    """A city bicycle (step-through frame, upright bars) with an upright rider in paint top and trousers."""
+    """A city bicycle (step-through frame, upright bars) with an upright rider in a garment top and jeans."""
     return merge(_bicycle(sport=False), ObjectClass.BICYCLE)
 
 
@@ -156,5 +197,13 @@ def scooter() -> Mesh:
     return merge(parts, ObjectClass.MOTORCYCLE)
 
 
-BICYCLES = (bicycle, bicycle_sport)
+BICYCLES = (
+    BicycleFamily("bicycle_city", False, Outfit(top="garment", sleeves="garment", trousers="denim", shins="denim")),
+    BicycleFamily("bicycle_city_jacket", False, Outfit(
+        top="fabric_beige", sleeves="fabric_beige", trousers="fabric_black", shins="fabric_black", hair="hair_brown",
+        long_hair=True, backpack="fabric_grey")),
+    BicycleFamily("bicycle_sport", True, Outfit(top="garment", sleeves="skin", trousers="fabric_black", shins="skin")),
+    BicycleFamily("bicycle_commuter", True, Outfit(top="fabric_navy", sleeves="fabric_navy", trousers="fabric_grey",
+                                                   shins="fabric_grey", skin="skin_medium", backpack="fabric_black")),
+)
 MOTORCYCLES = (motorcycle, scooter)

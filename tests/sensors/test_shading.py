@@ -81,3 +81,27 @@ def test_condition_validation():
         condition(sun={"elevation_deg": 120.0})
     with pytest.raises(ValueError):
         condition(lens={"exposure": 0.0})
+
+
+def test_a_bicycles_lamps_glow_at_night(actors_factory):
+    """A bicycle's front and rear lamps glow at night with its lights on (a ridden bicycle's are), not with them
+    off: seen from ahead and from behind, their lenses are brighter lit than unlit."""
+    from pipeline.sensors.conditions import get_condition
+
+    night = get_condition("night")
+    assert night.lights_on
+    for material, side in (("headlight", 1.0), ("taillight", -1.0)):
+        rays, out = [], []
+        for lit in (True, False):
+            actors = actors_factory([[10.0, 0.0, 0.85]], [[1.75, 0.65, 1.7]], classes=[ObjectClass.BICYCLE],
+                                    lights_on=[lit])
+            scene = FrameScene(StaticScene([]), actors)
+            geo = scene.geometry
+            tri = np.flatnonzero(geo.triangle_material == material_index(material))
+            centroid = geo.vertices[geo.triangles[tri]].mean(axis=1)
+            target = centroid[np.argmax(side * centroid[:, 0])]
+            rays = np.asarray([np.concatenate([target + [side * 5.0, 0.0, 0.0], [-side, 0.0, 0.0]])], np.float32)
+            hits = scene.cast_rays(rays)
+            assert hits.material[0] == material_index(material)
+            out.append(shade(scene, rays, hits, night)[0])
+        assert out[0].sum() > 0.5 and out[0].sum() > 100.0 * out[1].sum(), (material, out)

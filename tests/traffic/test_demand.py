@@ -106,3 +106,30 @@ def test_color_shares_set_the_colour_frequencies():
     for bad in ([0.5, 0.5], [0.0, 0.0, 0.0], [1.0, -0.5, 0.5]):
         with pytest.raises(ValidationError, match="color_shares"):
             ClassSpec(**base, color_shares=bad)
+
+
+def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
+    """Standing pedestrians come in groups of 1-3 (shares STANDING_GROUP_SHARES), side by side STANDING_SPACING_M
+    apart on the sidewalk of their walk's first edge, inside it, departing, standing and walking on together; a walk
+    whose first edge is too short for the group gets no stop."""
+    import pandas as pd
+
+    from pipeline.traffic.demand import STANDING_SPACING_M, _standing
+
+    config = load_config(ScenarioConfig, "urban", "scenarios")[0].demand.model_copy(
+        update={"pedestrians": 0, "standing_pedestrians": 300})
+    sidewalks = {"long": ("long_0", 90.0), "short": ("short_0", 5.0)}
+    walks = [("w", ["short" if i % 50 == 7 else "long", "next"]) for i in range(300)]
+    rows = _standing(config, sidewalks, walks, np.random.default_rng(4))
+    assert len(rows) == 300 and rows["person_id"].is_unique
+    stops = rows[rows["stop_lane"] != ""]
+    assert set(stops["stop_lane"]) == {"long_0"} and len(stops) < len(rows)
+    assert ((stops["stop_pos_m"] >= 3.0) & (stops["stop_pos_m"] <= 87.0)).all()
+    assert ((stops["stop_s"] >= 60.0) & (stops["stop_s"] <= 300.0)).all()
+    groups = stops.groupby(["depart_s", "stop_s"])
+    sizes = groups.size()
+    assert set(sizes) <= {1, 2, 3} and {1, 2, 3} <= set(sizes)
+    for _, group in groups:
+        np.testing.assert_allclose(np.diff(group["stop_pos_m"]), STANDING_SPACING_M, atol=0.011)
+        assert group["speed_mps"].nunique() == 1 and group["route"].nunique() == 1
+    assert pd.isna(rows.loc[rows["stop_lane"] == "", "stop_pos_m"]).all()

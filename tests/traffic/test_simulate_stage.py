@@ -87,7 +87,9 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     traj = pd.read_parquet(tmp_path / "urban" / "trajectories.parquet")
     assert (traj["cls"] == "pedestrian").any()
     departs = [float(p.get("depart")) for p in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person")]
-    assert len(departs) == config.demand.pedestrians
+    assert len(departs) == config.demand.pedestrians + config.demand.standing_pedestrians
+    stops = list(ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("stop"))
+    assert 0 < len(stops) <= config.demand.standing_pedestrians  # those who stand first
     last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
     assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")

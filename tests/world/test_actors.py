@@ -11,15 +11,17 @@ from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
 from pipeline.world.actors import (
     ActorMeshes,
     Actors,
+    Model,
     actor_variants,
     canonical_mesh,
+    family_extent,
     family_mesh,
     normalise_to_unit_box,
     place_actors,
     srgb8_to_linear,
     unit_to_world,
 )
-from pipeline.world.materials import material_index
+from pipeline.world.materials import MATERIAL_NAMES, material_index
 from pipeline.world.mesh import Mesh
 
 ALL_FAMILIES = [pytest.param(c, f, id=f.__name__) for c, families in FAMILIES.items() for f in families]
@@ -131,30 +133,37 @@ def _first_materials(mesh: Mesh, origins: np.ndarray, direction) -> np.ndarray:
 
 
 PEDESTRIAN_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] == ObjectClass.PEDESTRIAN]
+SKIN = {material_index(n) for n in ("skin", "skin_medium", "skin_dark")}
+HAIR = {material_index(n) for n in MATERIAL_NAMES if n.startswith("hair_")}
+SHOES = {material_index(n) for n in ("trim", "rubber", "leather", "sneaker_white")}
 
 
 @pytest.mark.parametrize(("object_class", "family"), PEDESTRIAN_FAMILIES)
-def test_pedestrians_have_a_face_on_top_and_shoes_below(object_class, family):
-    """Seen from the front at eye height (6 % of the stature below the top), a person shows skin; from behind, hair;
-    from above, the head (skin or hair) is what is highest; at the ankles, from the front, shoes or skin."""
-    mesh = family_mesh(family)
-    skin, hair = material_index("skin"), material_index("trim")
+@pytest.mark.parametrize("pose", [0, 3, 8, 9])
+def test_pedestrians_have_a_face_on_top_and_shoes_below(object_class, family, pose):
+    """Walking or standing, seen from the front at eye height (6 % of the stature below the top), a person shows
+    skin; from behind, hair or a hat; from above, the head (skin, hair or hat) is what is highest; at the ankles, from
+    the front, shoes or skin."""
+    mesh = family_mesh(family, pose)
+    hat = {material_index(family.outfit.hat)} if family.outfit.hat else set()
     eyes = np.array([[5.0, 0.0, 0.44]])
-    assert _first_materials(mesh, eyes, [-1.0, 0.0, 0.0])[0] == skin
-    assert _first_materials(mesh, eyes * [-1, 1, 1], [1.0, 0.0, 0.0])[0] == hair
+    assert _first_materials(mesh, eyes, [-1.0, 0.0, 0.0])[0] in SKIN
+    assert _first_materials(mesh, eyes * [-1, 1, 1], [1.0, 0.0, 0.0])[0] in HAIR | hat
     top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
-    assert _first_materials(mesh, (top + [0, 0, 1.0])[None], [0.0, 0.0, -1.0])[0] in (skin, hair)
+    assert _first_materials(mesh, (top + [0, 0, 1.0])[None], [0.0, 0.0, -1.0])[0] in SKIN | HAIR | hat
     feet = np.array([[5.0, y, -0.49] for y in np.linspace(-0.3, 0.3, 61)])
     seen = set(_first_materials(mesh, feet, [-1.0, 0.0, 0.0]).tolist()) - {-1}
-    assert seen and seen <= {material_index("trim"), material_index("rubber")}
+    assert seen and seen <= SHOES | SKIN
 
 
-@pytest.mark.parametrize("family", ["pedestrian", "pedestrian_summer"])
-def test_a_walker_mid_stride_shows_daylight_between_the_legs(family):
-    """From the side just above the knees (30 % of the stature), rays meet the rear leg, then miss, then meet the
-    front leg: the legs are apart (higher up, at mid-thigh, a real walker's thighs overlap seen from the side)."""
+@pytest.mark.parametrize("family", ["man_jeans", "man_summer", "woman_backpack"])
+@pytest.mark.parametrize("pose", [0, 4])
+def test_a_walker_mid_stride_shows_daylight_between_the_legs(family, pose):
+    """At the double support of the walk cycle (the left heel striking, then the right), from the side just above the
+    knees (30 % of the stature), rays meet the rear leg, then miss, then meet the front leg: the legs are apart
+    (higher up, at mid-thigh, a real walker's thighs overlap seen from the side)."""
     fn = next(f for f in FAMILIES[ObjectClass.PEDESTRIAN] if f.__name__ == family)
-    mesh = family_mesh(fn)
+    mesh = family_mesh(fn, pose)
     origins = np.array([[x, -5.0, -0.2] for x in np.linspace(-0.5, 0.5, 201)])
     hit = _first_materials(mesh, origins, [0.0, 1.0, 0.0]) >= 0
     runs = np.flatnonzero(np.diff(hit.astype(int)))  # where hit / miss changes along x
@@ -177,8 +186,8 @@ def test_two_wheelers_stand_on_two_tyres_and_carry_a_rider(object_class, family)
     assert (low[xs < -0.25] >= 0).any() and (low[xs > 0.25] >= 0).any() and (low[np.abs(xs) < 0.1] < 0).all()
     top = mesh.vertices[np.argmax(mesh.vertices[:, 2])]
     head = _first_materials(mesh, (top + [5.0, 0.0, -0.03])[None], [-1.0, 0.0, 0.0])[0]
-    assert head in {material_index(n) for n in ("skin", "trim", "paint", "glass")}
-    assert material_index("skin") in set(mesh.material.tolist())
+    assert head in {material_index(n) for n in ("skin", "trim", "paint", "glass")} | SKIN | HAIR
+    assert SKIN & set(mesh.material.tolist())
 
 
 VEHICLE_FAMILIES = [p for p in ALL_FAMILIES if p.values[0] in (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK,
@@ -241,31 +250,38 @@ def test_variants_pick_families_that_suit_the_length():
     assert [meshes.model_names[c] for c in meshes.model_codes(trucks)] == ["curtain_trailer", "box_truck"]
 
 
-def test_pedestrian_boxes_take_their_bodys_depth():
-    """SUMO's 0.215 m pedestrian depth is replaced by the picked model's own depth at the actor's height (a walker's
-    stride ~0.8 m, a standing person ~0.3 m), so the placed body is not squashed; cars keep their length, and a
-    user's model of unknown proportions keeps SUMO's."""
-    meshes = ActorMeshes()
-    n = 40
+def test_user_pedestrian_models_take_their_depth():
+    """A user's pedestrian model of known proportions gets its own depth at SUMO's height (so it is not squashed to
+    SUMO's 0.215 m); cars keep their length; a user's model of unknown proportions keeps SUMO's depth."""
+    n = 4
     boxes = Boxes3D(np.zeros((n + 1, 3)), [[0.215, 0.478, 1.719]] * n + [[4.5, 1.8, 1.5]], np.zeros(n + 1))
     actors = Actors(np.arange(1, n + 2), ["pedestrian"] * n + ["car"], boxes, np.zeros((n + 1, 3)),
                     variant=actor_variants(np.arange(1, n + 2), 3))
-    length = meshes.body_lengths(actors)
+    walker = FAMILIES[ObjectClass.PEDESTRIAN][0]
+    known = ActorMeshes(overrides={ObjectClass.PEDESTRIAN: [Model("walker", family_mesh(walker, 2),
+                                                                  tuple(family_extent(walker, 2)))]})
+    length = known.body_lengths(actors)
+    extent = family_extent(walker, 2)
+    np.testing.assert_allclose(length[:n], extent[0] * 1.719 / extent[2], rtol=1e-12)
     assert length[-1] == 4.5
-    codes = meshes.model_codes(actors)[:n]
-    for code, got in zip(codes, length[:n], strict=True):
-        extent = meshes.model_extent[code]
-        assert got == pytest.approx(extent[0] * 1.719 / extent[2], rel=1e-12)
-    names = {meshes.model_names[c]: got for c, got in zip(codes, length[:n], strict=True)}
-    assert 0.6 < names["pedestrian"] < 1.0 and 0.2 < names["pedestrian_standing"] < 0.4
-    # re-picking with the new lengths picks the same models (a person's family does not depend on length)
-    resized = Actors(actors.track_id, ["pedestrian"] * n + ["car"],
-                     Boxes3D(np.zeros((n + 1, 3)), np.column_stack([length, boxes.size[:, 1:]]), np.zeros(n + 1)),
-                     np.zeros((n + 1, 3)), variant=actors.variant)
-    np.testing.assert_array_equal(meshes.model_codes(resized)[:n], codes)
-    user = ActorMeshes(overrides={ObjectClass.PEDESTRIAN: normalise_to_unit_box(family_mesh(FAMILIES[
-        ObjectClass.PEDESTRIAN][0]))})
+    user = ActorMeshes(overrides={ObjectClass.PEDESTRIAN: normalise_to_unit_box(family_mesh(walker))})
     np.testing.assert_array_equal(user.body_lengths(actors), boxes.size[:, 0])
+
+
+def test_poses_pick_the_models_of_a_family():
+    """A person's family comes from its variant alone; its pose picks that family's mesh (modulo its poses)."""
+    meshes = ActorMeshes()
+    n = 30
+    boxes = Boxes3D(np.zeros((n, 3)), [[0.215, 0.478, 1.719]] * n, np.zeros(n))
+    variant = actor_variants(np.arange(1, n + 1), 3)
+    base = Actors(np.arange(1, n + 1), ["pedestrian"] * n, boxes, np.zeros((n, 3)), variant=variant)
+    family = meshes.family_codes(base)
+    for pose in (0, 5, 10, 11):
+        posed = Actors(base.track_id, base.object_class, boxes, base.color_rgb, variant=variant, pose=np.full(n, pose))
+        np.testing.assert_array_equal(meshes.family_codes(posed), family)
+        codes = meshes.model_codes(posed)
+        assert [meshes.model_pose[c] for c in codes] == [pose % 11] * n
+        assert [meshes.model_names[c] for c in codes] == [meshes.families[f].__name__ for f in family]
 
 
 def test_actor_variants_depend_on_seed_and_track_only():

@@ -6,7 +6,8 @@ import numpy as np
 
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 
-PAINT = 2
+PAINT, GARMENT = 2, 4
+TINTED = np.isin(np.arange(6), [PAINT, GARMENT])
 
 
 def _inputs(rng: np.random.Generator, n: int = 2000, triangles: int = 50, actor_triangles: int = 40, actors: int = 5):
@@ -24,7 +25,7 @@ def _inputs(rng: np.random.Generator, n: int = 2000, triangles: int = 50, actor_
         "normal_actor": rng.normal(size=(len(sub), 3)).astype(np.float32),
         "hit_actor": rng.integers(0, actors, len(sub)).astype(np.int32),
         "actor_semantic": rng.integers(1, 20, actor_triangles).astype(np.uint8),
-        "actor_material": rng.integers(0, 6, actor_triangles).astype(np.int32),  # 6 materials, PAINT among them
+        "actor_material": rng.integers(0, 6, actor_triangles).astype(np.int32),  # PAINT and GARMENT among the 6
         "track_id": rng.permutation(np.arange(100, 100 + actors)).astype(np.int32),
         "actor_color": rng.random((actors, 3)).astype(np.float32),
     }
@@ -41,7 +42,7 @@ def _resolve(rays, t, prim, normal, static, actor):
     t, normal = t.copy(), normal.copy()
     resolve_hits(rays, t, prim, normal, static["static_semantic"], static["static_material"], static["albedo"],
                  actor["sub"], actor["t_actor"], actor["prim_actor"], actor["normal_actor"], actor["hit_actor"],
-                 actor["actor_semantic"], actor["actor_material"], actor["track_id"], actor["actor_color"], PAINT,
+                 actor["actor_semantic"], actor["actor_material"], actor["track_id"], actor["actor_color"], TINTED,
                  out["hit"], out["instance_id"], out["actor_index"], out["semantic"], out["material"], out["color"])
     return t, normal, out
 
@@ -57,7 +58,8 @@ def test_each_ray_keeps_its_nearer_hit_with_that_triangles_attributes():
             a = actor["hit_actor"][j]
             m = actor["actor_material"][p]
             expected = (actor["t_actor"][j], True, actor["track_id"][a], a, actor["actor_semantic"][p], m,
-                        actor["actor_color"][a] if m == PAINT else static["albedo"][m], actor["normal_actor"][j])
+                        actor["actor_color"][a] if m in (PAINT, GARMENT) else static["albedo"][m],
+                        actor["normal_actor"][j])
         elif np.isfinite(t[i]):
             m = static["static_material"][prim[i]]
             expected = (t[i], True, 0, 0, static["static_semantic"][prim[i]], m, static["albedo"][m], normal[i])

@@ -182,6 +182,10 @@ class DemandConfig(_Model):
     driver: DriverModel
     pedestrians: int = Field(0, ge=0, description="pedestrians walking sidewalks and crossings (urban/osm)")
     pedestrian_speed_mps: Distribution = TruncNormal(mean=1.34, std=0.26, low=0.6, high=2.2)
+    standing_pedestrians: int = Field(0, ge=0, description="more pedestrians who first stand on a sidewalk, alone or "
+                                      "in a small group (waiting, talking, at a shop front), then walk on")
+    standing_s: Distribution = Field(Uniform(low=60.0, high=300.0),
+                                     description="how long a standing pedestrian stands after departing, seconds")
     parked: ParkedConfig | None = Field(None, description="vehicles parked in the network's parking lanes")
 
     @model_validator(mode="after")

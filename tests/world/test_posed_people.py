@@ -1,0 +1,167 @@
+"""People posed through the walk cycle: the phase from the distance walked, and boxes that enclose the posed body in
+every pose (the labels' boxes are these boxes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.core.classes import ObjectClass
+from pipeline.core.geometry import Boxes3D
+from pipeline.world.actors import ActorMeshes, Actors, actor_variants, place_actors
+from pipeline.world.gait import (
+    MODEL_STATURE_M,
+    STAND_POSES,
+    STANDING_BELOW_MPS,
+    WALK_PHASES,
+    gait_poses,
+    stride_m,
+    walking_pose,
+)
+from pipeline.world.people import FAMILIES, STATURE_M, person_statures
+from pipeline.world.posed_people import posed_boxes
+
+MESHES = ActorMeshes()
+
+
+def test_stride_follows_alexanders_relation():
+    # stride = 2.3 h (v^2 / (g h))^0.3 with h = 0.53 x stature: 1.75 m at 1.34 m/s, worked by hand.
+    h = 0.53 * 1.75
+    assert stride_m(np.array([1.34]), np.array([1.75]))[0] == pytest.approx(2.3 * h * (1.34**2 / (9.81 * h)) ** 0.3)
+    assert 1.2 < stride_m(np.array([1.34]), np.array([1.75]))[0] < 1.5
+    assert stride_m(np.array([0.0]), np.array([1.75]))[0] == 0.0
+
+
+def test_phase_advances_with_the_distance_walked():
+    """At a constant speed the phase index steps through the cycle at speed / stride cycles per second; a person
+    slower than STANDING_BELOW_MPS stands (the standing poses); the result does not depend on the rows' order."""
+    t = np.arange(0.0, 4.0, 0.1)
+    v = np.full(len(t), 1.3)
+    cycles_per_s = 1.3 / stride_m(np.array([1.3]), np.array([1.7]))[0]
+    pose = gait_poses(np.full(len(t), 7), t, v, np.full(len(t), 1.7), np.full(len(t), 0.25))
+    expected = np.floor(np.mod(0.25 + cycles_per_s * t, 1.0) * WALK_PHASES) % WALK_PHASES
+    assert np.mean(pose == expected) > 0.95  # the trapezoids round the same as t x rate but for float ties
+    assert set(pose.tolist()) == set(range(WALK_PHASES))
+    standing = gait_poses(np.full(len(t), 7), t, np.full(len(t), 0.5 * STANDING_BELOW_MPS), np.full(len(t), 1.7),
+                          np.full(len(t), 0.25))
+    assert set(standing.tolist()) <= set(range(WALK_PHASES, WALK_PHASES + STAND_POSES))
+    # Two people's rows shuffled give each the same poses.
+    rng = np.random.default_rng(0)
+    tid = np.r_[np.full(len(t), 7), np.full(len(t), 9)]
+    tt, vv = np.r_[t, t], np.r_[v, np.full(len(t), 0.9)]
+    both = gait_poses(tid, tt, vv, np.full(2 * len(t), 1.7), np.r_[np.full(len(t), 0.25), np.zeros(len(t))])
+    order = rng.permutation(len(tid))
+    shuffled = gait_poses(tid[order], tt[order], vv[order], np.full(2 * len(t), 1.7),
+                          np.r_[np.full(len(t), 0.25), np.zeros(len(t))][order])
+    np.testing.assert_array_equal(shuffled, both[order])
+    np.testing.assert_array_equal(both[: len(t)], pose)
+
+
+def test_the_torso_bobs_and_the_arms_swing_against_the_legs():
+    """Through the cycle the pelvis rises and falls (a few cm, twice per cycle), and at the left heel strike the left
+    foot is ahead and the left hand behind (the right hand ahead)."""
+    poses = [walking_pose(k / 16) for k in range(16)]
+    hip_z = np.array([p.pelvis[2] for p in poses])
+    assert 0.02 < hip_z.max() - hip_z.min() < 0.08
+    strike = poses[0]
+    assert strike.ankles[0, 0] > strike.ankles[1, 0] + 0.3
+    assert strike.wrists[0, 0] < strike.wrists[1, 0] - 0.1
+
+
+def test_statures_follow_their_group():
+    n = 2000
+    track = np.arange(1, n + 1)
+    for group, (mean, sd, low, high) in STATURE_M.items():
+        h = person_statures(np.full(n, group), track, seed=3)
+        assert low <= h.min() and h.max() <= high
+        if group != "child":
+            assert h.mean() == pytest.approx(mean, abs=0.01) and h.std() == pytest.approx(sd, rel=0.15)
+        np.testing.assert_array_equal(person_statures(np.full(n, group), track, seed=3), h)
+    child = person_statures(np.full(n, "child"), track, seed=3)
+    assert 1.25 < child.mean() < 1.42
+
+
+def _person_rows(n_frames: int = 40, speed_mps: float = 1.3, people: int = 24):
+    """A straight walk of ``people`` persons of every family (variants chosen so), on ground at z = 2 m."""
+    tracks = np.arange(1, people + 1)
+    variant = actor_variants(tracks, 5)
+    boxes = Boxes3D(np.zeros((people, 3)), np.tile([0.215, 0.478, 1.719], (people, 1)), np.zeros(people))
+    actors = Actors(tracks, ["pedestrian"] * people, boxes, np.zeros((people, 3)), variant=variant)
+    row_actor = np.repeat(np.arange(people), n_frames)
+    t = np.tile(np.arange(n_frames) * 0.1, people)
+    yaw = np.repeat(np.linspace(-3.0, 3.0, people), n_frames)
+    x = t * speed_mps * np.cos(yaw) + 10.0 * row_actor
+    y = t * speed_mps * np.sin(yaw)
+    center = np.column_stack([x, y, np.full(len(x), 2.0 + 1.719 / 2)])
+    rows = Boxes3D(center, np.tile([0.215, 0.478, 1.719], (len(x), 1)), yaw)
+    return actors, row_actor, t, np.full(len(x), speed_mps), rows
+
+
+@pytest.mark.parametrize("speed_mps", [1.3, 0.0])
+def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps):
+    """Each row's box holds its posed, placed mesh exactly (it touches all six faces): the 3D label encloses the body
+    in every phase of the gait and standing; the feet are on the ground, the pelvis over the trajectory point, and the
+    body as tall as its stature in the pose."""
+    actors, row_actor, t, v, rows = _person_rows(speed_mps=speed_mps)
+    boxes, pose = posed_boxes(MESHES, actors, row_actor, t, v, rows, seed=5)
+    assert set(pose.tolist()) == (set(range(WALK_PHASES)) if speed_mps else
+                                  set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)))
+    per_row = Actors(np.arange(1, len(pose) + 1), ["pedestrian"] * len(pose), boxes, np.zeros((len(pose), 3)),
+                     variant=actors.variant[row_actor], pose=pose)
+    geo = place_actors(per_row, MESHES)
+    family = MESHES.family_codes(actors)
+    stature = person_statures(np.array([MESHES.families[f].group for f in family]), actors.track_id, 5)
+    for k in range(0, len(pose), 7):
+        v_world = geo.vertices[geo.vertex_actor == k] - boxes.center[k]
+        c, s = np.cos(boxes.yaw_rad[k]), np.sin(boxes.yaw_rad[k])
+        local = np.column_stack([c * v_world[:, 0] + s * v_world[:, 1], -s * v_world[:, 0] + c * v_world[:, 1],
+                                 v_world[:, 2]])
+        np.testing.assert_allclose(local.min(axis=0), -0.5 * boxes.size[k], atol=1e-6)
+        np.testing.assert_allclose(local.max(axis=0), 0.5 * boxes.size[k], atol=1e-6)
+        assert boxes.center[k, 2] - 0.5 * boxes.size[k, 2] == pytest.approx(2.0, abs=0.01)  # soles on the ground
+        a = row_actor[k]
+        model = MESHES.family_models(family[a:a + 1], pose[k:k + 1])[0]
+        scale = stature[a] / MODEL_STATURE_M
+        pelvis_unit = -(MESHES.model_low[model][:2] + 0.5 * MESHES.model_extent[model][:2]) / MESHES.model_extent[
+            model][:2]  # the pelvis (x = y = 0 as modelled) in the unit box
+        pelvis = boxes.center[k, :2] + [c * pelvis_unit[0] * boxes.size[k, 0] - s * pelvis_unit[1] * boxes.size[k, 1],
+                                        s * pelvis_unit[0] * boxes.size[k, 0] + c * pelvis_unit[1] * boxes.size[k, 1]]
+        np.testing.assert_allclose(pelvis, rows.center[k, :2], atol=1e-9)
+        assert boxes.size[k, 2] == pytest.approx(MESHES.model_extent[model][2] * scale)
+        assert 0.9 * stature[a] < boxes.size[k, 2] < 1.05 * stature[a]
+
+
+def test_every_family_is_picked_and_others_keep_their_boxes():
+    """Persons' families cover all of FAMILIES; a car's row keeps its box and pose 0."""
+    people = 400
+    tracks = np.arange(1, people + 2)
+    classes = ["pedestrian"] * people + ["car"]
+    sizes = np.tile([0.215, 0.478, 1.719], (people + 1, 1))
+    sizes[-1] = [4.5, 1.8, 1.5]
+    boxes = Boxes3D(np.zeros((people + 1, 3)), sizes, np.zeros(people + 1))
+    actors = Actors(tracks, classes, boxes, np.zeros((people + 1, 3)), variant=actor_variants(tracks, 9))
+    names = {MESHES.families[f].__name__ for f in MESHES.family_codes(actors)[:people]}
+    assert names == {f.name for f in FAMILIES}
+    out, pose = posed_boxes(MESHES, actors, np.arange(people + 1), np.zeros(people + 1), np.ones(people + 1), boxes, 9)
+    np.testing.assert_array_equal(out.size[-1], [4.5, 1.8, 1.5])
+    assert pose[-1] == 0 and MESHES.model_class[MESHES.model_codes(actors)[-1]] == ObjectClass.CAR
+
+
+def test_a_bicycles_cranks_turn_with_the_distance_ridden():
+    """At 5 m/s a bicycle with a 5 m development turns its cranks once a second: over 2 s sampled at 10 Hz every
+    pose appears, in order; stopped, the cranks stay; its box stays as simulated."""
+    from pipeline.world.gait import crank_poses
+    from pipeline.world.two_wheelers import CRANK_PHASES, DEVELOPMENT_M
+
+    t = np.arange(0.0, 2.0, 0.1)
+    pose = crank_poses(np.full(len(t), 3), t, np.full(len(t), DEVELOPMENT_M), DEVELOPMENT_M, CRANK_PHASES,
+                       np.full(len(t), 0.01))
+    np.testing.assert_array_equal(pose, np.floor(np.mod(t + 0.01, 1.0) * CRANK_PHASES))
+    stopped = crank_poses(np.full(len(t), 3), t, np.zeros(len(t)), DEVELOPMENT_M, CRANK_PHASES, np.full(len(t), 0.3))
+    assert set(stopped.tolist()) == {2}
+    boxes = Boxes3D(np.zeros((len(t), 3)), np.tile([1.75, 0.65, 1.7], (len(t), 1)), np.zeros(len(t)))
+    bike = Actors([3], ["bicycle"], Boxes3D(np.zeros((1, 3)), [[1.75, 0.65, 1.7]], np.zeros(1)), np.zeros((1, 3)),
+                  variant=[0])
+    out, got = posed_boxes(MESHES, bike, np.zeros(len(t), np.int64), t, np.full(len(t), DEVELOPMENT_M), boxes, 1)
+    np.testing.assert_array_equal(out.size, boxes.size)
+    assert len(set(got.tolist())) == CRANK_PHASES
