@@ -19,6 +19,7 @@ import argparse
 import contextlib
 import logging
 import os
+import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator, Sequence
@@ -185,12 +186,24 @@ def ray_session(spec: ExecutorSpec) -> Iterator[Any]:
 
 
 def _init_within(ray, kwargs: dict[str, Any], timeout_s: float | None) -> None:
-    """``ray.init(**kwargs)`` in a helper thread, waited for at most ``timeout_s`` (None: as long as it takes).
+    """``ray.init(**kwargs)``, waited for at most ``timeout_s`` (None: as long as it takes).
 
-    Ray retries a cluster that does not answer for minutes in its own code, out of reach of a Python timeout; a
-    thread can be given up on (the process exits soon after, with the error). It also keeps this process's SIGTERM
-    handling (the CLI's, like Ctrl-C): ``ray.init`` replaces the handler when it runs in the main thread.
+    Connecting to a cluster runs in a helper thread: Ray retries a cluster that does not answer for minutes in its
+    own code, out of reach of a Python timeout; a thread can be given up on (the process exits soon after, with the
+    error). A new local instance (``timeout_s`` None) starts in this thread instead: Ray ties its head's processes
+    to the life of the thread that starts them (a parent-death signal), so those started from a helper thread die
+    with it, a second after. Either way this process keeps its SIGTERM handling (the CLI's, like Ctrl-C), which
+    ``ray.init`` replaces when it runs in the main thread.
     """
+    if timeout_s is None:
+        main = threading.current_thread() is threading.main_thread()
+        handler = signal.getsignal(signal.SIGTERM) if main else None
+        try:
+            ray.init(**kwargs)
+        finally:
+            if handler is not None:
+                signal.signal(signal.SIGTERM, handler)
+        return
     outcome: dict[str, BaseException] = {}
 
     def connect() -> None:

@@ -108,3 +108,13 @@ def test_ray_flags_with_the_local_executor_are_refused(render_args, tmp_path):
     args = [a for a in render_args if a not in ("--executor", "ray")] + ["--ray-timeout", "5"]
     proc, _ = _render(args, tmp_path)
     assert proc.returncode == 2 and "--ray-timeout" in proc.stderr
+
+
+@pytest.mark.slow
+def test_a_new_local_instance_outlives_its_start(render_args, tmp_path):
+    # No address: the CLI starts a local Ray. Its head's processes die with the thread that starts them (a
+    # parent-death signal); started from the helper thread that bounds a cluster's connection, they died a second
+    # later and the render hung, then failed, waiting for them.
+    proc, _ = _render(render_args, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "rec" / "meta.json").is_file()
