@@ -42,8 +42,9 @@ from pipeline.core.jit import as_input, as_view_input, fma32, kernel
 from pipeline.world import smooth_normals
 from pipeline.world.actor_casts import (
     BOX_MARGIN,
-    actor_pairs,
+    actor_grid,
     cell_lists,
+    grid_actor_pairs,
     listed_actor_pairs,
     nearest_actor_hits,
     unit_frame_rays,
@@ -415,6 +416,7 @@ class FrameScene:
         self._hull_vertices, self._hull_actor = self.geometry.vertices[hull], self.geometry.vertex_actor[hull]
         self._top_z = float(self._hull_vertices[:, 2].max()) if len(self._hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
+        self._grid: tuple | None = None  # see _pairs
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
@@ -436,7 +438,9 @@ class FrameScene:
         sub = np.zeros(0, np.int64)
         if len(self._placed):
             sub = np.arange(n) if actor_rays is None else np.flatnonzero(actor_rays)
-        t_actor, prim_actor, normal_actor, hit_actor = self._cast_actors(rays, sub)
+        # An actor hit counts only where it is nearer than the static one (resolve_hits): the static hit bounds the
+        # span of each ray that the actors are tested in.
+        t_actor, prim_actor, normal_actor, hit_actor = self._cast_actors(rays, sub, t[sub].astype(np.float64))
         hit, instance_id, actor_index = np.zeros(n, bool), np.zeros(n, np.int32), np.zeros(n, np.int32)
         semantic, material, color = np.zeros(n, np.uint8), np.zeros(n, np.int32), np.zeros((n, 3), np.float32)
         static, tables = self.static, _class_tables(self.meshes)
@@ -493,8 +497,7 @@ class FrameScene:
         if np.isfinite(t_max_m) and len(sub):
             pair_row, pair_actor, local = self._pairs_within(rays, sub, float(t_max_m))
         else:
-            pair_row, pair_actor, local = actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
-                                                      self._radius)
+            pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), np.inf))
         hit_pair = np.zeros(len(pair_row), bool)
         for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
@@ -535,12 +538,24 @@ class FrameScene:
         for code in np.unique(codes):
             yield int(code), np.flatnonzero(codes == code)
 
-    def _cast_actors(self, rays: np.ndarray, sub: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays``: t (K,) float32 (inf = none),
-        triangle (K,) uint32 (numbered as in :func:`_class_tables`), world normal (K, 3) float32 and actor (K,)
-        int32 (see :mod:`pipeline.world.actor_casts`)."""
-        pair_row, pair_actor, local = actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
-                                                  self._radius)
+    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:func:`pipeline.world.actor_casts.actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` and
+        the placed actors, less the pairs that cannot be hit at t <= ``t_limit`` ((K,) float64, inf: no limit), each
+        ray tested only against the actors of the grid cells it crosses (:func:`grid_actor_pairs`; the grid is
+        built once per frame)."""
+        if not len(self._placed) or not len(sub):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 6), np.float32)
+        if self._grid is None:
+            self._grid = actor_grid(self._center, self._radius, self._placed)
+        return grid_actor_pairs(rays, as_input(sub, np.int64), self._placed, self._inv_linear, self._center,
+                                self._radius, as_input(t_limit, np.float64), *self._grid)
+
+    def _cast_actors(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays`` where it may lie at t <=
+        ``t_limit`` ((K,) float64; a hit found farther may be reported or not): t (K,) float32 (inf = none), triangle
+        (K,) uint32 (numbered as in :func:`_class_tables`), world normal (K, 3) float32 and actor (K,) int32 (see
+        :mod:`pipeline.world.actor_casts`)."""
+        pair_row, pair_actor, local = self._pairs(rays, sub, t_limit)
         t = np.full(len(pair_row), np.inf, np.float32)
         prim = np.zeros(len(pair_row), np.uint32)
         normal = np.zeros((len(pair_row), 3), np.float32)
