@@ -32,6 +32,7 @@ All positions and directions are in the world frame, metres; ``t_m`` is metres a
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -49,7 +50,15 @@ from pipeline.world.actor_casts import (
     nearest_actor_hits,
     unit_frame_rays,
 )
-from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
+from pipeline.world.actors import (
+    DEFAULT_MESHES,
+    ActorGeometry,
+    ActorMeshes,
+    Actors,
+    place_actors,
+    place_hulls,
+    unit_to_world,
+)
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh, triangle_bounds
@@ -398,7 +407,9 @@ class FrameScene:
         if self.active.shape != (len(actors),):
             raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
         self._model = meshes.model_codes(actors)
-        self.geometry = place_actors(actors, meshes, self.active, self._model)
+        # The placed actors' hull vertices (every actor's extremes, in any direction): what the frame's tests and
+        # amodal boxes need; whole meshes are placed only on demand (geometry).
+        self.hull_vertices, self.hull_actor = place_hulls(actors, meshes, self.active, self._model)
         self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
@@ -412,11 +423,17 @@ class FrameScene:
         # Holds the unit box grown by BOX_MARGIN: half its diagonal, grown, and a little more for rounding.
         self._radius = as_input(0.5 * np.linalg.norm(actors.boxes.size, axis=1) * (1.0 + 2.0 * BOX_MARGIN) + 1e-6,
                                 np.float64)
-        hull = self.geometry.vertex_on_hull  # every actor's extremes, in any direction, are among these
-        self._hull_vertices, self._hull_actor = self.geometry.vertices[hull], self.geometry.vertex_actor[hull]
-        self._top_z = float(self._hull_vertices[:, 2].max()) if len(self._hull_vertices) else -np.inf
+        self._top_z = float(self.hull_vertices[:, 2].max()) if len(self.hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
         self._grid: tuple | None = None  # see _pairs
+
+    @functools.cached_property
+    def geometry(self) -> ActorGeometry:
+        """The placed (``active``) actors' whole meshes merged (:func:`pipeline.world.actors.place_actors`), placed on
+        first use: the frame's casts need none of it (each actor is its model's canonical mesh), its tests and boxes
+        only the hull vertices (``hull_vertices`` (H, 3) float64, ``hull_actor`` (H,) int32: those of ``geometry``
+        on the hull, in its order)."""
+        return place_actors(self.actors, self.meshes, self.active, self._model)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
@@ -619,9 +636,9 @@ class FrameScene:
         onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
         key = tuple(slope.tolist())
         if key not in self._footprints:
-            flat = np.column_stack(along_sun(*self._hull_vertices.T, slope))
+            flat = np.column_stack(along_sun(*self.hull_vertices.T, slope))
             # Each actor's vertices are one run (place_actors): bounds per run.
-            starts = np.flatnonzero(np.r_[True, np.diff(self._hull_actor) != 0])
+            starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
             self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
         return self._footprints[key]
 
