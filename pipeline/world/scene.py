@@ -62,7 +62,7 @@ from pipeline.world.actors import (
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import material_arrays, material_index
 from pipeline.world.mesh import Mesh, triangle_bounds
-from pipeline.world.sunmap import SunMap, along_sun, sun_slope
+from pipeline.world.sunmap import SunMap, sun_slope
 
 
 @dataclass(frozen=True)
@@ -636,10 +636,9 @@ class FrameScene:
         onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
         key = tuple(slope.tolist())
         if key not in self._footprints:
-            flat = np.column_stack(along_sun(*self.hull_vertices.T, slope))
-            # Each actor's vertices are one run (place_actors): bounds per run.
+            # Each actor's vertices are one run (place_hulls): bounds per run.
             starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
-            self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
+            self._footprints[key] = _run_bounds_along_sun(self.hull_vertices, starts, *np.asarray(slope, np.float64))
         return self._footprints[key]
 
 
@@ -673,3 +672,24 @@ def _in_marked_cells(x, y, z, sx, sy, x0, y0, scale, grid, top_z):
         j = min(np.int64(np.int32((y[k] - z[k] * sy - y0) * scale)), cols - 1)
         out[k] = grid[i, j] and z[k] <= top_z
     return out
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[::1], float64, float64)")
+def _run_bounds_along_sun(vertices, starts, sx, sy):
+    """(lo, hi), each (R, 2) float64: the bounds of each run of the (V, 3) float64 ``vertices`` (run r from
+    ``starts[r]`` to the next start) projected along the sun (slope (sx, sy)) onto z = 0, each point as
+    :func:`pipeline.world.sunmap.along_sun` computes it (x - z sx, y - z sy): one pass instead of two vertex-sized
+    columns and two reductions per sun direction (16 directions over the sun's disc)."""
+    r_count = starts.size
+    lo = np.empty((r_count, 2))
+    hi = np.empty((r_count, 2))
+    for r in range(r_count):
+        end = starts[r + 1] if r + 1 < r_count else vertices.shape[0]
+        lx, ly, hx, hy = np.inf, np.inf, -np.inf, -np.inf
+        for v in range(starts[r], end):
+            px = vertices[v, 0] - vertices[v, 2] * sx
+            py = vertices[v, 1] - vertices[v, 2] * sy
+            lx, hx = min(lx, px), max(hx, px)
+            ly, hy = min(ly, py), max(hy, py)
+        lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
+    return lo, hi

@@ -253,3 +253,33 @@ def test_static_foliage_gets_smooth_normals(material):
     expected /= np.linalg.norm(expected, axis=1, keepdims=True)
     np.testing.assert_allclose(hits.normal, expected, atol=1e-4)
     assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", hits.normal, face_n[face]), -1, 1))).max() > 10.0
+
+
+def test_sun_footprints_are_each_runs_projected_bounds():
+    """The compiled footprint pass against its definition: along_sun of every vertex, then min and max per run
+    (numpy's reduceat), to the bit."""
+    from pipeline.world.scene import _run_bounds_along_sun
+    from pipeline.world.sunmap import along_sun
+
+    rng = np.random.default_rng(3)
+    vertices = rng.uniform(-800, 800, (5000, 3)) * [1, 1, 0.01]
+    starts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, 5000), 40, replace=False))])
+    for slope in (np.array([0.3, -1.7]), np.zeros(2)):
+        flat = np.column_stack(along_sun(*vertices.T, slope))
+        lo, hi = _run_bounds_along_sun(vertices, starts, *slope)
+        np.testing.assert_array_equal(lo, np.minimum.reduceat(flat, starts, axis=0))
+        np.testing.assert_array_equal(hi, np.maximum.reduceat(flat, starts, axis=0))
+
+
+def test_frame_scene_hull_vertices_are_the_placed_meshes_on_the_hull():
+    """FrameScene places only the hull vertices per frame: the same numbers, in the same order, as those of the
+    whole placed meshes (geometry, placed on demand)."""
+    rng = np.random.default_rng(8)
+    n = 30
+    actors = Actors(np.arange(1, n + 1), [list(ObjectClass)[i] for i in rng.integers(0, 7, n)],
+                    Boxes3D(rng.uniform(-50, 50, (n, 3)), rng.uniform(0.5, 12, (n, 3)), rng.uniform(-3, 3, n)),
+                    rng.uniform(0, 1, (n, 3)))
+    scene = FrameScene(StaticScene([]), actors, active=rng.uniform(size=n) < 0.7)
+    hull = scene.geometry.vertex_on_hull
+    np.testing.assert_array_equal(scene.hull_vertices, scene.geometry.vertices[hull])
+    np.testing.assert_array_equal(scene.hull_actor, scene.geometry.vertex_actor[hull])
