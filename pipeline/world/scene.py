@@ -608,28 +608,59 @@ class FrameScene:
         occlusion rays of that length cannot meet one)."""
         return self._footprint_candidates(x, y, z, np.zeros(2), float(radius_m))
 
-    def _footprint_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray,
-                              grow_m: float) -> np.ndarray:
+    def sun_disc_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, suns: np.ndarray,
+                                  which: np.ndarray) -> np.ndarray:
+        """:meth:`sun_actor_candidates` of rays along several directions: the ray from point j along ``suns[which[j]]``
+        ((S, 3) upward unit directions, ``which`` (M,) int64), all looked up in one grid, on which each actor's box is
+        the union of its boxes along the S directions (a superset of each direction's: still conservative). One grid
+        instead of S: the directions over the sun's disc differ by a fraction of a degree."""
+        which = np.asarray(which, np.int64)
+        groups = [(sun_slope(sun), np.flatnonzero(which == k)) for k, sun in enumerate(np.asarray(suns))]
+        return self._footprint_candidates(x, y, z, None, 0.0, [(g, rows) for g, rows in groups if len(rows)])
+
+    def _footprint_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray | None,
+                              grow_m: float, groups: list[tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
         """:meth:`sun_actor_candidates` for the sun's ``slope`` (:func:`sun_slope`; 0 = straight up), the actors'
-        projected bounds and their top grown by ``grow_m``."""
+        projected bounds and their top grown by ``grow_m``; or, with ``groups`` ((slope, rows (K,) int64) pairs that
+        share out the points), each group's points along its own slope, on one grid of the union of the groups'
+        actor bounds."""
         if not len(self._placed) or not len(x):
             return np.zeros(len(x), bool)
-        lo, hi = self._sun_footprints(slope)
-        lo, hi = lo - grow_m, hi + grow_m
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
         x, y, z = (as_view_input(c, np.float32) for c in (x, y, z))
-        sx, sy = np.asarray(slope, np.float32)
-        p_lo, p_hi = np.split(_projection_bounds(x, y, z, sx, sy).astype(np.float64), 2)
+        if groups is None:
+            groups, whole = [(np.asarray(slope, np.float64), None)], True
+        else:
+            whole = False
+        lo, hi = np.full((len(self._placed), 2), np.inf), np.full((len(self._placed), 2), -np.inf)
+        bounds = []
+        for g_slope, rows in groups:
+            g_lo, g_hi = self._sun_footprints(g_slope)
+            lo, hi = np.minimum(lo, g_lo), np.maximum(hi, g_hi)
+            sx, sy = np.asarray(g_slope, np.float32)
+            picked = (x, y, z) if whole else (x[rows], y[rows], z[rows])
+            bounds.append((picked, sx, sy, _projection_bounds(*picked, sx, sy)))
+        lo, hi = lo - grow_m, hi + grow_m
+        all_bounds = np.array([b[3] for b in bounds], np.float32)
+        p_lo = np.minimum.reduce(all_bounds[:, :2]).astype(np.float64)
+        p_hi = np.maximum.reduce(all_bounds[:, 2:]).astype(np.float64)
         near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))
         if not len(near):
             return np.zeros(len(x), bool)
         cell = max(SHADOW_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + SHADOW_CELL_M) / SHADOW_MAX_CELLS)))
-        rows, cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
+        n_rows, n_cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
         # Cell (i, j) covers [p_lo + (i, j) * cell, p_lo + (i + 1, j + 1) * cell).
-        grid = rectangles_mask(rows, cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
+        grid = rectangles_mask(n_rows, n_cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
                                np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
-        return _in_marked_cells(x, y, z, sx, sy, np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell),
-                                grid, np.float32(self._top_z + grow_m + CHUNK_PAD_M))
+        lookup = (np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell), grid,
+                  np.float32(self._top_z + grow_m + CHUNK_PAD_M))
+        if whole:
+            picked, sx, sy, _ = bounds[0]
+            return _in_marked_cells(*picked, sx, sy, *lookup)
+        out = np.zeros(len(x), bool)
+        for (_, rows), (picked, sx, sy, _) in zip(groups, bounds, strict=True):
+            out[rows] = _in_marked_cells(*picked, sx, sy, *lookup)
+        return out
 
     def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)

@@ -221,6 +221,31 @@ def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
     assert cand.mean() < 0.5
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_sun_disc_candidates_hold_each_directions_candidates(seed):
+    """Rays along the 16 directions over a (here widened) sun's disc, all in one grid: every ray that the actors
+    block is a candidate, so the masked shadow test equals the unmasked one; and they still leave most rays out."""
+    from pipeline.sensors.shadows import sun_disc
+
+    rng = np.random.default_rng(seed)
+    n = 60
+    size = rng.uniform([0.5, 0.5, 1.2], [12.0, 2.6, 3.6], (n, 3))
+    centre = np.column_stack([rng.uniform(-80, 80, (n, 2)), size[:, 2] / 2])
+    actors = Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, Boxes3D(centre, size, rng.uniform(-np.pi, np.pi, n)),
+                    rng.uniform(0, 1, (n, 3)))
+    scene = FrameScene(StaticScene([ground()]), actors, threads=1)
+    points = np.column_stack([rng.uniform(-90, 90, (20000, 2)), rng.choice([0.01, 0.5, 2.0, 4.0], 20000)])
+    points = points.astype(np.float32)
+    disc = sun_disc(sun_towards(rng.uniform(5.0, 60.0), rng.uniform(-180.0, 180.0)), np.radians(3.0))
+    which = rng.integers(0, len(disc), len(points))
+    cand = scene.sun_disc_actor_candidates(*points.T, disc, which)
+    rays = np.column_stack([points, disc[which]]).astype(np.float32)
+    by_actors = FrameScene(StaticScene([]), actors, threads=1).occluded_rays(rays)
+    assert by_actors.any() and not (by_actors & ~cand).any()
+    np.testing.assert_array_equal(scene.occluded_rays(rays, actor_rays=cand), scene.occluded_rays(rays))
+    assert cand.mean() < 0.5
+
+
 @pytest.mark.parametrize("material", ["foliage", "building"])
 def test_static_foliage_gets_smooth_normals(material):
     """A ray at an icosahedron of foliage gets the corners' normals interpolated at the hit (on a regular
