@@ -147,45 +147,6 @@ def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
     return pair_row, pair_actor, pair_rays
 
 
-@kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
-        "float64[:, :, ::1], float64[:, ::1], float64[::1], int64[::1], int64[::1], int64[::1])")
-def listed_actor_pairs(rays, rows, actors, inv_linear, centre, radius, row_cell, cell_start, cell_item):
-    """:func:`actor_pairs` where each ray is tested only against the actors listed for its cell: ray ``rows[j]``
-    against ``actors[cell_item[k]]`` for k in ``cell_start[c]:cell_start[c + 1]``, c = ``row_cell[j]``
-    (:func:`cell_lists`; ascending within a cell). The same tests in the same arithmetic, so the pairs are those
-    of :func:`actor_pairs` whose actor is listed for the ray's cell, in the same order (by row, then as in
-    ``actors``). For rays whose origins differ (shadow and occlusion rays): no sharing of c - o between rays."""
-    local = np.empty(6, np.float32)
-    count = 0
-    pair_row = np.empty(rows.size, np.int64)
-    pair_actor = np.empty(rows.size, np.int64)
-    pair_rays = np.empty((rows.size, 6), np.float32)
-    for j in range(rows.size):
-        i = rows[j]
-        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
-        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        c = row_cell[j]
-        for k in range(cell_start[c], cell_start[c + 1]):
-            a = actors[cell_item[k]]
-            v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
-            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
-                continue
-            _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
-            if not _meets_unit_box(local):
-                continue
-            if count == pair_row.size:
-                size = max(2 * count, 16)
-                pair_row, pair_actor, pair_rays = (_grown(pair_row, size), _grown(pair_actor, size),
-                                                   _grown_rows(pair_rays, size))
-            pair_row[count] = j
-            pair_actor[count] = a
-            for m in range(6):
-                pair_rays[count, m] = local[m]
-            count += 1
-    return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
-
-
 @kernel("Tuple((int64[::1], int64[::1]))(int64, int64, int64[:, ::1])")
 def cell_lists(rows, cols, spans):
     """Which items cover each cell of a ``rows`` x ``cols`` grid, as compressed rows: item b covers the cells

@@ -44,9 +44,7 @@ from pipeline.world import smooth_normals
 from pipeline.world.actor_casts import (
     BOX_MARGIN,
     actor_grid,
-    cell_lists,
     grid_actor_pairs,
-    listed_actor_pairs,
     nearest_actor_hits,
     unit_frame_rays,
 )
@@ -245,7 +243,6 @@ CHUNK_PAD_M = 1e-3  # boxes are grown by this, far beyond Embree's float32 round
 # The grid of FrameScene.sun_actor_candidates: only how tight that test is depends on them.
 SHADOW_CELL_M = 0.5  # cells at least this wide ...
 SHADOW_MAX_CELLS = 250_000  # ... and at most about this many
-REACH_CELL_M = 1.0  # cells of the grid that lists the actors a short segment can reach (FrameScene._pairs_within)
 
 
 def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -511,43 +508,14 @@ class FrameScene:
             return blocked
         sub = np.flatnonzero(~blocked if actor_rays is None else actor_rays & ~blocked)
         rays = as_input(rays, np.float32)
-        if np.isfinite(t_max_m) and len(sub):
-            pair_row, pair_actor, local = self._pairs_within(rays, sub, float(t_max_m))
-        else:
-            pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), np.inf))
+        # Segments (sky occlusion, shadows towards a lamp) test only the actors of the grid cells they cross.
+        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)))
         hit_pair = np.zeros(len(pair_row), bool)
         for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
             hit_pair[sel] = _occluded(_canonical_scene(self.meshes, model), local, t_max_m, self.threads, sel)
         blocked[sub[pair_row[hit_pair]]] = True
         return blocked
-
-    def _pairs_within(self, rays: np.ndarray, sub: np.ndarray, t_max_m: float) -> tuple[np.ndarray, ...]:
-        """:func:`actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` less the pairs whose segment
-        (t in [0, ``t_max_m``]) cannot reach the actor: a segment stays within ``reach`` = t_max |d| of its origin,
-        so it can only meet an actor whose sphere (centre c, radius r) holds a point within reach, and then
-        |o_xy - c_xy| <= r + reach. The origins' bounding rectangle is cut into cells (at least REACH_CELL_M wide,
-        at most about SHADOW_MAX_CELLS of them); each actor is listed for the cells its square c_xy +- (r + reach)
-        touches, grown by a cell (far beyond rounding), and each ray is tested only against its origin's cell's
-        actors (:func:`listed_actor_pairs`). The pairs left out could not block the segment, so what
-        :meth:`occluded_rays` returns is unchanged; sky occlusion rays (1.5 m) test a few actors each instead of
-        every placed one (docs/performance.md)."""
-        picked = np.take(rays, sub, axis=0)
-        origin = picked[:, :2].astype(np.float64)
-        length = np.sqrt(np.einsum("ij,ij->i", picked[:, 3:], picked[:, 3:], dtype=np.float64))
-        reach = t_max_m * float(length.max()) * (1.0 + 1e-6) + CHUNK_PAD_M
-        p_lo, p_hi = origin.min(axis=0), origin.max(axis=0)
-        cell = max(REACH_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + REACH_CELL_M) / SHADOW_MAX_CELLS)))
-        rows, cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
-        grow = (self._radius[self._placed] + reach)[:, None]
-        centre = self._center[self._placed, :2]
-        first = np.floor((centre - grow - p_lo) / cell).astype(np.int64) - 1
-        last = np.floor((centre + grow - p_lo) / cell).astype(np.int64) + 2  # exclusive
-        spans = np.ascontiguousarray(np.column_stack([first[:, 0], last[:, 0], first[:, 1], last[:, 1]]))
-        cell_start, cell_item = cell_lists(rows, cols, spans)
-        ij = np.minimum(np.floor((origin - p_lo) / cell).astype(np.int64), [rows - 1, cols - 1])
-        return listed_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center, self._radius,
-                                  np.ascontiguousarray(ij[:, 0] * cols + ij[:, 1]), cell_start, cell_item)
 
     def _pairs_by_model(self, pair_actor: np.ndarray):
         """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""

@@ -14,7 +14,6 @@ from pipeline.world.actor_casts import (
     actor_pairs,
     cell_lists,
     grid_actor_pairs,
-    listed_actor_pairs,
     nearest_actor_hits,
 )
 from pipeline.world.actors import Actors, unit_to_world
@@ -90,38 +89,6 @@ def test_shadow_segments_through_and_beside_an_actor():
     rays = np.concatenate([origins, lamps - origins], axis=1).astype(np.float32)  # segments: t in [0, 1]
     assert scene.occluded_rays(rays, 1.0).tolist() == [True, False, False]
     assert scene.occluded_rays(rays, 1.0, actor_rays=np.array([True, True, True])).tolist() == [True, False, False]
-
-
-def test_listed_pairs_are_actor_pairs_of_the_listed_actors():
-    """listed_actor_pairs against actor_pairs: with every actor listed for one cell, the same arrays; with each
-    ray's cell listing some actors, exactly actor_pairs' pairs of those actors, in the same order."""
-    rng = np.random.default_rng(5)
-    boxes = _boxes(rng, 25)
-    affine = unit_to_world(boxes)
-    inv, centre = np.ascontiguousarray(np.linalg.inv(affine[:, :, :3])), np.ascontiguousarray(affine[:, :, 3])
-    radius = 0.5 * np.linalg.norm(boxes.size, axis=1) * (1 + 2 * BOX_MARGIN) + 1e-6
-    d = rng.normal(size=(3000, 3))
-    rays = np.concatenate([rng.uniform(-30, 30, (3000, 3)), d / np.linalg.norm(d, axis=1, keepdims=True)],
-                          axis=1).astype(np.float32)
-    rows, actors = np.arange(0, 3000, 3), np.arange(25)[::-1].copy()  # actors in a non-trivial order
-    full = actor_pairs(rays, rows, actors, inv, centre, radius)
-    start, item = cell_lists(1, 1, np.array([[0, 1, 0, 1]] * 25))
-    assert item.tolist() == list(range(25))
-    one_cell = listed_actor_pairs(rays, rows, actors, inv, centre, radius, np.zeros(len(rows), np.int64), start, item)
-    for a, b in zip(full, one_cell, strict=True):
-        np.testing.assert_array_equal(a, b)
-    # Two cells: cell 0 lists the actors at even positions, cell 1 those at odd ones; rays alternate cells.
-    spans = np.array([[p % 2, p % 2 + 1, 0, 1] for p in range(25)])
-    start, item = cell_lists(2, 1, spans)
-    assert item[start[0]:start[1]].tolist() == list(range(0, 25, 2))
-    row_cell = np.arange(len(rows)) % 2
-    pair_row, pair_actor, local = listed_actor_pairs(rays, rows, actors, inv, centre, radius, row_cell, start, item)
-    position = {int(a): p for p, a in enumerate(actors)}
-    keep = np.array([position[int(a)] % 2 == r % 2 for r, a in zip(full[0], full[1], strict=True)])
-    assert keep.sum() > 50 and (~keep).sum() > 50
-    np.testing.assert_array_equal(pair_row, full[0][keep])
-    np.testing.assert_array_equal(pair_actor, full[1][keep])
-    np.testing.assert_array_equal(local, full[2][keep])
 
 
 def _box_entry(rays: np.ndarray, affine: np.ndarray, rows: np.ndarray, actor: np.ndarray) -> np.ndarray:
