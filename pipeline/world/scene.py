@@ -7,7 +7,8 @@ Design (measured with bench/bench_render_core.py; the figures are in docs/perfor
 - The actors get no Embree scene of their own (:class:`FrameScene`): an actor is its model's canonical mesh
   under an affine map, so a ray meets it where the ray mapped into the actor's unit box frame meets the canonical
   mesh, whose scene is built once per model and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
-  actor) pairs by an exact test against each unit box, then one cast per model present). Building a BVH over the
+  actor) pairs by an exact test against each unit box, of the actors listed for the cells of a per-frame grid that
+  the ray crosses up to its static hit, then one cast per model present). Building a BVH over the
   placed actors instead cost time per triangle, every frame: more than the actor rays it served. A ray's result
   is the nearer of the static and the actor hit. Callers may pass a conservative mask of the rays that can reach
   an actor at all (from projected boxes) to skip the actor test for the rest.
@@ -16,7 +17,8 @@ Design (measured with bench/bench_render_core.py; the figures are in docs/perfor
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
 - Only the actors that some ray of the frame can reach are placed and tested (``active``, from
-  :func:`pipeline.sensors.reach.actors_in_reach`: a minority of an urban frame's actors).
+  :func:`pipeline.sensors.reach.actors_in_reach`: a minority of an urban frame's actors), and of their meshes only
+  the hull vertices (``hull_vertices``: bounds and footprints); whole meshes on demand (``geometry``).
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
   along the sun; a few per cent of the lit pixels); against the static world only those from
