@@ -17,7 +17,14 @@ thread, as each pool worker renders them, and prints where a frame's time goes b
 encoding, ground truth, shading, ...) with the frames/s that total allows on this machine's cores, and the bound
 if all but the casts were free.
 
-    python bench/bench_render.py [--frames 100] [--sim DIR] [--condition noon] [--workers 2] [--breakdown 10]
+Also prints the default rig's labelled frames per CPU-second (all the stage's processes, start-up included) and
+that rate as a share of the bare casts' (issue 41: >= 0.3), the peak resident memory of each render worker, the
+frames/s beside MetaDrive's (METADRIVE_FPS, 800x600, measured on the development machine), and what a
+100,000-frame dataset costs in CPU-hours at this rate. The breakdown is in CPU time (cProfile timing with
+``time.process_time``: other work on shared cores does not inflate it).
+
+    python bench/bench_render.py [--frames 100] [--sim DIR] [--scenario highway] [--condition noon] [--workers 2]
+        [--breakdown 10] [--no-fast]
 """
 
 from __future__ import annotations
@@ -25,9 +32,11 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
+import threading
 import time
 from pathlib import Path
 
+import numpy as np
 from bench_render_core import BareCasts, frame_rays, sim_frames
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
@@ -54,6 +63,40 @@ def cpu_seconds() -> float:
             continue
         total += t.user + t.system + t.children_user + t.children_system
     return total
+
+
+# MetaDrive's rendered frames/s at 800x600 on the development machine (issue 41's reference figure).
+METADRIVE_FPS = 4.88
+DATASET_FRAMES = 100_000  # the dataset the scaling line costs
+
+
+class PeakWorkerMemory:
+    """The largest resident set (bytes) any descendant process of this one reached while the context was open
+    (polled every ``period_s``): a render's pool workers."""
+
+    def __init__(self, period_s: float = 0.05) -> None:
+        self.period_s, self.peak, self._stop = period_s, 0, threading.Event()
+
+    def _poll(self) -> None:
+        import psutil
+
+        me = psutil.Process()
+        while not self._stop.is_set():
+            for proc in me.children(recursive=True):
+                try:
+                    self.peak = max(self.peak, proc.memory_info().rss)
+                except psutil.Error:
+                    continue
+            self._stop.wait(self.period_s)
+
+    def __enter__(self) -> PeakWorkerMemory:
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def bare_seconds(sim: Path, frames: list[int], rig: RigConfig, condition_cfg: ConditionConfig) -> tuple[float, float]:
@@ -127,7 +170,7 @@ def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames:
     job = ShardJob(0, tuple(frames[:1]), sim, tmp / "static.pkl", tmp / "rec", tmp / "shards", rig, condition_cfg,
                    seed, threads=1)
     render_shard(job)  # loads the world and builds its BVH outside the profile
-    profile = cProfile.Profile()
+    profile = cProfile.Profile(time.process_time)  # CPU time: other work on shared cores does not count
     profile.runcall(render_shard, dataclasses.replace(job, index=1, frames=tuple(frames)))
     stats = pstats.Stats(profile).stats
     owners: dict = {}
@@ -195,7 +238,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=100)
     ap.add_argument("--sim", type=Path)
+    ap.add_argument("--scenario", default="highway", help="scenario simulated when --sim is not given")
     ap.add_argument("--condition", default="noon")
+    ap.add_argument("--no-fast", action="store_true", help="skip the fast preset's render (and its rows)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--breakdown", type=int, default=10, metavar="N",
                     help="also profile N of the frames on one thread and print where the time goes (0: skip)")
@@ -206,21 +251,24 @@ def main() -> None:
         tmp = Path(tmp_name)
         sim = args.sim
         if sim is None:
-            config, _ = resolve_scenario("highway", duration_s=args.frames / 10.0, warmup_s=90.0)
+            config, _ = resolve_scenario(args.scenario, duration_s=args.frames / 10.0, warmup_s=90.0)
             sim = tmp / "sim"
             simulate(config, 1, sim, progress=False)
         start, cpu = time.perf_counter(), cpu_seconds()
-        render(sim, condition, rig, tmp / "record", frames=args.frames, workers=args.workers, shard_size=5,
-               progress=False)
+        with PeakWorkerMemory() as memory:
+            render(sim, condition, rig, tmp / "record", frames=args.frames, workers=args.workers, shard_size=5,
+                   progress=False)
         stage_s, stage_cpu_s = time.perf_counter() - start, cpu_seconds() - cpu
         size_mb = sum(p.stat().st_size for p in (tmp / "record").rglob("*") if p.is_file()) / 1e6
         # The same frames in the fast preset (one sample per pixel, direct light only: the look before realism).
         fast = rig.model_copy(update={"cameras": [c.model_copy(update={"quality": "fast", "samples_per_pixel": 1})
                                                   for c in rig.cameras]})
-        start, cpu = time.perf_counter(), cpu_seconds()
-        render(sim, condition, fast, tmp / "record_fast", frames=args.frames, workers=args.workers, shard_size=5,
-               progress=False)
-        fast_s, fast_cpu_s = time.perf_counter() - start, cpu_seconds() - cpu
+        fast_s = fast_cpu_s = np.nan
+        if not args.no_fast:
+            start, cpu = time.perf_counter(), cpu_seconds()
+            render(sim, condition, fast, tmp / "record_fast", frames=args.frames, workers=args.workers,
+                   shard_size=5, progress=False)
+            fast_s, fast_cpu_s = time.perf_counter() - start, cpu_seconds() - cpu
         import pandas as pd
 
         frames = select_frames(pd.read_parquet(sim / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
@@ -247,8 +295,20 @@ def main() -> None:
                                                           f"{stage_cpu_s / bare_cpu_s:.2f}"),
         ("CPU: realistic / fast preset (target <= 4)", f"{stage_cpu_s:.1f} s / {fast_cpu_s:.1f} s = "
                                                        f"{stage_cpu_s / fast_cpu_s:.2f}"),
+        ("labelled frames per CPU-second (realistic rig, all processes, start-up included)",
+         f"{n / stage_cpu_s:.3f}"),
+        ("bare casts' frames per CPU-second", f"{n / bare_cpu_s:.3f}"),
+        ("realistic / bare casts' frames per CPU-second (issue 41: >= 0.3)", f"{bare_cpu_s / stage_cpu_s:.3f}"),
+        (f"peak resident memory of a render worker ({args.workers} workers)", f"{memory.peak / 2**20:.0f} MiB"),
+        (f"ours vs MetaDrive at 800x600 on this machine ({METADRIVE_FPS} frames/s)",
+         f"{n / stage_s:.2f} vs {METADRIVE_FPS} frames/s (ours labelled, with LiDAR and radar)"),
+        (f"CPU-hours for {DATASET_FRAMES:,} frames at this rate (this scenario and condition)",
+         f"{DATASET_FRAMES * stage_cpu_s / n / 3600:.1f} ({DATASET_FRAMES * stage_cpu_s / n / 3600 / args.workers:.1f} "
+         f"h on {args.workers} cores)"),
         ("load average (1 min) at the end", f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"),
     ]
+    if args.no_fast:
+        rows = [r for r in rows if "fast preset" not in r[0]]
     width = max(len(k) for k, _ in rows)
     print(f"{'measure':<{width}} | value\n{'-' * width}-|------")
     for key, value in rows:
@@ -258,7 +318,7 @@ def main() -> None:
         total = sum(t for _, t in parts)
         embree = sum(t for name, t in parts if name == EMBREE)
         width = max(len(k) for k, _ in parts)
-        print(f"\nwhere one frame's time goes: {count} frames on one thread, cProfile (adds ~5%)\n"
+        print(f"\nwhere one frame's CPU time goes: {count} frames on one thread, cProfile (adds ~5%)\n"
               f"{'part':<{width}} | ms/frame | share\n{'-' * width}-|----------|------")
         for name, t in parts:
             print(f"{name:<{width}} | {1000 * t / count:8.1f} | {100 * t / total:4.1f}%")

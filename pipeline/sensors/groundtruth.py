@@ -26,6 +26,7 @@ import numpy as np
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
+from pipeline.world.actors import place_actors
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 VIRTUAL_SAMPLES_PER_IMAGE = 0.25
@@ -62,7 +63,7 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     Actors whose bounding sphere lies outside the camera's frustum (behind the near plane or beyond the
     widest border ray) are culled first: no ray of the image can reach them, so they get no box.
     """
-    geo, k = scene.geometry, len(scene.actors)
+    k = len(scene.actors)
     world_to_cam = cam_to_world.inverse()
     centre = world_to_cam.apply(scene.actors.boxes.center)
     radius = 0.5 * np.linalg.norm(scene.actors.boxes.size, axis=1)
@@ -78,18 +79,19 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     # edges project to curves) needs all its vertices and the points where its edges cross the plane.
     whole = in_view & ((centre[:, 2] - radius > near) if not camera.has_distortion else np.zeros(k, bool))
     clipped = in_view & ~whole
-    need = np.flatnonzero((whole[geo.vertex_actor] & geo.vertex_on_hull) | clipped[geo.vertex_actor])
-    verts = np.zeros((len(geo.vertices), 3))
-    verts[need] = world_to_cam.apply(geo.vertices[need])
-    tris = geo.triangles[clipped[geo.triangle_actor]].astype(np.int64)
-    vsel = need
+    # The whole actors' hull vertices (FrameScene.hull_vertices), the others' whole meshes, placed for them only.
+    on_hull = np.flatnonzero(whole[scene.hull_actor])
+    geo = place_actors(scene.actors, scene.meshes, clipped) if clipped.any() else None
+    verts = world_to_cam.apply(geo.vertices) if geo is not None else np.zeros((0, 3))
+    tris = geo.triangles.astype(np.int64) if geo is not None else np.zeros((0, 3), np.int64)
     edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     z0, z1 = verts[edges[:, 0], 2], verts[edges[:, 1], 2]
     cross = (z0 > near) != (z1 > near)
     a, b = verts[edges[cross, 0]], verts[edges[cross, 1]]
     clip_pts = a + ((near - a[:, 2]) / (b[:, 2] - a[:, 2]))[:, None] * (b - a)
-    points = [verts[vsel], clip_pts]
-    owner = [geo.vertex_actor[vsel], geo.vertex_actor[edges[cross, 0]]]
+    vertex_actor = geo.vertex_actor if geo is not None else np.zeros(0, np.int32)
+    points = [world_to_cam.apply(scene.hull_vertices[on_hull]), verts, clip_pts]
+    owner = [scene.hull_actor[on_hull], vertex_actor, vertex_actor[edges[cross, 0]]]
     if camera.has_distortion:  # straight edges project to curves: sample them
         front = (z0 > near) & (z1 > near)
         s = np.linspace(0.0, 1.0, 10)[1:-1]

@@ -4,7 +4,8 @@ Label images (instance, semantic, depth) come from the pixel-centre rays. The co
 centre ray of every pixel; with ``samples_per_pixel`` N > 1, pixels on an edge (:func:`edge_pixels`: object,
 class or material boundaries, silhouettes, creases: a small share of a frame) average N stratified rays
 instead (all pixels with ``samples_everywhere``: for shadow edges too, at several times the cost; see
-bench/bench_antialias.py). Each ray is shaded
+bench/bench_antialias.py); with the lights off, only the edges that show in the centres' image (more than
+AA_MIN_CONTRAST 8-bit levels across a 3x3 window). Each ray is shaded
 and fogged under the :class:`Condition` (sun, sky, and at night the frame's spot lights: headlights and street
 lamps), then given the condition's post effects (:mod:`pipeline.sensors.post`: rain, motion blur, bloom,
 flare, vignetting, noise) and tone-mapped. Depth is the
@@ -128,6 +129,13 @@ def render_camera(
             if reflection is not None:
                 reflection.apply(radiance)
             exposure = auto_exposure(radiance.reshape(h, w, 3), sensor, compensation, shaded_with=compensation)
+            if not condition.lights_on:
+                # Only where the edge shows: an edge whose 3x3 window spans at most AA_MIN_CONTRAST 8-bit levels in
+                # the centres' image (this exposure and tone curve) would average to within them. Not with the lights
+                # on: a lamp smaller than a pixel, far off, shows in no centre, only in a sample (and then blooms).
+                display = to_srgb8(radiance.reshape(h, w, 3) * np.float32(exposure.scale / compensation),
+                                   "filmic" if indirect else "soft")
+                where = where[window_contrast(display).reshape(-1)[where] > AA_MIN_CONTRAST]
         mask = actor_rays.reshape(-1)[where]
         edge = np.zeros((len(where), 3), np.float32)
         for sample in samples:  # loop over samples; all chosen pixels vectorised
@@ -184,6 +192,10 @@ def render_camera(
     )
 
 
+# Anti-aliasing samples go to the edge pixels whose 3x3 window in the pixel centres' 8-bit image spans more than this
+# many levels in some channel (window_contrast): within it, the samples' mean would change the pixel by about a level,
+# below the sensor's noise. With the lights on (dusk, night) every edge pixel is sampled.
+AA_MIN_CONTRAST = 2
 MIN_BLUR_PX = 0.25  # motion during the exposure below this everywhere is not blurred (it would not show)
 # Edge tests between neighbouring pixel centres (see edge_pixels).
 EDGE_INVERSE_DEPTH = 0.02  # |second difference of 1/z| over 1/z: 0 on any plane, large at a silhouette
@@ -215,6 +227,13 @@ def edge_pixels(hits: Hits, depth_m: np.ndarray) -> np.ndarray:
         core = (slice(1, -1), slice(None)) if bend.shape[0] == h - 2 else (slice(None), slice(1, -1))
         edge[core] |= bend
     return cv2.dilate(edge.view(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def window_contrast(image: np.ndarray) -> np.ndarray:
+    """(H, W) uint8: for each pixel of an (H, W, 3) uint8 image, the greatest spread (brightest less darkest) over
+    its 3x3 window (clipped to the image), over the channels."""
+    kernel3 = np.ones((3, 3), np.uint8)
+    return (cv2.dilate(image, kernel3) - cv2.erode(image, kernel3)).max(axis=2)
 
 
 def _centre_sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition,

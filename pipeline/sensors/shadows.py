@@ -151,10 +151,11 @@ def sun_blocked(scene: FrameScene, shadow: np.ndarray, which: np.ndarray, disc: 
     origin = [shadow[:, k] for k in range(3)]  # views: the tests below read them in place
     actor_rays, static_rays = np.zeros(len(t_m), bool), np.ones(len(t_m), bool)
     near = t_m < SUN_MAP_RANGE_M
+    if len(t_m):  # one grid for all the disc's directions
+        actor_rays = scene.sun_disc_actor_candidates(*origin, disc, which)
     for k in np.unique(which).tolist():
         rows = np.flatnonzero(which == k)
         direction = disc[k]
-        actor_rays[rows] = scene.sun_actor_candidates(*(c[rows] for c in origin), direction)
         # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
         rows = rows[near[rows]]
         static_rays[rows] = scene.static.sun_candidates(*origin, direction, rows=rows)

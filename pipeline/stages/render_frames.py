@@ -227,14 +227,25 @@ def _worker_state(job: ShardJob) -> _WorkerState:
                         rig_actor_meshes(job.rig))
 
 
+@functools.cache
+def _limit_blas(threads: int) -> None:
+    """Cap numpy's BLAS (OpenBLAS: a thread per core by default) at ``threads`` in this process, once: beside a
+    pool's other workers its second thread only spins, e.g. in the (N, 3) @ (3, 3) transforms of the amodal boxes
+    (docs/performance.md); each product is computed by one thread either way, so no byte changes."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(threads, user_api="blas")
+
+
 def render_shard(job: ShardJob) -> int:
     """Render ``job.frames``; write images, point clouds and the shard's tables. Returns frames rendered.
 
-    ``job.threads`` caps Embree's threads per cast and, when not 0, OpenCV's for the process (its post effects:
-    a second thread beside a pool's other workers only costs CPU). Neither changes a
-    pixel."""
+    ``job.threads`` caps Embree's threads per cast and, when not 0, OpenCV's and BLAS's for the process (its post
+    effects, its small matrix products: a second thread beside a pool's other workers only costs CPU). None changes
+    a pixel."""
     if job.threads:
         cv2.setNumThreads(job.threads)
+        _limit_blas(job.threads)
     state = _state(job)
     world, static, cameras, lidars, condition = state.world, state.static, state.cameras, state.lidars, \
         state.condition

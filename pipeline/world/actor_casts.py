@@ -147,45 +147,6 @@ def actor_pairs(rays, rows, actors, inv_linear, centre, radius):
     return pair_row, pair_actor, pair_rays
 
 
-@kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
-        "float64[:, :, ::1], float64[:, ::1], float64[::1], int64[::1], int64[::1], int64[::1])")
-def listed_actor_pairs(rays, rows, actors, inv_linear, centre, radius, row_cell, cell_start, cell_item):
-    """:func:`actor_pairs` where each ray is tested only against the actors listed for its cell: ray ``rows[j]``
-    against ``actors[cell_item[k]]`` for k in ``cell_start[c]:cell_start[c + 1]``, c = ``row_cell[j]``
-    (:func:`cell_lists`; ascending within a cell). The same tests in the same arithmetic, so the pairs are those
-    of :func:`actor_pairs` whose actor is listed for the ray's cell, in the same order (by row, then as in
-    ``actors``). For rays whose origins differ (shadow and occlusion rays): no sharing of c - o between rays."""
-    local = np.empty(6, np.float32)
-    count = 0
-    pair_row = np.empty(rows.size, np.int64)
-    pair_actor = np.empty(rows.size, np.int64)
-    pair_rays = np.empty((rows.size, 6), np.float32)
-    for j in range(rows.size):
-        i = rows[j]
-        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
-        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
-        dd = d0 * d0 + d1 * d1 + d2 * d2
-        c = row_cell[j]
-        for k in range(cell_start[c], cell_start[c + 1]):
-            a = actors[cell_item[k]]
-            v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
-            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
-                continue
-            _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
-            if not _meets_unit_box(local):
-                continue
-            if count == pair_row.size:
-                size = max(2 * count, 16)
-                pair_row, pair_actor, pair_rays = (_grown(pair_row, size), _grown(pair_actor, size),
-                                                   _grown_rows(pair_rays, size))
-            pair_row[count] = j
-            pair_actor[count] = a
-            for m in range(6):
-                pair_rays[count, m] = local[m]
-            count += 1
-    return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
-
-
 @kernel("Tuple((int64[::1], int64[::1]))(int64, int64, int64[:, ::1])")
 def cell_lists(rows, cols, spans):
     """Which items cover each cell of a ``rows`` x ``cols`` grid, as compressed rows: item b covers the cells
@@ -251,3 +212,146 @@ def nearest_actor_hits(k, pair_row, pair_actor, t, prim, normal, inv_linear):
             for c in range(3):
                 normal_best[j, c] = w[c] / norm
     return t_best, prim_best, normal_best, actor_best
+
+
+@kernel("float64(float32[::1], float64)")
+def _unit_box_entry(ray, half):
+    """The t >= 0 at which the ray [origin | direction] (float32, unit frame) enters the box [-half, half]^3 (0 from
+    inside), NaN where it misses it: :func:`_meets_unit_box`'s slabs, in the same arithmetic."""
+    t_in, t_out = 0.0, np.inf
+    for c in range(3):
+        o, d = np.float64(ray[c]), np.float64(ray[3 + c])
+        if d == 0.0:
+            if o < -half or o > half:
+                return np.nan
+            continue
+        t0, t1 = (-half - o) / d, (half - o) / d
+        if t0 > t1:
+            t0, t1 = t1, t0
+        t_in, t_out = max(t_in, t0), min(t_out, t1)
+        if t_in > t_out:
+            return np.nan
+    return t_in
+
+
+@kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
+        "float64[:, :, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1], float64, int64, "
+        "int64, int64[::1], int64[::1])")
+def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo, hi, cell, nx, ny, cell_start,
+                     cell_item):
+    """:func:`actor_pairs` of the pairs that can give a ray ``rows[j]`` a hit at t <= ``t_limit[j]``, each ray
+    tested only against the actors listed for the grid cells it crosses in that span.
+
+    The grid (:func:`actor_grid`) covers the box ``lo``..``hi`` ((3,) float64: the actors' spheres, x, y and z);
+    its ``nx`` x ``ny`` cells, ``cell`` metres wide from (lo[0], lo[1]), list (``cell_start``, ``cell_item``:
+    :func:`cell_lists`, positions in ``actors``) the actors whose sphere's square touches the cell or one of its
+    8 neighbours. A ray's part inside the box with t in [0, t_limit] is sampled at steps that advance it one cell
+    in xy, and its end: every point of it lies within half a cell of a sample, so in a cell next to the sample's,
+    and an actor whose sphere the ray meets there is listed for the sample's cell. The candidates are tested as
+    :func:`actor_pairs` tests them (the same arithmetic), in the order of ``actors``; a pair whose box the ray
+    enters beyond ``t_limit[j]`` (grown by 0.1 % and 1 cm for rounding) is left out: its hit would lie there.
+
+    Returns what :func:`actor_pairs` returns, less the pairs that cannot be hit within ``t_limit``.
+    """
+    local = np.empty(6, np.float32)
+    nb = actors.size
+    stamp = np.full(nb, -1, np.int64)
+    cand = np.empty(nb, np.int64)
+    count = 0
+    pair_row = np.empty(rows.size, np.int64)
+    pair_actor = np.empty(rows.size, np.int64)
+    pair_rays = np.empty((rows.size, 6), np.float32)
+    half = 0.5 + BOX_MARGIN
+    for j in range(rows.size):
+        i = rows[j]
+        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
+        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
+        # The span of t in the box and in [0, t_limit] (slabs).
+        t0, t1 = 0.0, np.float64(t_limit[j])
+        limit = t1 * 1.001 + 0.01
+        ok = True
+        for c in range(3):
+            o, d = (o0, o1, o2)[c], (d0, d1, d2)[c]
+            if d == 0.0:
+                if o < lo[c] or o > hi[c]:
+                    ok = False
+                continue
+            ta, tb = (lo[c] - o) / d, (hi[c] - o) / d
+            if ta > tb:
+                ta, tb = tb, ta
+            t0, t1 = max(t0, ta), min(t1, tb)
+        if not ok or t0 > t1:
+            continue
+        dxy = np.sqrt(d0 * d0 + d1 * d1)
+        steps = 0
+        step = 0.0
+        if dxy > 0.0 and t1 > t0:
+            step = cell / dxy
+            steps = np.int64((t1 - t0) / step) + 1
+        n = 0
+        last = np.int64(-1)
+        for k in range(steps + 1):
+            t = min(t0 + k * step, t1)
+            ci = min(max(np.int64(np.floor((o0 + t * d0 - lo[0]) / cell)), 0), nx - 1)
+            cj = min(max(np.int64(np.floor((o1 + t * d1 - lo[1]) / cell)), 0), ny - 1)
+            cc = ci * ny + cj
+            if cc == last:
+                continue
+            last = cc
+            for m in range(cell_start[cc], cell_start[cc + 1]):
+                b = cell_item[m]
+                if stamp[b] != j:
+                    stamp[b] = j
+                    cand[n] = b
+                    n += 1
+        # In the order of ``actors`` (insertion sort: a handful each).
+        for p in range(1, n):
+            v = cand[p]
+            q = p - 1
+            while q >= 0 and cand[q] > v:
+                cand[q + 1] = cand[q]
+                q -= 1
+            cand[q + 1] = v
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        for p in range(n):
+            a = actors[cand[p]]
+            v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
+            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
+                continue
+            _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
+            t_in = _unit_box_entry(local, half)
+            if not t_in <= limit:  # a miss (NaN) or beyond the limit
+                continue
+            if count == pair_row.size:
+                size = max(2 * count, 16)
+                pair_row, pair_actor, pair_rays = (_grown(pair_row, size), _grown(pair_actor, size),
+                                                   _grown_rows(pair_rays, size))
+            pair_row[count] = j
+            pair_actor[count] = a
+            for m in range(6):
+                pair_rays[count, m] = local[m]
+            count += 1
+    return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
+
+
+
+GRID_CELL_M = 2.0  # cells of actor_grid at least this wide ...
+GRID_MAX_CELLS = 250_000  # ... and at most about this many
+
+
+def actor_grid(centre: np.ndarray, radius: np.ndarray, actors: np.ndarray) -> tuple:
+    """The grid of :func:`grid_actor_pairs` over the ``actors`` (B,) int64 (positions into ``centre`` (A, 3) float64
+    and ``radius`` (A,) float64, the spheres that hold each actor's grown box): (lo, hi, cell, nx, ny, cell_start,
+    cell_item), each actor listed for the cells its sphere's xy square touches, grown by a cell on every side
+    (:func:`cell_lists`, items positions in ``actors``). The box lo..hi holds every sphere, grown by 1 mm."""
+    c, r = centre[actors], radius[actors][:, None]
+    lo = (c - r).min(axis=0) - 1e-3
+    hi = (c + r).max(axis=0) + 1e-3
+    cell = max(GRID_CELL_M, float(np.sqrt(np.prod(hi[:2] - lo[:2] + GRID_CELL_M) / GRID_MAX_CELLS)))
+    nx, ny = (np.floor((hi[:2] - lo[:2]) / cell).astype(np.int64) + 1).tolist()
+    first = np.floor((c[:, :2] - r - lo[:2]) / cell).astype(np.int64) - 1
+    last = np.floor((c[:, :2] + r - lo[:2]) / cell).astype(np.int64) + 2  # exclusive
+    spans = np.ascontiguousarray(np.column_stack([first[:, 0], last[:, 0], first[:, 1], last[:, 1]]))
+    cell_start, cell_item = cell_lists(nx, ny, spans)
+    return (np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64), float(cell), int(nx), int(ny),
+            cell_start, cell_item)

@@ -434,3 +434,25 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         np.concatenate(cols[5]),
         np.concatenate(cols[6]),
     )
+
+
+def place_hulls(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,
+                models: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The placed vertices of :func:`place_actors` that lie on their model's convex hull (its ``vertex_on_hull``),
+    without placing the others: (H, 3) float64 world positions and (H,) int32 their actors, in the order of
+    :func:`place_actors`' vertices. Every actor's extremes in any direction, and the bounds of its projection seen
+    from outside it, are among them; a frame needs them for every placed actor but the whole mesh for few."""
+    codes = meshes.model_codes(actors) if models is None else np.asarray(models, np.int64)
+    if where is not None:
+        codes = np.where(np.asarray(where, bool), codes, -1)
+    vertices, owner = [np.zeros((0, 3))], [np.zeros(0, np.int32)]
+    for code, mesh in enumerate(meshes.models):
+        idx = np.flatnonzero(codes == code)
+        if not len(idx):
+            continue
+        affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
+        hull = np.ascontiguousarray(mesh.vertices[meshes.hull_mask(code)])
+        # The arithmetic of place_actors (one stacked matmul), row by row the same numbers.
+        vertices.append((np.matmul(hull, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]).reshape(-1, 3))
+        owner.append(np.repeat(idx, len(hull)).astype(np.int32))
+    return np.concatenate(vertices), np.concatenate(owner)

@@ -7,7 +7,8 @@ Design (measured with bench/bench_render_core.py; the figures are in docs/perfor
 - The actors get no Embree scene of their own (:class:`FrameScene`): an actor is its model's canonical mesh
   under an affine map, so a ray meets it where the ray mapped into the actor's unit box frame meets the canonical
   mesh, whose scene is built once per model and process (:mod:`pipeline.world.actor_casts`: candidate (ray,
-  actor) pairs by an exact test against each unit box, then one cast per model present). Building a BVH over the
+  actor) pairs by an exact test against each unit box, of the actors listed for the cells of a per-frame grid that
+  the ray crosses up to its static hit, then one cast per model present). Building a BVH over the
   placed actors instead cost time per triangle, every frame: more than the actor rays it served. A ray's result
   is the nearer of the static and the actor hit. Callers may pass a conservative mask of the rays that can reach
   an actor at all (from projected boxes) to skip the actor test for the rest.
@@ -16,7 +17,8 @@ Design (measured with bench/bench_render_core.py; the figures are in docs/perfor
   their projection the rays that cannot hit it (most of the sky) and skip them: a conservative test, so every
   hit is still found (``static_rays``).
 - Only the actors that some ray of the frame can reach are placed and tested (``active``, from
-  :func:`pipeline.sensors.reach.actors_in_reach`: a minority of an urban frame's actors).
+  :func:`pipeline.sensors.reach.actors_in_reach`: a minority of an urban frame's actors), and of their meshes only
+  the hull vertices (``hull_vertices``: bounds and footprints); whole meshes on demand (``geometry``).
 - Sun shadow rays are tested against the actors only where they can meet one
   (:meth:`FrameScene.sun_actor_candidates`: a conservative test of the points' and the actors' projections
   along the sun; a few per cent of the lit pixels); against the static world only those from
@@ -32,6 +34,7 @@ All positions and directions are in the world frame, metres; ``t_m`` is metres a
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -42,17 +45,24 @@ from pipeline.core.jit import as_input, as_view_input, fma32, kernel
 from pipeline.world import smooth_normals
 from pipeline.world.actor_casts import (
     BOX_MARGIN,
-    actor_pairs,
-    cell_lists,
-    listed_actor_pairs,
+    actor_grid,
+    grid_actor_pairs,
     nearest_actor_hits,
     unit_frame_rays,
 )
-from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Actors, place_actors, unit_to_world
+from pipeline.world.actors import (
+    DEFAULT_MESHES,
+    ActorGeometry,
+    ActorMeshes,
+    Actors,
+    place_actors,
+    place_hulls,
+    unit_to_world,
+)
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import TINTED_MATERIALS, material_arrays, material_index
 from pipeline.world.mesh import Mesh, triangle_bounds
-from pipeline.world.sunmap import SunMap, along_sun, sun_slope
+from pipeline.world.sunmap import SunMap, sun_slope
 
 
 @dataclass(frozen=True)
@@ -235,7 +245,6 @@ CHUNK_PAD_M = 1e-3  # boxes are grown by this, far beyond Embree's float32 round
 # The grid of FrameScene.sun_actor_candidates: only how tight that test is depends on them.
 SHADOW_CELL_M = 0.5  # cells at least this wide ...
 SHADOW_MAX_CELLS = 250_000  # ... and at most about this many
-REACH_CELL_M = 1.0  # cells of the grid that lists the actors a short segment can reach (FrameScene._pairs_within)
 
 
 def chunk_boxes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -397,7 +406,9 @@ class FrameScene:
         if self.active.shape != (len(actors),):
             raise ValueError(f"active must be ({len(actors)},) bool, one per actor; got shape {self.active.shape}")
         self._model = meshes.model_codes(actors)
-        self.geometry = place_actors(actors, meshes, self.active, self._model)
+        # The placed actors' hull vertices (every actor's extremes, in any direction): what the frame's tests and
+        # amodal boxes need; whole meshes are placed only on demand (geometry).
+        self.hull_vertices, self.hull_actor = place_hulls(actors, meshes, self.active, self._model)
         self._placed = np.flatnonzero(self.active)  # the actors rays can meet (each as its model's canonical mesh)
         mats = material_arrays()
         self._albedo = as_input(mats["albedo"], np.float32)
@@ -412,10 +423,17 @@ class FrameScene:
         # Holds the unit box grown by BOX_MARGIN: half its diagonal, grown, and a little more for rounding.
         self._radius = as_input(0.5 * np.linalg.norm(actors.boxes.size, axis=1) * (1.0 + 2.0 * BOX_MARGIN) + 1e-6,
                                 np.float64)
-        hull = self.geometry.vertex_on_hull  # every actor's extremes, in any direction, are among these
-        self._hull_vertices, self._hull_actor = self.geometry.vertices[hull], self.geometry.vertex_actor[hull]
-        self._top_z = float(self._hull_vertices[:, 2].max()) if len(self._hull_vertices) else -np.inf
+        self._top_z = float(self.hull_vertices[:, 2].max()) if len(self.hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
+        self._grid: tuple | None = None  # see _pairs
+
+    @functools.cached_property
+    def geometry(self) -> ActorGeometry:
+        """The placed (``active``) actors' whole meshes merged (:func:`pipeline.world.actors.place_actors`), placed on
+        first use: the frame's casts need none of it (each actor is its model's canonical mesh), its tests and boxes
+        only the hull vertices (``hull_vertices`` (H, 3) float64, ``hull_actor`` (H,) int32: those of ``geometry``
+        on the hull, in its order)."""
+        return place_actors(self.actors, self.meshes, self.active, self._model)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, actor_rays: np.ndarray | None = None) -> Hits:
         """First hits of rays: (N, 3) world origins and directions (normalised here). See :meth:`cast_rays`."""
@@ -437,7 +455,9 @@ class FrameScene:
         sub = np.zeros(0, np.int64)
         if len(self._placed):
             sub = np.arange(n) if actor_rays is None else np.flatnonzero(actor_rays)
-        t_actor, prim_actor, normal_actor, hit_actor = self._cast_actors(rays, sub)
+        # An actor hit counts only where it is nearer than the static one (resolve_hits): the static hit bounds the
+        # span of each ray that the actors are tested in.
+        t_actor, prim_actor, normal_actor, hit_actor = self._cast_actors(rays, sub, t[sub].astype(np.float64))
         hit, instance_id, actor_index = np.zeros(n, bool), np.zeros(n, np.int32), np.zeros(n, np.int32)
         semantic, material, color = np.zeros(n, np.uint8), np.zeros(n, np.int32), np.zeros((n, 3), np.float32)
         static, tables = self.static, _class_tables(self.meshes)
@@ -491,11 +511,8 @@ class FrameScene:
             return blocked
         sub = np.flatnonzero(~blocked if actor_rays is None else actor_rays & ~blocked)
         rays = as_input(rays, np.float32)
-        if np.isfinite(t_max_m) and len(sub):
-            pair_row, pair_actor, local = self._pairs_within(rays, sub, float(t_max_m))
-        else:
-            pair_row, pair_actor, local = actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
-                                                      self._radius)
+        # Segments (sky occlusion, shadows towards a lamp) test only the actors of the grid cells they cross.
+        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)))
         hit_pair = np.zeros(len(pair_row), bool)
         for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
@@ -503,45 +520,30 @@ class FrameScene:
         blocked[sub[pair_row[hit_pair]]] = True
         return blocked
 
-    def _pairs_within(self, rays: np.ndarray, sub: np.ndarray, t_max_m: float) -> tuple[np.ndarray, ...]:
-        """:func:`actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` less the pairs whose segment
-        (t in [0, ``t_max_m``]) cannot reach the actor: a segment stays within ``reach`` = t_max |d| of its origin,
-        so it can only meet an actor whose sphere (centre c, radius r) holds a point within reach, and then
-        |o_xy - c_xy| <= r + reach. The origins' bounding rectangle is cut into cells (at least REACH_CELL_M wide,
-        at most about SHADOW_MAX_CELLS of them); each actor is listed for the cells its square c_xy +- (r + reach)
-        touches, grown by a cell (far beyond rounding), and each ray is tested only against its origin's cell's
-        actors (:func:`listed_actor_pairs`). The pairs left out could not block the segment, so what
-        :meth:`occluded_rays` returns is unchanged; sky occlusion rays (1.5 m) test a few actors each instead of
-        every placed one (docs/performance.md)."""
-        picked = np.take(rays, sub, axis=0)
-        origin = picked[:, :2].astype(np.float64)
-        length = np.sqrt(np.einsum("ij,ij->i", picked[:, 3:], picked[:, 3:], dtype=np.float64))
-        reach = t_max_m * float(length.max()) * (1.0 + 1e-6) + CHUNK_PAD_M
-        p_lo, p_hi = origin.min(axis=0), origin.max(axis=0)
-        cell = max(REACH_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + REACH_CELL_M) / SHADOW_MAX_CELLS)))
-        rows, cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
-        grow = (self._radius[self._placed] + reach)[:, None]
-        centre = self._center[self._placed, :2]
-        first = np.floor((centre - grow - p_lo) / cell).astype(np.int64) - 1
-        last = np.floor((centre + grow - p_lo) / cell).astype(np.int64) + 2  # exclusive
-        spans = np.ascontiguousarray(np.column_stack([first[:, 0], last[:, 0], first[:, 1], last[:, 1]]))
-        cell_start, cell_item = cell_lists(rows, cols, spans)
-        ij = np.minimum(np.floor((origin - p_lo) / cell).astype(np.int64), [rows - 1, cols - 1])
-        return listed_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center, self._radius,
-                                  np.ascontiguousarray(ij[:, 0] * cols + ij[:, 1]), cell_start, cell_item)
-
     def _pairs_by_model(self, pair_actor: np.ndarray):
         """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""
         codes = self._model[pair_actor]
         for code in np.unique(codes):
             yield int(code), np.flatnonzero(codes == code)
 
-    def _cast_actors(self, rays: np.ndarray, sub: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays``: t (K,) float32 (inf = none),
-        triangle (K,) uint32 (numbered as in :func:`_class_tables`), world normal (K, 3) float32 and actor (K,)
-        int32 (see :mod:`pipeline.world.actor_casts`)."""
-        pair_row, pair_actor, local = actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
-                                                  self._radius)
+    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:func:`pipeline.world.actor_casts.actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` and
+        the placed actors, less the pairs that cannot be hit at t <= ``t_limit`` ((K,) float64, inf: no limit), each
+        ray tested only against the actors of the grid cells it crosses (:func:`grid_actor_pairs`; the grid is
+        built once per frame)."""
+        if not len(self._placed) or not len(sub):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 6), np.float32)
+        if self._grid is None:
+            self._grid = actor_grid(self._center, self._radius, self._placed)
+        return grid_actor_pairs(rays, as_input(sub, np.int64), self._placed, self._inv_linear, self._center,
+                                self._radius, as_input(t_limit, np.float64), *self._grid)
+
+    def _cast_actors(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays`` where it may lie at t <=
+        ``t_limit`` ((K,) float64; a hit found farther may be reported or not): t (K,) float32 (inf = none), triangle
+        (K,) uint32 (numbered as in :func:`_class_tables`), world normal (K, 3) float32 and actor (K,) int32 (see
+        :mod:`pipeline.world.actor_casts`)."""
+        pair_row, pair_actor, local = self._pairs(rays, sub, t_limit)
         t = np.full(len(pair_row), np.inf, np.float32)
         prim = np.zeros(len(pair_row), np.uint32)
         normal = np.zeros((len(pair_row), 3), np.float32)
@@ -577,38 +579,68 @@ class FrameScene:
         occlusion rays of that length cannot meet one)."""
         return self._footprint_candidates(x, y, z, np.zeros(2), float(radius_m))
 
-    def _footprint_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray,
-                              grow_m: float) -> np.ndarray:
+    def sun_disc_actor_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, suns: np.ndarray,
+                                  which: np.ndarray) -> np.ndarray:
+        """:meth:`sun_actor_candidates` of rays along several directions: the ray from point j along ``suns[which[j]]``
+        ((S, 3) upward unit directions, ``which`` (M,) int64), all looked up in one grid, on which each actor's box is
+        the union of its boxes along the S directions (a superset of each direction's: still conservative). One grid
+        instead of S: the directions over the sun's disc differ by a fraction of a degree."""
+        which = np.asarray(which, np.int64)
+        groups = [(sun_slope(sun), np.flatnonzero(which == k)) for k, sun in enumerate(np.asarray(suns))]
+        return self._footprint_candidates(x, y, z, None, 0.0, [(g, rows) for g, rows in groups if len(rows)])
+
+    def _footprint_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray | None,
+                              grow_m: float, groups: list[tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
         """:meth:`sun_actor_candidates` for the sun's ``slope`` (:func:`sun_slope`; 0 = straight up), the actors'
-        projected bounds and their top grown by ``grow_m``."""
+        projected bounds and their top grown by ``grow_m``; or, with ``groups`` ((slope, rows (K,) int64) pairs that
+        share out the points), each group's points along its own slope, on one grid of the union of the groups'
+        actor bounds."""
         if not len(self._placed) or not len(x):
             return np.zeros(len(x), bool)
-        lo, hi = self._sun_footprints(slope)
-        lo, hi = lo - grow_m, hi + grow_m
         # float32: rounding (~1e-4 m at 2 km) is far below the cell the boxes are grown by.
         x, y, z = (as_view_input(c, np.float32) for c in (x, y, z))
-        sx, sy = np.asarray(slope, np.float32)
-        p_lo, p_hi = np.split(_projection_bounds(x, y, z, sx, sy).astype(np.float64), 2)
+        if groups is None:
+            groups, whole = [(np.asarray(slope, np.float64), None)], True
+        else:
+            whole = False
+        lo, hi = np.full((len(self._placed), 2), np.inf), np.full((len(self._placed), 2), -np.inf)
+        bounds = []
+        for g_slope, rows in groups:
+            g_lo, g_hi = self._sun_footprints(g_slope)
+            lo, hi = np.minimum(lo, g_lo), np.maximum(hi, g_hi)
+            sx, sy = np.asarray(g_slope, np.float32)
+            picked = (x, y, z) if whole else (x[rows], y[rows], z[rows])
+            bounds.append((picked, sx, sy, _projection_bounds(*picked, sx, sy)))
+        lo, hi = lo - grow_m, hi + grow_m
+        all_bounds = np.array([b[3] for b in bounds], np.float32)
+        p_lo = np.minimum.reduce(all_bounds[:, :2]).astype(np.float64)
+        p_hi = np.maximum.reduce(all_bounds[:, 2:]).astype(np.float64)
         near = np.flatnonzero(np.all(hi >= p_lo, axis=1) & np.all(lo <= p_hi, axis=1))
         if not len(near):
             return np.zeros(len(x), bool)
         cell = max(SHADOW_CELL_M, float(np.sqrt(np.prod(p_hi - p_lo + SHADOW_CELL_M) / SHADOW_MAX_CELLS)))
-        rows, cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
+        n_rows, n_cols = (np.floor((p_hi - p_lo) / cell).astype(np.int64) + 1).tolist()
         # Cell (i, j) covers [p_lo + (i, j) * cell, p_lo + (i + 1, j + 1) * cell).
-        grid = rectangles_mask(rows, cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
+        grid = rectangles_mask(n_rows, n_cols, np.floor((lo[near] - p_lo) / cell).astype(np.int64) - 1,
                                np.floor((hi[near] - p_lo) / cell).astype(np.int64) + 2)
-        return _in_marked_cells(x, y, z, sx, sy, np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell),
-                                grid, np.float32(self._top_z + grow_m + CHUNK_PAD_M))
+        lookup = (np.float32(p_lo[0]), np.float32(p_lo[1]), np.float32(1.0 / cell), grid,
+                  np.float32(self._top_z + grow_m + CHUNK_PAD_M))
+        if whole:
+            picked, sx, sy, _ = bounds[0]
+            return _in_marked_cells(*picked, sx, sy, *lookup)
+        out = np.zeros(len(x), bool)
+        for (_, rows), (picked, sx, sy, _) in zip(groups, bounds, strict=True):
+            out[rows] = _in_marked_cells(*picked, sx, sy, *lookup)
+        return out
 
     def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
         onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
         key = tuple(slope.tolist())
         if key not in self._footprints:
-            flat = np.column_stack(along_sun(*self._hull_vertices.T, slope))
-            # Each actor's vertices are one run (place_actors): bounds per run.
-            starts = np.flatnonzero(np.r_[True, np.diff(self._hull_actor) != 0])
-            self._footprints[key] = np.minimum.reduceat(flat, starts, axis=0), np.maximum.reduceat(flat, starts, axis=0)
+            # Each actor's vertices are one run (place_hulls): bounds per run.
+            starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
+            self._footprints[key] = _run_bounds_along_sun(self.hull_vertices, starts, *np.asarray(slope, np.float64))
         return self._footprints[key]
 
 
@@ -642,3 +674,24 @@ def _in_marked_cells(x, y, z, sx, sy, x0, y0, scale, grid, top_z):
         j = min(np.int64(np.int32((y[k] - z[k] * sy - y0) * scale)), cols - 1)
         out[k] = grid[i, j] and z[k] <= top_z
     return out
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[::1], float64, float64)")
+def _run_bounds_along_sun(vertices, starts, sx, sy):
+    """(lo, hi), each (R, 2) float64: the bounds of each run of the (V, 3) float64 ``vertices`` (run r from
+    ``starts[r]`` to the next start) projected along the sun (slope (sx, sy)) onto z = 0, each point as
+    :func:`pipeline.world.sunmap.along_sun` computes it (x - z sx, y - z sy): one pass instead of two vertex-sized
+    columns and two reductions per sun direction (16 directions over the sun's disc)."""
+    r_count = starts.size
+    lo = np.empty((r_count, 2))
+    hi = np.empty((r_count, 2))
+    for r in range(r_count):
+        end = starts[r + 1] if r + 1 < r_count else vertices.shape[0]
+        lx, ly, hx, hy = np.inf, np.inf, -np.inf, -np.inf
+        for v in range(starts[r], end):
+            px = vertices[v, 0] - vertices[v, 2] * sx
+            py = vertices[v, 1] - vertices[v, 2] * sy
+            lx, hx = min(lx, px), max(hx, px)
+            ly, hy = min(ly, py), max(hy, py)
+        lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
+    return lo, hi

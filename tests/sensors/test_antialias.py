@@ -8,7 +8,7 @@ import numpy as np
 from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
 from pipeline.sensors.camera import Camera
-from pipeline.sensors.render import edge_pixels, render_camera
+from pipeline.sensors.render import edge_pixels, render_camera, window_contrast
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
@@ -75,7 +75,19 @@ def test_extra_samples_change_only_edge_pixels(box_meshes, actors_factory, wall)
     np.testing.assert_array_equal(one.labels.box_tight, four.labels.box_tight)
     everywhere = render_camera(scene, Camera(camera_config(width_px=200, height_px=150, samples_per_pixel=4,
                                                           samples_everywhere=True)), EGO)
-    np.testing.assert_array_equal(everywhere.rgb[edge], four.rgb[edge])  # the same samples where both take them
+    # The same samples where both take them: every pixel they change (edges that show, AA_MIN_CONTRAST).
+    np.testing.assert_array_equal(everywhere.rgb[changed], four.rgb[changed])
+
+
+def test_window_contrast_is_the_widest_3x3_spread_of_any_channel():
+    image = np.zeros((5, 6, 3), np.uint8)
+    image[2, 3] = (10, 200, 7)
+    image[0, 0, 2] = 3
+    spread = window_contrast(image)
+    expected = np.zeros((5, 6), np.uint8)
+    expected[1:4, 2:5] = 200  # the bright pixel's 3x3 neighbourhood, green
+    expected[0:2, 0:2] = 3  # the corner's window is clipped to the image
+    np.testing.assert_array_equal(spread, expected)
 
 
 def test_the_rig_file_sets_the_sampling():

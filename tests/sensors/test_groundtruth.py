@@ -218,8 +218,6 @@ def test_amodal_boxes_from_hull_vertices_equal_those_from_all_vertices(distortio
     """project_actors projects only each model's convex-hull vertices for actors wholly in front of the near plane:
     the same boxes, to the bit, as projecting every vertex (real body models, many poses, some crossing the near
     plane, some beside or behind the camera)."""
-    import dataclasses
-
     from pipeline.core.classes import ObjectClass
     from pipeline.sensors.groundtruth import project_actors
     from pipeline.world.actors import Actors, actor_variants
@@ -237,7 +235,10 @@ def test_amodal_boxes_from_hull_vertices_equal_those_from_all_vertices(distortio
     cam_to_world = camera.camera_to_world(EGO)
     fast = project_actors(scene, camera, cam_to_world)
     assert scene.geometry.vertex_on_hull.mean() < 0.5  # the hulls leave most vertices out
-    scene.geometry = dataclasses.replace(scene.geometry, vertex_on_hull=np.ones(len(scene.geometry.vertices), bool))
+    hull = scene.geometry.vertex_on_hull  # FrameScene's hull vertices are the placed mesh's on the hull, in order
+    np.testing.assert_array_equal(scene.hull_vertices, scene.geometry.vertices[hull])
+    np.testing.assert_array_equal(scene.hull_actor, scene.geometry.vertex_actor[hull])
+    scene.hull_vertices, scene.hull_actor = scene.geometry.vertices, scene.geometry.vertex_actor  # every vertex
     every = project_actors(scene, camera, cam_to_world)
     assert fast.valid.sum() > 20 and (~fast.valid).sum() > 5  # boxes for some, none for others behind
     np.testing.assert_array_equal(fast.valid, every.valid)

@@ -8,7 +8,14 @@ import pytest
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
-from pipeline.world.actor_casts import BOX_MARGIN, actor_pairs, cell_lists, listed_actor_pairs, nearest_actor_hits
+from pipeline.world.actor_casts import (
+    BOX_MARGIN,
+    actor_grid,
+    actor_pairs,
+    cell_lists,
+    grid_actor_pairs,
+    nearest_actor_hits,
+)
 from pipeline.world.actors import Actors, unit_to_world
 from pipeline.world.scene import FrameScene, StaticScene
 
@@ -84,36 +91,54 @@ def test_shadow_segments_through_and_beside_an_actor():
     assert scene.occluded_rays(rays, 1.0, actor_rays=np.array([True, True, True])).tolist() == [True, False, False]
 
 
-def test_listed_pairs_are_actor_pairs_of_the_listed_actors():
-    """listed_actor_pairs against actor_pairs: with every actor listed for one cell, the same arrays; with each
-    ray's cell listing some actors, exactly actor_pairs' pairs of those actors, in the same order."""
-    rng = np.random.default_rng(5)
-    boxes = _boxes(rng, 25)
+def _box_entry(rays: np.ndarray, affine: np.ndarray, rows: np.ndarray, actor: np.ndarray) -> np.ndarray:
+    """(P,) float64 t >= 0 at which each ray rows[p] enters actor[p]'s grown unit box (brute force, float64)."""
+    half = 0.5 + BOX_MARGIN
+    m = affine[actor]
+    inv = np.linalg.inv(m[:, :, :3])
+    o = np.einsum("pij,pj->pi", inv, rays[rows, :3].astype(np.float64) - m[:, :, 3])
+    d = np.einsum("pij,pj->pi", inv, rays[rows, 3:].astype(np.float64))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (-half - o) / d, (half - o) / d
+    return np.maximum(np.where(d == 0, -np.inf, np.minimum(t0, t1)).max(axis=1), 0.0)
+
+
+@pytest.mark.parametrize("spread_m", [40.0, 600.0])  # one cell's worth of actors; a grid of many cells
+def test_grid_pairs_are_actor_pairs(spread_m):
+    """grid_actor_pairs against actor_pairs: without a limit, the same arrays (pairs, order, unit-frame rays); with
+    a limit per ray, exactly the pairs whose box the ray enters by the limit, and none entered beyond its margin."""
+    rng = np.random.default_rng(int(spread_m))
+    n = 300
+    centre = np.column_stack([rng.uniform(-spread_m, spread_m, (n, 2)), rng.uniform(0.0, 2.0, n)])
+    boxes = Boxes3D(centre, rng.uniform(0.5, 12.0, (n, 3)), rng.uniform(-np.pi, np.pi, n))
     affine = unit_to_world(boxes)
-    inv, centre = np.ascontiguousarray(np.linalg.inv(affine[:, :, :3])), np.ascontiguousarray(affine[:, :, 3])
+    inv, c = np.ascontiguousarray(np.linalg.inv(affine[:, :, :3])), np.ascontiguousarray(affine[:, :, 3])
     radius = 0.5 * np.linalg.norm(boxes.size, axis=1) * (1 + 2 * BOX_MARGIN) + 1e-6
-    d = rng.normal(size=(3000, 3))
-    rays = np.concatenate([rng.uniform(-30, 30, (3000, 3)), d / np.linalg.norm(d, axis=1, keepdims=True)],
-                          axis=1).astype(np.float32)
-    rows, actors = np.arange(0, 3000, 3), np.arange(25)[::-1].copy()  # actors in a non-trivial order
-    full = actor_pairs(rays, rows, actors, inv, centre, radius)
-    start, item = cell_lists(1, 1, np.array([[0, 1, 0, 1]] * 25))
-    assert item.tolist() == list(range(25))
-    one_cell = listed_actor_pairs(rays, rows, actors, inv, centre, radius, np.zeros(len(rows), np.int64), start, item)
-    for a, b in zip(full, one_cell, strict=True):
+    d = rng.normal(size=(6000, 3))
+    d[:2000, 2] *= 0.05  # near-horizontal rays cross many cells
+    d[2000:2100, :2] = 0.0  # vertical ones a single cell
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    origins = np.concatenate([rng.uniform(-spread_m, spread_m, (3000, 3)) * [1, 1, 0.01],
+                              np.repeat(centre[:6], 500, axis=0)])  # some inside actors, sharing origins
+    rays = np.concatenate([origins, d], axis=1).astype(np.float32)
+    rows, actors = np.arange(0, 6000, 2), np.sort(rng.choice(n, 250, replace=False))
+    grid = actor_grid(c, radius, actors)
+    full = actor_pairs(rays, rows, actors, inv, c, radius)
+    unlimited = grid_actor_pairs(rays, rows, actors, inv, c, radius, np.full(len(rows), np.inf), *grid)
+    assert len(full[0]) > 500
+    for a, b in zip(full, unlimited, strict=True):
         np.testing.assert_array_equal(a, b)
-    # Two cells: cell 0 lists the actors at even positions, cell 1 those at odd ones; rays alternate cells.
-    spans = np.array([[p % 2, p % 2 + 1, 0, 1] for p in range(25)])
-    start, item = cell_lists(2, 1, spans)
-    assert item[start[0]:start[1]].tolist() == list(range(0, 25, 2))
-    row_cell = np.arange(len(rows)) % 2
-    pair_row, pair_actor, local = listed_actor_pairs(rays, rows, actors, inv, centre, radius, row_cell, start, item)
-    position = {int(a): p for p, a in enumerate(actors)}
-    keep = np.array([position[int(a)] % 2 == r % 2 for r, a in zip(full[0], full[1], strict=True)])
-    assert keep.sum() > 50 and (~keep).sum() > 50
-    np.testing.assert_array_equal(pair_row, full[0][keep])
-    np.testing.assert_array_equal(pair_actor, full[1][keep])
-    np.testing.assert_array_equal(local, full[2][keep])
+    limit = rng.uniform(0.0, 30.0, len(rows))
+    pair_row, pair_actor, _ = grid_actor_pairs(rays, rows, actors, inv, c, radius, limit, *grid)
+    entry = _box_entry(rays, affine, rows[full[0]], full[1])
+    within = entry <= limit[full[0]]
+    beyond = entry > limit[full[0]] * 1.001 + 0.01
+    kept = np.isin(np.arange(len(full[0])), np.flatnonzero(~beyond)) & ~within
+    assert within.sum() > 100 and beyond.sum() > 100
+    got = set(zip(pair_row.tolist(), pair_actor.tolist(), strict=True))
+    assert {(int(r), int(a)) for r, a in zip(full[0][within], full[1][within], strict=True)} <= got
+    assert got <= {(int(r), int(a)) for r, a in zip(full[0][within | kept], full[1][within | kept], strict=True)}
+    assert np.all(np.diff(pair_row) >= 0)
 
 
 def test_cell_lists_clip_spans_and_keep_items_ascending():

@@ -221,6 +221,31 @@ def test_sun_actor_candidates_keep_every_ray_an_actor_blocks(seed):
     assert cand.mean() < 0.5
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_sun_disc_candidates_hold_each_directions_candidates(seed):
+    """Rays along the 16 directions over a (here widened) sun's disc, all in one grid: every ray that the actors
+    block is a candidate, so the masked shadow test equals the unmasked one; and they still leave most rays out."""
+    from pipeline.sensors.shadows import sun_disc
+
+    rng = np.random.default_rng(seed)
+    n = 60
+    size = rng.uniform([0.5, 0.5, 1.2], [12.0, 2.6, 3.6], (n, 3))
+    centre = np.column_stack([rng.uniform(-80, 80, (n, 2)), size[:, 2] / 2])
+    actors = Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, Boxes3D(centre, size, rng.uniform(-np.pi, np.pi, n)),
+                    rng.uniform(0, 1, (n, 3)))
+    scene = FrameScene(StaticScene([ground()]), actors, threads=1)
+    points = np.column_stack([rng.uniform(-90, 90, (20000, 2)), rng.choice([0.01, 0.5, 2.0, 4.0], 20000)])
+    points = points.astype(np.float32)
+    disc = sun_disc(sun_towards(rng.uniform(5.0, 60.0), rng.uniform(-180.0, 180.0)), np.radians(3.0))
+    which = rng.integers(0, len(disc), len(points))
+    cand = scene.sun_disc_actor_candidates(*points.T, disc, which)
+    rays = np.column_stack([points, disc[which]]).astype(np.float32)
+    by_actors = FrameScene(StaticScene([]), actors, threads=1).occluded_rays(rays)
+    assert by_actors.any() and not (by_actors & ~cand).any()
+    np.testing.assert_array_equal(scene.occluded_rays(rays, actor_rays=cand), scene.occluded_rays(rays))
+    assert cand.mean() < 0.5
+
+
 @pytest.mark.parametrize("material", ["foliage", "building"])
 def test_static_foliage_gets_smooth_normals(material):
     """A ray at an icosahedron of foliage gets the corners' normals interpolated at the hit (on a regular
@@ -253,3 +278,33 @@ def test_static_foliage_gets_smooth_normals(material):
     expected /= np.linalg.norm(expected, axis=1, keepdims=True)
     np.testing.assert_allclose(hits.normal, expected, atol=1e-4)
     assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", hits.normal, face_n[face]), -1, 1))).max() > 10.0
+
+
+def test_sun_footprints_are_each_runs_projected_bounds():
+    """The compiled footprint pass against its definition: along_sun of every vertex, then min and max per run
+    (numpy's reduceat), to the bit."""
+    from pipeline.world.scene import _run_bounds_along_sun
+    from pipeline.world.sunmap import along_sun
+
+    rng = np.random.default_rng(3)
+    vertices = rng.uniform(-800, 800, (5000, 3)) * [1, 1, 0.01]
+    starts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, 5000), 40, replace=False))])
+    for slope in (np.array([0.3, -1.7]), np.zeros(2)):
+        flat = np.column_stack(along_sun(*vertices.T, slope))
+        lo, hi = _run_bounds_along_sun(vertices, starts, *slope)
+        np.testing.assert_array_equal(lo, np.minimum.reduceat(flat, starts, axis=0))
+        np.testing.assert_array_equal(hi, np.maximum.reduceat(flat, starts, axis=0))
+
+
+def test_frame_scene_hull_vertices_are_the_placed_meshes_on_the_hull():
+    """FrameScene places only the hull vertices per frame: the same numbers, in the same order, as those of the
+    whole placed meshes (geometry, placed on demand)."""
+    rng = np.random.default_rng(8)
+    n = 30
+    actors = Actors(np.arange(1, n + 1), [list(ObjectClass)[i] for i in rng.integers(0, 7, n)],
+                    Boxes3D(rng.uniform(-50, 50, (n, 3)), rng.uniform(0.5, 12, (n, 3)), rng.uniform(-3, 3, n)),
+                    rng.uniform(0, 1, (n, 3)))
+    scene = FrameScene(StaticScene([]), actors, active=rng.uniform(size=n) < 0.7)
+    hull = scene.geometry.vertex_on_hull
+    np.testing.assert_array_equal(scene.hull_vertices, scene.geometry.vertices[hull])
+    np.testing.assert_array_equal(scene.hull_actor, scene.geometry.vertex_actor[hull])
