@@ -28,7 +28,7 @@ from pipeline.sensors.exposure import auto_exposure
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
 from pipeline.sensors.post import apply_post, motion_flow
 from pipeline.sensors.rain import streak_coverage
-from pipeline.sensors.shading import _materials, shade, sky, to_srgb8
+from pipeline.sensors.shading import shade, shading_materials, sky, to_srgb8
 from pipeline.sensors.shadows import (
     SHADOW_FILTER_DEPTH,
     SHADOW_FILTER_NORMAL_COS,
@@ -151,7 +151,7 @@ def render_camera(
     if reflection is not None and len(samples) == 1:
         reflection.apply(radiance)
     if condition.visibility_m is not None:  # lamps glow through fog and rain
-        glowing = hits.hit & _materials()["glows"][hits.material]
+        glowing = hits.hit & shading_materials()["glows"][hits.material]
         condition.halos(radiance, np.where(hits.hit, hits.t_m, np.inf), glowing, (h, w), camera.fy)
     radiance = radiance.reshape(h, w, 3)
     if exposure is None:

@@ -88,7 +88,7 @@ def shade(
     (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
     wet sheen add theirs with numpy.
     """
-    mats = _materials()
+    mats = shading_materials()
     if pixel_angle_rad > 0:
         hits = dataclasses.replace(hits, color=textured_albedo(rays, hits.t_m, hits.hit, hits.instance_id,
                                                                hits.material, hits.normal, hits.color, pixel_angle_rad))
@@ -139,7 +139,9 @@ def shade(
     return out
 
 
-def _materials() -> dict[str, np.ndarray]:
+def shading_materials() -> dict[str, np.ndarray]:
+    """The material tables (:func:`pipeline.world.materials.material_arrays`) with ``glows``: (M,) bool, the
+    materials that glow or are lit by their own lamp (emissive, NIGHT_GLOWS, NIGHT_LIT)."""
     mats = material_arrays()
     lights = [material_index(n) for n in (*NIGHT_GLOWS, *NIGHT_LIT)]
     mats["glows"] = (mats["emissive"].max(axis=1) > 0) | np.isin(np.arange(len(mats["specular"])), lights)
