@@ -10,6 +10,12 @@ Writes, into ``--out`` (atomically): ``metrics.json`` (every episode's metrics, 
 ``report.md``, a plot per condition (``plots/CONDITION.png``) and ``meta.json``; with ``--record``, each episode as
 a simulated run under ``episodes/`` (``roadsynth render`` and ``export`` read it; Foxglove through the MCAP export).
 
+An experiment is hours of CPU: each finished episode is kept in ``OUT.partial/`` (its row, and its recording with
+``--record``) beside the output, so an interrupted run resumes where it stopped when the same command is run again.
+The kept rows are used only while the settings an episode depends on are unchanged (the config without its
+name, description and lists, and the detector file's bytes: :func:`episode_fingerprint`); otherwise, or with
+``--restart``, they are discarded. ``OUT.partial/`` is removed once ``OUT`` is written.
+
 This module is the command's: it sits in ``pipeline/envs/`` because it drives the environment (the layer above
 the stages); the CLI loads it by name like the stage modules.
 """
@@ -17,8 +23,11 @@ the stages); the CLI loads it by name like the stage modules.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import logging
+import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +42,7 @@ log = logging.getLogger(__name__)
 
 HELP = "drive each episode on ground truth and on perception; compare safety and progress per condition"
 INPUT_ARGS = ("config",)
-INTERRUPT_HINT = "the output is as it was; rerun to start again"
+INTERRUPT_HINT = "the output is as it was; finished episodes are kept in OUT.partial/: rerun to resume"
 MODES = ("ground_truth", "perceived")
 _LEADER = NEIGHBOUR_SLOTS.index("leader")
 _AHEAD = [NEIGHBOUR_SLOTS.index(s) for s in ("left_leader", "leader", "right_leader")]  # what a front camera sees
@@ -47,6 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder (replaced atomically)")
     parser.add_argument("--record", action="store_true", help="also record every episode as a simulated run (with "
                         "--executor ray, --out must be on storage every worker shares)")
+    parser.add_argument("--restart", action="store_true", help="discard the episodes an interrupted run kept in "
+                        "OUT.partial/ and run all again")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_executor_arguments(parser)
 
@@ -121,17 +132,59 @@ def episode_row(config: ClosedLoopConfig, config_file: Path, scenario: str, seed
     """One episode as a row of metrics.json: a task of :func:`closedloop`, here or on a Ray worker (which loads the
     detector itself: a session does not travel)."""
     detector = load_detector(config.detector, config_file) if mode == "perceived" else None
+    if record is not None and record.exists():  # what an interrupted attempt at this episode left
+        shutil.rmtree(record)
     episode, reason = run_episode(config, scenario, seed, condition, detector, record)
     return {"scenario": Path(scenario).stem, "seed": seed, "condition": Path(condition).stem, "mode": mode,
             "end": reason, "steps": len(episode.speed_mps), "metrics": episode_metrics(episode)}
 
 
+def episode_fingerprint(config: ClosedLoopConfig, config_file: Path) -> str:
+    """What an episode's row depends on besides its (scenario, seed, condition, mode): the config without its name,
+    description and lists, and the detector file's (or model folder's) bytes. Rows kept by an interrupted run are
+    reused only under the same fingerprint. Code changes are not in it: after one, resume with ``--restart``."""
+    fields = config.model_dump(exclude={"name", "description", "scenarios", "seeds", "conditions"})
+    digest = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
+    _, _, path = config.detector.partition(":")
+    target = Path(path) if Path(path).is_absolute() else (config_file.parent / path)
+    for file in sorted(target.rglob("*")) if target.is_dir() else [target]:
+        if file.is_file():
+            digest.update(file.name.encode())
+            with file.open("rb") as handle:
+                for block in iter(lambda: handle.read(1 << 20), b""):
+                    digest.update(block)
+    return digest.hexdigest()
+
+
+def _partial_folder(out: Path, fingerprint: str, restart: bool) -> Path:
+    """``OUT.partial/``, emptied when ``restart`` or when it was kept under another fingerprint."""
+    partial = out.with_name(out.name + ".partial")
+    stamp = partial / "fingerprint.txt"
+    if partial.exists() and (restart or not stamp.is_file() or stamp.read_text().strip() != fingerprint):
+        if not restart:
+            log.warning("%s holds episodes of other settings: starting again", partial)
+        shutil.rmtree(partial)
+    (partial / "rows").mkdir(parents=True, exist_ok=True)
+    if not stamp.is_file():
+        stamp.write_text(fingerprint + "\n")
+    return partial
+
+
+def _keep_row(partial: Path, name: str, row: dict) -> None:
+    """Write one finished episode's row (atomically: a row file is whole or absent)."""
+    target = partial / "rows" / f"{name}.json"
+    tmp = target.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(_finite(row), sort_keys=True))
+    os.replace(tmp, target)
+
+
 def closedloop(config: ClosedLoopConfig, config_file: Path, out: Path, *, record: bool = False,
-               progress: bool = True, executor: ExecutorSpec | None = None) -> dict:
+               progress: bool = True, executor: ExecutorSpec | None = None, restart: bool = False) -> dict:
     """Run every episode twice and write the outputs into ``out`` (see the module docstring); returns metrics.
     ``executor``: where the episodes run (:mod:`pipeline.stages.executor`: here, one after the other, by default; on
     Ray, each in a fresh worker process, as libsumo runs one simulation per process); the rows keep the config's
-    order either way, so the outputs are the same."""
+    order either way, so the outputs are the same. Episodes an interrupted run kept in ``OUT.partial/`` are not run
+    again (``restart``: they are)."""
     from tqdm import tqdm
 
     from pipeline.stages.common import atomic_output_dir, write_json, write_meta
@@ -139,25 +192,47 @@ def closedloop(config: ClosedLoopConfig, config_file: Path, out: Path, *, record
 
     executor = executor or ExecutorSpec("local")
     load_detector(config.detector, config_file)  # a missing or bad detector fails before any episode runs
+    out = Path(out)
+    partial = _partial_folder(out, episode_fingerprint(config, config_file), restart)
     episodes = [(s, n, c) for s in config.scenarios for n in config.seeds for c in config.conditions]
+    names, rows_by_name, tasks = [], {}, []
+    for scenario, seed, condition in episodes:
+        for mode in MODES:
+            name = f"{Path(scenario).stem}-{seed}-{Path(condition).stem}-{mode}"
+            names.append(name)
+            kept = partial / "rows" / f"{name}.json"
+            if kept.is_file() and (not record or (partial / "episodes" / name).is_dir()):
+                rows_by_name[name] = json.loads(kept.read_text())
+                continue
+            tasks.append(Task(name, episode_row, (config, config_file, scenario, seed, condition, mode,
+                                                  partial / "episodes" / name if record else None),
+                              fresh_process=True))
+    if rows_by_name:
+        log.info("resuming: %d of %d episodes were kept in %s", len(rows_by_name), len(names), partial)
+    bar = tqdm(total=len(names), initial=len(rows_by_name), disable=not progress, desc="closed-loop episodes",
+               unit="episode")
+
+    def done(i: int, row: dict) -> None:
+        _keep_row(partial, tasks[i].label, row)
+        bar.update()
+
+    for task, row in zip(tasks, run_tasks(tasks, executor, on_done=done, hint="finished episodes are kept in "
+                                          f"{partial}: rerun to resume", noun="episodes"), strict=True):
+        rows_by_name[task.label] = json.loads(json.dumps(_finite(row), sort_keys=True))  # as a kept row reads
+    bar.close()
+    rows = [rows_by_name[name] for name in names]
     with atomic_output_dir(out) as tmp:
-        tasks = []
-        for scenario, seed, condition in episodes:
-            for mode in MODES:
-                name = f"{Path(scenario).stem}-{seed}-{Path(condition).stem}-{mode}"
-                tasks.append(Task(name, episode_row, (config, config_file, scenario, seed, condition, mode,
-                                                      tmp / "episodes" / name if record else None),
-                                  fresh_process=True))
-        bar = tqdm(total=len(tasks), disable=not progress, desc="closed-loop episodes", unit="episode")
-        rows = run_tasks(tasks, executor, on_done=lambda i, row: bar.update(), hint="nothing was written",
-                         noun="episodes")
-        bar.close()
         comparisons = _comparisons(rows)
         metrics = {"episodes": rows, "comparisons": comparisons, "metric_names": list(METRICS)}
         write_json(tmp / "metrics.json", _finite(metrics))
         (tmp / "report.md").write_text(_report(config, rows, comparisons))
         _plots(comparisons, tmp / "plots")
+        if record:
+            (tmp / "episodes").mkdir()
+            for name in names:
+                shutil.copytree(partial / "episodes" / name, tmp / "episodes" / name)
         write_meta(tmp, stage="closedloop", config=config.model_dump(), seed=None)
+    shutil.rmtree(partial)
     return metrics
 
 
@@ -243,7 +318,7 @@ def main(args: argparse.Namespace) -> int:
 
     config, path = load_config(ClosedLoopConfig, args.config, "closedloop")
     metrics = closedloop(config, path, args.out, record=args.record, progress=not args.no_progress,
-                         executor=executor_from_args(args))
+                         executor=executor_from_args(args), restart=args.restart)
     for key, table in metrics["comparisons"].items():
         if "/" not in key:
             brief = {c["metric"]: c["difference"] for c in table}

@@ -121,9 +121,11 @@ class LaneChoice:
 
 
 def mobil(speed_mps: float, ego_length_m: float, neighbours: dict[str, Neighbour], side: int, idm: IdmParams,
-          params: MobilParams) -> LaneChoice:
+          params: MobilParams, observed=NEIGHBOUR_SLOTS) -> LaneChoice:
     """MOBIL's verdict on changing to the lane on ``side`` (+1 left, -1 right), from the neighbour slots (centre
-    offsets along the road) of the current and the target lane (see the module docstring)."""
+    offsets along the road) of the current and the target lane (see the module docstring). ``observed``: the slots
+    the observation can fill at all (its sensors' coverage); a change is unsafe when the target lane's follower
+    slot is not among them, since an empty slot there does not mean an empty lane."""
     if side not in (1, -1):
         raise ValueError(f"side: expected +1 (left) or -1 (right), got {side!r}")
     prefix = "left_" if side == 1 else "right_"
@@ -145,7 +147,7 @@ def mobil(speed_mps: float, ego_length_m: float, neighbours: dict[str, Neighbour
                       None if new_leader is None else new_leader.speed_mps)
     gain = a_ego_new - a_ego
     others = 0.0
-    safe = a_ego_new > -math.inf  # no overlap with the new leader
+    safe = a_ego_new > -math.inf and prefix + "follower" in observed  # no overlap; the lane behind is seen
     if new_follower is not None:
         before = accel(new_follower.speed_mps, gap(new_leader, new_follower.ds_m, new_follower.length_m),
                        None if new_leader is None else new_leader.speed_mps)
@@ -174,6 +176,8 @@ class ReferenceDriver:
         k_lat, d_lat: the lateral PD gains (1/s^2, 1/s), as :class:`pipeline.envs.MetaActions`'.
         cooldown_s: least time between two lane changes.
         settled_m: a new change waits until the ego is this close to its target lane's centre.
+        observed_slots: the neighbour slots the observation can fill (all for ground truth; a front camera's
+            perception fills only the leaders): no change to a lane whose follower slot is not observed.
     """
 
     idm: IdmParams = field(default_factory=IdmParams)
@@ -184,6 +188,7 @@ class ReferenceDriver:
     d_lat: float = 1.6
     cooldown_s: float = 4.0
     settled_m: float = 0.3
+    observed_slots: tuple[str, ...] = NEIGHBOUR_SLOTS
     target_offset_m: float = 0.0
     since_change_s: float = math.inf
     last_offset_m: float = 0.0
@@ -218,7 +223,7 @@ class ReferenceDriver:
         lon = idm_accel(speed, self.idm, gap, None if leader is None else leader.speed_mps)
         settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m
         if settled and self.since_change_s >= self.cooldown_s and lane_width_m > 0:
-            choices = [mobil(speed, self.ego_length_m, neighbours, side, self.idm, self.mobil)
+            choices = [mobil(speed, self.ego_length_m, neighbours, side, self.idm, self.mobil, self.observed_slots)
                        for side in (1, -1) if lane_drivable(side)]
             best = max((c for c in choices if c.change), key=lambda c: c.incentive, default=None)
             if best is not None:
@@ -230,7 +235,9 @@ class ReferenceDriver:
 
 class ReferenceAgent:
     """:class:`ReferenceDriver` as an agent of a :class:`pipeline.envs.RoadsynthEnv` (or a wrapper of one):
-    ``act(obs)`` gives the env's action. Lane widths and which lanes exist come from the env (map knowledge)."""
+    ``act(obs)`` gives the env's action. Lane widths and which lanes exist come from the env (map knowledge), and
+    which neighbour slots its observation can fill from the env's ``observed_slots`` where a wrapper declares it
+    (:class:`pipeline.envs.perception.PerceivedFeatures`: the leaders only), all six otherwise."""
 
     def __init__(self, env, driver: ReferenceDriver | None = None) -> None:
         self.env = env
@@ -240,6 +247,11 @@ class ReferenceAgent:
         inner = self.env.unwrapped
         self.driver.ego_length_m = inner.ego_length_m()
         self.driver.dt_s = inner.sim.step_length_s
+        try:
+            observed = self.env.get_wrapper_attr("observed_slots")
+        except AttributeError:
+            observed = NEIGHBOUR_SLOTS
+        self.driver.observed_slots = tuple(observed)
         self.driver.reset(obs)
 
     def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:

@@ -128,7 +128,14 @@ class PerceivedFeatures(gym.Wrapper):
         detector: as :class:`Perception`'s.
         tracker: the tracker's parameters (``dt_s`` is set to the env's step).
         max_detections: K, the rows of the ``detections`` observation.
+
+    ``observed_slots``: the neighbour slots this perception can fill at all. One front camera sees the leaders of
+    the three lanes, never the followers: their slots stay empty whatever is behind, and an agent must not read
+    an empty follower slot as an empty lane (:class:`pipeline.envs.driver.ReferenceAgent` does not change lanes
+    into a lane it cannot see behind).
     """
+
+    observed_slots = ("left_leader", "leader", "right_leader")
 
     def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
                  max_detections: int = 32) -> None:

@@ -92,6 +92,46 @@ def test_a_bad_config_value_is_refused(tmp_path, capsys):
     assert cli_main(["closedloop", str(config), "--out", str(tmp_path / "o")]) == 2
 
 
+def test_an_interrupted_run_resumes_with_the_episodes_it_kept(run, monkeypatch):
+    """One episode fails: nothing is written to --out, the others are kept in OUT.partial/; the rerun runs only the
+    missing one and writes what an uninterrupted run writes. A changed setting discards what was kept."""
+    import pipeline.envs.closedloop as closedloop
+
+    root, out = run
+    resumed = root / "resumed"
+    config = root / "tiny.yaml"
+    real, ran = closedloop.episode_row, []
+
+    def failing(*args):
+        if args[-2:] == ("perceived", None) and args[3] == 2:  # seed 2's perceived episode
+            raise RuntimeError("interrupted")
+        ran.append(args[3:6])
+        return real(*args)
+
+    monkeypatch.setattr(closedloop, "episode_row", failing)
+    assert cli_main(["closedloop", str(config), "--out", str(resumed), "--no-progress"]) != 0
+    assert not resumed.exists() and len(ran) == 3
+    kept = sorted(p.name for p in (root / "resumed.partial" / "rows").iterdir())
+    assert kept == [f"highway-{n}-morning-{m}.json" for n, m in
+                    [(1, "ground_truth"), (1, "perceived"), (2, "ground_truth")]]
+
+    ran.clear()
+    monkeypatch.setattr(closedloop, "episode_row", lambda *args: ran.append(args[3:6]) or real(*args))
+    assert cli_main(["closedloop", str(config), "--out", str(resumed), "--no-progress"]) == 0
+    assert ran == [(2, "morning", "perceived")] and not (root / "resumed.partial").exists()
+    local, again = (json.loads((d / "metrics.json").read_text()) for d in (out, resumed))
+    assert again["episodes"] == local["episodes"] and again["comparisons"] == local["comparisons"]
+
+    # kept rows of other settings are not reused
+    partial = root / "changed.partial"
+    (partial / "rows").mkdir(parents=True)
+    (partial / "fingerprint.txt").write_text("another config\n")
+    (partial / "rows" / "highway-1-morning-perceived.json").write_text("{}")
+    ran.clear()
+    assert cli_main(["closedloop", str(config), "--out", str(root / "changed"), "--no-progress"]) == 0
+    assert len(ran) == 4 and not partial.exists()
+
+
 def test_on_ray_the_episodes_give_the_local_runs_metrics(run):
     # Each episode in a fresh Ray worker process: the same rows, in the config's order, as one after the other here.
     ray = pytest.importorskip("ray")

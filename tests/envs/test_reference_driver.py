@@ -62,6 +62,31 @@ def test_mobil_keeps_right_when_nothing_is_gained():
     assert left.incentive == pytest.approx(-params.keep_right_bias_mps2) and not left.change
 
 
+def test_mobil_does_not_change_into_a_lane_it_cannot_see_behind():
+    # A front camera's perception fills only the leaders: an empty left-follower slot there is not an empty lane.
+    front_camera = ("left_leader", "leader", "right_leader")
+    blind = mobil(25.0, 4.5, _slow_leader(), +1, IDM, MobilParams(), front_camera)
+    seen = mobil(25.0, 4.5, _slow_leader(), +1, IDM, MobilParams(), NEIGHBOUR_SLOTS)
+    assert seen.change and not blind.safe and not blind.change
+    assert blind.incentive == pytest.approx(seen.incentive)  # it would gain as much; it is the safety that fails
+
+
+def test_the_reference_agent_takes_the_observed_slots_from_a_perception_wrapper():
+    class FrontCamera(gym.Wrapper):
+        observed_slots = ("left_leader", "leader", "right_leader")
+
+    env = gym.make("roadsynth/Scenario-v0", scenario="highway", vehicles=20, warmup_s=5.0, time_limit_s=1.0)
+    try:
+        obs, _ = env.reset(seed=1)
+        plain, wrapped = ReferenceAgent(env), ReferenceAgent(FrontCamera(env))
+        plain.reset(obs)
+        wrapped.reset(obs)
+        assert plain.driver.observed_slots == NEIGHBOUR_SLOTS
+        assert wrapped.driver.observed_slots == FrontCamera.observed_slots
+    finally:
+        env.close()
+
+
 def test_politeness_counts_the_old_followers_gain():
     # Behind the ego a follower is held up: leaving its lane frees it; with politeness the incentive grows.
     follower = Neighbour(ds_m=-12.0, speed_mps=25.0, length_m=4.5)
