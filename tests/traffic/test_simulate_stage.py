@@ -90,11 +90,36 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     assert len(departs) == config.demand.pedestrians + config.demand.standing_pedestrians
     stops = list(ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("stop"))
     assert 0 < len(stops) <= config.demand.standing_pedestrians  # those who stand first
+    # Those standing now stand on their sidewalk (SUMO draws them 3 m to the right of its centre line, in the verge).
+    lanes = list(ET.parse(tmp_path / "urban" / "network.net.xml").getroot().iter("lane"))
+    shapes = {lane.get("id"): np.array([[float(v) for v in xy.split(",")[:2]] for xy in lane.get("shape").split()])
+              for lane in lanes}
+    widths = {lane.get("id"): float(lane.get("width", "3.2")) for lane in lanes}
+    rows = traj.set_index(["actor_id", "frame"])
+    checked = 0
+    for person in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person"):
+        stop = person.find("stop")
+        depart = float(person.get("depart"))
+        if stop is None or not depart + 0.5 <= 30.0 <= depart + float(stop.get("duration")) - 0.5:
+            continue
+        row = rows.loc[(person.get("id"), 0)]
+        assert row["speed_mps"] == 0.0
+        lane = stop.get("lane")
+        assert _distance_to_polyline((row["x_m"], row["y_m"]), shapes[lane]) < 0.5 * widths[lane]
+        checked += 1
+    assert checked > 0
     last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
     assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")
     assert tls["tls_id"].nunique() == stats["network"]["traffic_lights"]
     assert set("".join(tls["state"])) <= set("rRyYgGuoOs")
+
+
+def _distance_to_polyline(point, polyline: np.ndarray) -> float:
+    p = np.asarray(point, np.float64)
+    a, b = polyline[:-1], polyline[1:]
+    t = np.clip(np.einsum("ij,ij->i", p - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a), 1e-12), 0, 1)
+    return float(np.min(np.linalg.norm(a + t[:, None] * (b - a) - p, axis=1)))
 
 
 def test_recorded_command_line_names_the_program_not_its_path():
