@@ -258,12 +258,17 @@ class Condition:
         camera_xyz_m: np.ndarray,
         street_lights_m: np.ndarray | None = None,
         ego_size_m: tuple[float, float, float] | None = None,
+        *,
+        ego_lamp_pair: bool = False,
     ) -> SpotLights:
-        """The spot lights of one frame: the ego's and other vehicles' headlights, the nearest street lamps."""
+        """The spot lights of one frame: the ego's and other vehicles' headlights, the nearest street lamps.
+        ``ego_lamp_pair``: the ego's two headlamps apart (the beams in fog, seen from just behind them), not as one
+        light between them (enough for what they light)."""
         parts = []
         if self.headlights is not None:
             if self.headlights.ego:
-                parts.append(ego_headlights(ego_pose, self.headlights, *(() if ego_size_m is None else (ego_size_m,))))
+                parts.append(ego_headlights(ego_pose, self.headlights, *(() if ego_size_m is None else (ego_size_m,)),
+                                            pair=ego_lamp_pair))
             if self.headlights.others:
                 parts.append(vehicle_headlights(actors, self.headlights, camera_xyz_m, ego_pose.rotation[:, 0]))
         if self.street_lamps is not None and street_lights_m is not None:

@@ -58,6 +58,7 @@ from pipeline.world.scene import FrameScene, Hits, take_columns
 # metres on the two cones are indistinguishable, and it halves the work.
 HEADLIGHT_UNIT_XYZ = np.array([0.5, 0.0, -0.09])
 HEADLIGHT_AHEAD_M = 0.1  # lights sit just ahead of the lamp plaques, so a car never shadows its own beam
+HEADLAMP_INSET_M = 0.3  # a lamp's centre from the car's side (where the pair is drawn apart: ego_headlights)
 LIT_CLASSES = (ObjectClass.CAR, ObjectClass.VAN, ObjectClass.TRUCK, ObjectClass.BUS, ObjectClass.MOTORCYCLE)
 DEFAULT_EGO_SIZE_M = (4.5, 1.8, 1.5)
 MIN_DISTANCE_M = 0.5  # the inverse-square law is clamped closer than this
@@ -184,14 +185,24 @@ def _headlight_spots(position: np.ndarray, axis: np.ndarray, up: np.ndarray, lam
                   cfg.horizontal_floor)
 
 
-def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT_EGO_SIZE_M) -> SpotLights:
-    """The ego's low beams (one light of two lamps); ``ego_pose`` maps the ego frame (origin at its box centre)
-    to the world. No shadow rays: the camera sits next to the lamps, so it sees almost none of their shadows.
+def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT_EGO_SIZE_M, *,
+                   pair: bool = False) -> SpotLights:
+    """The ego's low beams (one light of two lamps; ``pair``: the two lamps, HEADLAMP_INSET_M in from the car's
+    sides, as the air in front of them shows them: the beams in fog); ``ego_pose`` maps the ego frame (origin at
+    its box centre) to the world. No shadow rays: the camera sits next to the lamps, so it sees almost none of their
+    shadows.
     """
-    local = HEADLIGHT_UNIT_XYZ * np.asarray(ego_size_m, np.float64) + [HEADLIGHT_AHEAD_M, 0.0, 0.0]
+    size = np.asarray(ego_size_m, np.float64)
+    local = HEADLIGHT_UNIT_XYZ * size + [HEADLIGHT_AHEAD_M, 0.0, 0.0]
     fwd = ego_pose.rotation[:, 0]
-    axis, up = _beam_axes(np.array([np.arctan2(fwd[1], fwd[0])]), cfg.pitch_down_deg)
-    return _headlight_spots(ego_pose.apply(local[None]), axis, up, np.array([2.0]), cfg, False)
+    yaw = np.arctan2(fwd[1], fwd[0])
+    if not pair:
+        axis, up = _beam_axes(np.array([yaw]), cfg.pitch_down_deg)
+        return _headlight_spots(ego_pose.apply(local[None]), axis, up, np.array([2.0]), cfg, False)
+    side = 0.5 * size[1] - HEADLAMP_INSET_M
+    lamps = np.array([local + [0.0, side, 0.0], local - [0.0, side, 0.0]])
+    axis, up = _beam_axes(np.array([yaw, yaw]), cfg.pitch_down_deg)
+    return _headlight_spots(ego_pose.apply(lamps), axis, up, np.array([1.0, 1.0]), cfg, False)
 
 
 def vehicle_headlights(
@@ -291,6 +302,24 @@ class PointGrid:
         return np.arange(int(lengths.sum())) + offsets
 
 
+def spot_strength(lights: SpotLights, k: int, v: list[np.ndarray], d2: np.ndarray, axial: np.ndarray) -> np.ndarray:
+    """(M,) float32 irradiance of light ``k`` at M points in units of its ``rgb`` (on a surface facing it): the
+    cone's soft edge, the range window, the inverse square (clamped at MIN_DISTANCE_M) and the beam pattern.
+    ``v``: the three (M,) float32 components of each point's offset to the light; ``d2`` (M,) its square length;
+    ``axial`` (M,) > 0 the point's distance ahead of the light along its axis."""
+    left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
+    # Tangents of the angles to the left of and above the axis (v points from the point to the light).
+    tan_left = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / axial
+    tan_above = -(v[0] * up[0] + v[1] * up[1] + v[2] * up[2]) / axial
+    a = tan_left * np.float32(1.0 / lights.tan_h[k])
+    b = tan_above / np.where(tan_above > 0, np.float32(lights.tan_up[k]), np.float32(lights.tan_v[k]))
+    edge = np.clip((1.0 - np.sqrt(a * a + b * b)) * np.float32(1.0 / lights.soft[k]), 0.0, 1.0)
+    window = np.clip(1.0 - (d2 * np.float32(1.0 / lights.range_m[k] ** 2)) ** 2, 0.0, 1.0) ** 2
+    strength = edge * edge * (3.0 - 2.0 * edge) * window / np.maximum(d2, np.float32(MIN_DISTANCE_M ** 2))
+    strength *= beam_pattern(tan_left, tan_above, lights, k)
+    return strength
+
+
 def light_radiance(
     scene: FrameScene,
     rays: np.ndarray,
@@ -341,17 +370,8 @@ def light_radiance(
             continue
         cand, d2, axial, n_dot_v = cand[ok], d2[ok], axial[ok], n_dot_v[ok]
         v, nv = [c[ok] for c in v], [c[ok] for c in nv]
-        left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
-        # Tangents of the angles to the left of and above the axis (v points from the surface to the light).
-        tan_left = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / axial
-        tan_above = -(v[0] * up[0] + v[1] * up[1] + v[2] * up[2]) / axial
-        a = tan_left * np.float32(1.0 / lights.tan_h[k])
-        b = tan_above / np.where(tan_above > 0, np.float32(lights.tan_up[k]), np.float32(lights.tan_v[k]))
-        edge = np.clip((1.0 - np.sqrt(a * a + b * b)) * np.float32(1.0 / lights.soft[k]), 0.0, 1.0)
-        window = np.clip(1.0 - (d2 * np.float32(1.0 / lights.range_m[k] ** 2)) ** 2, 0.0, 1.0) ** 2
         inv_d = 1.0 / np.sqrt(d2)
-        strength = edge * edge * (3.0 - 2.0 * edge) * window / np.maximum(d2, np.float32(MIN_DISTANCE_M ** 2))
-        strength *= beam_pattern(tan_left, tan_above, lights, k)
+        strength = spot_strength(lights, k, v, d2, axial)
         # Drop pairs whose light is negligible (below MIN_IRRADIANCE on a white surface, highlights and the most
         # a retroreflector can return included).
         gain = 1.0 + np.take(retro, cand) * np.float32(RETRO_PEAK)

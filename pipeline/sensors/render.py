@@ -22,6 +22,7 @@ import numpy as np
 
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.beams import beams
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.exposure import auto_exposure
@@ -150,9 +151,15 @@ def render_camera(
             reflection.apply(radiance, where if not camera.config.samples_everywhere else None)
     if reflection is not None and len(samples) == 1:
         reflection.apply(radiance)
-    if condition.visibility_m is not None:  # lamps glow through fog and rain
+    if condition.visibility_m is not None:  # lamps glow through fog and rain, and their beams show in it
+        ends = np.where(hits.hit, hits.t_m, np.inf)
         glowing = hits.hit & shading_materials()["glows"][hits.material]
-        condition.halos(radiance, np.where(hits.hit, hits.t_m, np.inf), glowing, (h, w), camera.fy)
+        condition.halos(radiance, ends, glowing, (h, w), camera.fy)
+        if len(lights):  # the ego's two headlamps apart: the camera sees the air just in front of them
+            in_air = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m,
+                                            ego_size_m, ego_lamp_pair=True)
+            radiance += beams(cam_to_world.translation, rays[:, 3:6], ends, (h, w), in_air,
+                              condition.extinction_per_m()) * np.float32(condition.exposure)
     radiance = radiance.reshape(h, w, 3)
     if exposure is None:
         exposure = auto_exposure(radiance, sensor, compensation, shaded_with=compensation)
