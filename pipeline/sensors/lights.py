@@ -48,6 +48,7 @@ import numpy as np
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config.sensors import HeadlightConfig, StreetLampConfig
 from pipeline.core.geometry import Transform
+from pipeline.core.jit import as_input, kernel
 from pipeline.core.photometry import lux_to_irradiance
 from pipeline.world.actors import Actors, unit_to_world
 from pipeline.world.materials import material_arrays
@@ -306,7 +307,9 @@ def spot_strength(lights: SpotLights, k: int, v: list[np.ndarray], d2: np.ndarra
     """(M,) float32 irradiance of light ``k`` at M points in units of its ``rgb`` (on a surface facing it): the
     cone's soft edge, the range window, the inverse square (clamped at MIN_DISTANCE_M) and the beam pattern.
     ``v``: the three (M,) float32 components of each point's offset to the light; ``d2`` (M,) its square length;
-    ``axial`` (M,) > 0 the point's distance ahead of the light along its axis."""
+    ``axial`` (M,) > 0 the point's distance ahead of the light along its axis. The numpy definition that the
+    compiled passes (:func:`_lit_pairs` for surfaces, :func:`pipeline.sensors.beams.spot_factor` for the air) repeat
+    and are tested against."""
     left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
     # Tangents of the angles to the left of and above the axis (v points from the point to the light).
     tan_left = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / axial
@@ -336,8 +339,10 @@ def light_radiance(
         rays: (N, 6) float32 [origin | unit direction], world. hits: their first hits.
         albedo: (N, 3) float32 per-hit albedo; specular, shininess: (N,) float32 per-hit Blinn-Phong terms.
 
-    Everything runs on contiguous float32 columns: a cheap test (range, in front of the light, facing it) on
-    each light's grid candidates, the cone and shading terms on the survivors only.
+    The hits are bucketed once (:class:`PointGrid`); per light, one compiled pass (:func:`_lit_pairs`) over its
+    grid candidates makes the cheap test (range, in front of the light, facing it), the cone, beam pattern and
+    shading terms, in the float32 arithmetic of :func:`spot_strength` and :func:`beam_pattern`; shadow rays then
+    drop the pairs an occluder hides.
     """
     n = len(rays)
     hit_idx = np.flatnonzero(hits.hit)
@@ -348,58 +353,128 @@ def light_radiance(
     px, py = ray[0] + ray[3] * t, ray[1] + ray[4] * t
     grid = PointGrid(px, py)
     src_all = hit_idx[grid.order]
-    # Sorted columns: position, normal, view direction (towards the camera).
-    pos = [np.take(c, grid.order) for c in (px, py, ray[2] + ray[5] * t)]
-    nrm = [np.take(hits.normal[:, k], src_all) for k in range(3)]
-    view = [-np.take(ray[3 + k], grid.order) for k in range(3)]
+    # Sorted (3, M) float32 rows: position, normal, view direction (towards the camera).
+    pos = np.stack([np.take(c, grid.order) for c in (px, py, ray[2] + ray[5] * t)])
+    nrm = np.stack([np.take(hits.normal[:, k], src_all) for k in range(3)]).astype(np.float32)
+    view = np.stack([-np.take(ray[3 + k], grid.order) for k in range(3)])
     retro = np.take(_RETRO, np.take(hits.material, src_all))
+    spec = as_input(specular, np.float32)
+    shine = as_input(shininess, np.float32)
     diffuse = [np.zeros(n, np.float32) for _ in range(3)]
-    shine = [np.zeros(n, np.float32) for _ in range(3)]
-    for k in range(len(lights)):  # loop over lights; every point in reach is vectorised
+    shiny = [np.zeros(n, np.float32) for _ in range(3)]
+    for k in range(len(lights)):  # loop over lights; every point in reach in one compiled pass
         cand = grid.query_cone(lights, k)
         if not len(cand):
             continue
-        lp, ax = lights.position_m[k].astype(np.float32), lights.axis[k].astype(np.float32)
-        v = [lp[c] - np.take(pos[c], cand) for c in range(3)]  # surface -> light, unnormalised
-        d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-        axial = -(v[0] * ax[0] + v[1] * ax[1] + v[2] * ax[2])
-        nv = [np.take(nrm[c], cand) for c in range(3)]
-        n_dot_v = nv[0] * v[0] + nv[1] * v[1] + nv[2] * v[2]
-        ok = np.flatnonzero((d2 < np.float32(lights.range_m[k] ** 2)) & (axial > 0) & (n_dot_v > 0))
-        if not len(ok):
+        kept, w, s, start, seg = _lit_pairs(as_input(cand, np.int64), pos, nrm, view, retro, src_all, spec, shine,
+                                            _light_params(lights, k))
+        if not len(kept):
             continue
-        cand, d2, axial, n_dot_v = cand[ok], d2[ok], axial[ok], n_dot_v[ok]
-        v, nv = [c[ok] for c in v], [c[ok] for c in nv]
-        inv_d = 1.0 / np.sqrt(d2)
-        strength = spot_strength(lights, k, v, d2, axial)
-        # Drop pairs whose light is negligible (below MIN_IRRADIANCE on a white surface, highlights and the most
-        # a retroreflector can return included).
-        gain = 1.0 + np.take(retro, cand) * np.float32(RETRO_PEAK)
-        bright = np.flatnonzero(strength * gain * np.float32(lights.rgb[k].max()) > MIN_IRRADIANCE)
-        if not len(bright):
-            continue
-        cand, strength, inv_d, n_dot_v = cand[bright], strength[bright], inv_d[bright], n_dot_v[bright]
-        v, nv = [c[bright] for c in v], [c[bright] for c in nv]
-        src = src_all[cand]
-        # Blinn-Phong: half vector between the light and view directions.
-        h = [v[c] * inv_d + np.take(view[c], cand) for c in range(3)]
-        n_dot_h = (nv[0] * h[0] + nv[1] * h[1] + nv[2] * h[2]) / np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]
-                                                                           + np.float32(1e-12))
-        spec = specular[src] * np.clip(n_dot_h, 0.0, 1.0) ** shininess[src]
-        w, s = strength * n_dot_v * inv_d, strength * spec
-        back = np.flatnonzero(np.take(retro, cand) > 0)  # retroreflectors: E_perp = strength
-        if len(back):
-            cos_alpha = (v[0][back] * np.take(view[0], cand[back]) + v[1][back] * np.take(view[1], cand[back])
-                         + v[2][back] * np.take(view[2], cand[back])) * inv_d[back]
-            w[back] += strength[back] * np.take(retro, cand[back]) * retro_angle_factor(cos_alpha)
+        src = src_all[kept]
         if lights.shadows[k]:
-            start = np.stack([np.take(pos[c], cand) + nv[c] * np.float32(2e-3) for c in range(3)], axis=1)
-            seg = np.stack(v, axis=1) * (1.0 - 0.05 * inv_d)[:, None]  # stop 5 cm short of the lamp
             # Directions span the segment to the light, so tfar = 1 covers exactly the part that can shadow.
             lit = ~scene.occluded_rays(np.concatenate([start, seg], axis=1), 1.0)
             src, w, s = src[lit], w[lit], s[lit]
         for c in range(3):  # ``src`` is unique within one light, so fancy-index accumulation is exact
             diffuse[c][src] += w * np.float32(lights.rgb[k, c])
-            shine[c][src] += s * np.float32(lights.rgb[k, c])
+            shiny[c][src] += s * np.float32(lights.rgb[k, c])
     albedo = cv2.split(np.ascontiguousarray(albedo, np.float32).reshape(-1, 1, 3))
-    return cv2.merge([albedo[c].reshape(-1) * diffuse[c] + shine[c] for c in range(3)]).reshape(-1, 3)
+    return cv2.merge([albedo[c].reshape(-1) * diffuse[c] + shiny[c] for c in range(3)]).reshape(-1, 3)
+
+
+# The float32 parameters of one light for _lit_pairs, in this order.
+_PARAMS = ("lp", "ax", "left", "up", "range2", "inv_tan_h", "tan_up", "tan_v", "inv_soft", "inv_range2", "min_d2",
+           "falloff", "atan_tan_up", "band", "spread", "inv_spread", "floor", "rgb_max", "min_irradiance",
+           "retro_peak")
+
+
+def _light_params(lights: SpotLights, k: int) -> np.ndarray:
+    """Light ``k``'s values as :func:`_lit_pairs` reads them (float32, rounded as :func:`spot_strength` and
+    :func:`beam_pattern` round them)."""
+    f32 = np.float32
+    left = np.cross(lights.up[k], lights.axis[k]).astype(np.float32)
+    spread = np.isfinite(lights.spread_h_rad[k])
+    values = [*lights.position_m[k].astype(np.float32), *lights.axis[k].astype(np.float32), *left,
+              *lights.up[k].astype(np.float32), f32(lights.range_m[k] ** 2), f32(1.0 / lights.tan_h[k]),
+              f32(lights.tan_up[k]), f32(lights.tan_v[k]), f32(1.0 / lights.soft[k]),
+              f32(1.0 / lights.range_m[k] ** 2), f32(MIN_DISTANCE_M ** 2), f32(lights.falloff[k]),
+              f32(np.arctan(lights.tan_up[k])), f32(lights.peak_band_rad[k]), f32(spread),
+              f32(1.0 / lights.spread_h_rad[k]) if spread else f32(0), f32(lights.floor_h[k]), f32(lights.rgb[k].max()),
+              f32(MIN_IRRADIANCE), f32(RETRO_PEAK)]
+    return np.array(values, np.float32)
+
+
+@kernel("Tuple((int64[::1], float32[::1], float32[::1], float32[:, ::1], float32[:, ::1]))(int64[::1], "
+        "float32[:, ::1], float32[:, ::1], float32[:, ::1], float32[::1], int64[::1], float32[::1], float32[::1], "
+        "float32[::1])")
+def _lit_pairs(cand, pos, nrm, view, retro, src_all, specular, shininess, p):
+    """One light's pairs with the hits ``cand`` (positions in the sorted (3, M) ``pos``, ``nrm``, ``view`` rows and
+    (M,) ``retro``; ``src_all`` maps them to hit indices for the (N,) ``specular`` and ``shininess``), the light's
+    values ``p`` (:func:`_light_params`). Keeps the pairs in range, in front of the light, facing it and bright
+    enough (:data:`MIN_IRRADIANCE` with highlights and retroreflection at their most), and gives each its diffuse
+    weight w (irradiance x n.l, plus retroreflection) and specular s per unit of the light's rgb, and the start and
+    segment of its shadow ray. The arithmetic is :func:`spot_strength`'s, :func:`beam_pattern`'s and
+    :func:`retro_angle_factor`'s, in float32, term by term."""
+    f = np.float32
+    count = cand.size
+    kept = np.empty(count, np.int64)
+    w_out = np.empty(count, np.float32)
+    s_out = np.empty(count, np.float32)
+    start = np.empty((count, 3), np.float32)
+    seg = np.empty((count, 3), np.float32)
+    n = 0
+    for q in range(count):
+        i = cand[q]
+        v0, v1, v2 = p[0] - pos[0, i], p[1] - pos[1, i], p[2] - pos[2, i]
+        d2 = v0 * v0 + v1 * v1 + v2 * v2
+        axial = -(v0 * p[3] + v1 * p[4] + v2 * p[5])
+        n0, n1, n2 = nrm[0, i], nrm[1, i], nrm[2, i]
+        n_dot_v = n0 * v0 + n1 * v1 + n2 * v2
+        if not (d2 < p[12] and axial > 0 and n_dot_v > 0):
+            continue
+        inv_d = f(1.0) / np.sqrt(d2)
+        tan_left = (v0 * p[6] + v1 * p[7] + v2 * p[8]) / axial
+        tan_above = -(v0 * p[9] + v1 * p[10] + v2 * p[11]) / axial
+        a = tan_left * p[13]
+        b = tan_above / (p[14] if tan_above > 0 else p[15])
+        edge = min(max((f(1.0) - np.sqrt(a * a + b * b)) * p[16], f(0.0)), f(1.0))
+        window = min(max(f(1.0) - (d2 * p[17]) * (d2 * p[17]), f(0.0)), f(1.0))
+        window = window * window
+        if edge <= 0 or window <= 0:  # outside the cone or at its range: no light (and nothing bright enough)
+            continue
+        strength = edge * edge * (f(3.0) - f(2.0) * edge) * window / max(d2, p[18])
+        pattern = f(1.0)
+        if p[19] > 0:
+            below = p[20] - np.arctan(tan_above)
+            pattern *= (p[21] / max(below, p[21])) ** p[19]
+        if p[22] > 0:
+            side = np.arctan(abs(tan_left)) * p[23]
+            pattern *= p[24] + (f(1) - p[24]) * np.exp(-side * side)
+        strength *= pattern
+        r = retro[i]
+        gain = f(1.0) + r * p[27]
+        if not strength * gain * p[25] > p[26]:
+            continue
+        h0, h1, h2 = v0 * inv_d + view[0, i], v1 * inv_d + view[1, i], v2 * inv_d + view[2, i]
+        n_dot_h = (n0 * h0 + n1 * h1 + n2 * h2) / np.sqrt(h0 * h0 + h1 * h1 + h2 * h2 + f(1e-12))
+        src = src_all[i]
+        spec = specular[src] * min(max(n_dot_h, f(0.0)), f(1.0)) ** shininess[src]
+        w = strength * n_dot_v * inv_d
+        if r > 0:  # retroreflectors: E_perp = strength
+            cos_alpha = (v0 * view[0, i] + v1 * view[1, i] + v2 * view[2, i]) * inv_d
+            alpha = np.arccos(min(max(cos_alpha, f(-1.0)), f(1.0)))
+            ratio = alpha * f(1.0 / RETRO_WIDTH_RAD)
+            factor = f(RETRO_REFERENCE_RAD) / max(alpha, f(RETRO_MIN_RAD)) * np.exp(-ratio * ratio)
+            w += strength * r * factor
+        kept[n] = i
+        w_out[n] = w
+        s_out[n] = strength * spec
+        start[n, 0] = pos[0, i] + n0 * f(2e-3)
+        start[n, 1] = pos[1, i] + n1 * f(2e-3)
+        start[n, 2] = pos[2, i] + n2 * f(2e-3)
+        stop = f(1.0) - f(0.05) * inv_d  # stop 5 cm short of the lamp
+        seg[n, 0] = v0 * stop
+        seg[n, 1] = v1 * stop
+        seg[n, 2] = v2 * stop
+        n += 1
+    return kept[:n].copy(), w_out[:n].copy(), s_out[:n].copy(), start[:n].copy(), seg[:n].copy()

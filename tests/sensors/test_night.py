@@ -269,3 +269,36 @@ def test_lit_windows_glow_with_the_lamps_only_when_lights_are_on():
         out, off = (shade(lit_scene, rays, lit_scene.cast_rays(rays), c) for c in (cond, dark))
         added = albedo * np.asarray(rgb) * cond.lamp_glow * cond.exposure if glows else np.zeros(3)
         np.testing.assert_allclose(out[0] - off[0], added, rtol=1e-5, atol=1e-7)
+
+
+def test_the_compiled_light_pass_is_the_numpy_definition_term_by_term():
+    """_lit_pairs against spot_strength (cone, window, inverse square, beam pattern) times n.l / d, for the ego's
+    low beams and a street lamp, on random hits: the same float32 values where both keep a pair."""
+    from pipeline.sensors.lights import _light_params, _lit_pairs, spot_strength
+
+    condition = get_condition("night")
+    lights = ego_headlights(Transform.from_xyz_rpy([0.0, 0.0, 0.75], [0.0, 0.0, 0.2]), condition.headlights)
+    lights = lights.concatenate([lights, street_lamp_lights(np.array([[12.0, 4.0, 6.7]]), condition.street_lamps,
+                                                            np.zeros(3))])
+    rng = np.random.default_rng(3)
+    m = 20000
+    pos = rng.uniform([-2, -15, 0], [60, 15, 3], (m, 3)).astype(np.float32).T.copy()
+    nrm = rng.normal(size=(m, 3)).astype(np.float32)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = nrm.T.copy()
+    view = -pos / np.linalg.norm(pos, axis=0, keepdims=True)
+    retro = np.zeros(m, np.float32)
+    specular, shininess = np.zeros(m, np.float32), np.ones(m, np.float32)
+    everyone = np.arange(m, dtype=np.int64)
+    for k in range(len(lights)):
+        kept, w, s, start, seg = _lit_pairs(everyone, pos, nrm, view.astype(np.float32), retro, everyone, specular,
+                                            shininess, _light_params(lights, k))
+        assert len(kept) > 100 and not s.any()
+        v = [np.float32(lights.position_m[k, c]) - pos[c, kept] for c in range(3)]
+        d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        axial = -(v[0] * np.float32(lights.axis[k, 0]) + v[1] * np.float32(lights.axis[k, 1])
+                  + v[2] * np.float32(lights.axis[k, 2]))
+        n_dot_v = nrm[0, kept] * v[0] + nrm[1, kept] * v[1] + nrm[2, kept] * v[2]
+        want = spot_strength(lights, k, v, d2, axial) * n_dot_v * (1.0 / np.sqrt(d2))
+        assert np.allclose(w, want, rtol=2e-6, atol=0)
+        assert np.allclose(seg, np.stack(v, axis=1) * (1.0 - 0.05 / np.sqrt(d2))[:, None], rtol=1e-6)
