@@ -302,3 +302,4 @@ def test_the_compiled_light_pass_is_the_numpy_definition_term_by_term():
         want = spot_strength(lights, k, v, d2, axial) * n_dot_v * (1.0 / np.sqrt(d2))
         assert np.allclose(w, want, rtol=2e-6, atol=0)
         assert np.allclose(seg, np.stack(v, axis=1) * (1.0 - 0.05 / np.sqrt(d2))[:, None], rtol=1e-6)
+        assert np.array_equal(start, (pos[:, kept] + nrm[:, kept] * np.float32(2e-3)).T)
