@@ -34,7 +34,7 @@ import numpy as np
 
 from pipeline.core.config import load_config
 from pipeline.core.config.closedloop import ClosedLoopConfig
-from pipeline.envs.closedloop_metrics import METRICS, EpisodeLog, compare, episode_metrics
+from pipeline.envs.closedloop_metrics import METRICS, EpisodeLog, compare, episode_metrics, holds_leader
 from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
 from pipeline.stages.executor import ExecutorSpec
 
@@ -116,9 +116,9 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
             obs, _, terminated, truncated, info = env.step(agent.act(obs))
             truth = info["ground_truth"]["neighbours"] if detector is not None else obs["neighbours"]
             lid, gap, closing = _leader(env, truth) if not (terminated or truncated) else ("", np.nan, np.nan)
-            episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
-                        bool(obs["neighbours"][_LEADER, _COL["present"]] > 0.5))
             columns = [_COL["present"], _COL["ds_m"], _COL["dv_mps"]]
+            episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
+                        holds_leader(truth[_LEADER, columns], obs["neighbours"][_LEADER, columns]))
             episode.add_slots(truth[_AHEAD][:, columns], obs["neighbours"][_AHEAD][:, columns])
             if terminated or truncated:
                 episode.collided = info.get("reason") == "collision"

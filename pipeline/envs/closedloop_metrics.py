@@ -11,7 +11,9 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
   collision as safety indicators", Accident Analysis & Prevention 35);
 - ``hard_brakes``: events of deceleration beyond 4 m/s^2 (``HARD_BRAKE_MPS2``; one event per run of steps);
 - ``first_tracked_range_m``: the median over leaders of the ground-truth gap at which the agent's observation
-  first held each new leader (perceived runs; with ground truth, the range it appears in the observation);
+  first held each new leader (perceived runs; with ground truth, the range it appears in the observation). The
+  observation holds the leader when its leader slot is filled within LEADER_MATCH_SHARE of the true leader's offset
+  along the road (at least LEADER_MATCH_M; :func:`holds_leader`): a false track in the slot is not the leader;
 - ``mean_speed_mps`` and ``progress_m``;
 - the perception's own errors on the three leader slots (the front camera's view; :meth:`EpisodeLog.add_slots`):
   ``slot_missed_share`` (slots the ground truth fills and the observation leaves empty, over those it fills),
@@ -32,6 +34,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 HARD_BRAKE_MPS2 = -4.0
+# The observed leader is the true one when its offset along the road is within this share of the true one's, or
+# this many metres (a track's position error grows with range: the LiDAR median sits on the visible surfaces).
+LEADER_MATCH_SHARE = 0.2
+LEADER_MATCH_M = 5.0
 TTC_CRITICAL_S = 1.5
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
            "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
@@ -70,6 +76,15 @@ class EpisodeLog:
         self.leader_gap_m.append(float(leader_gap_m) if leader_id else math.nan)
         self.leader_closing_mps.append(float(leader_closing_mps) if leader_id else math.nan)
         self.leader_seen.append(bool(leader_seen))
+
+
+def holds_leader(truth: np.ndarray, observed: np.ndarray) -> bool:
+    """Whether an observation's leader slot holds the true leader: both (present, ds, ...) rows filled and the
+    observed centre offset within max(LEADER_MATCH_M, LEADER_MATCH_SHARE x the true one) of the true one."""
+    if not (truth[0] > 0.5 and observed[0] > 0.5):
+        return False
+    tolerance = max(LEADER_MATCH_M, LEADER_MATCH_SHARE * abs(float(truth[1])))
+    return bool(abs(float(observed[1]) - float(truth[1])) <= tolerance)
 
 
 def _events(flags: np.ndarray) -> int:

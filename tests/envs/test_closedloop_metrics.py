@@ -40,6 +40,17 @@ def test_hard_brakes_count_events_not_steps():
     assert episode_metrics(_log([10.0] * 8, accels))["hard_brakes"] == 3.0
 
 
+def test_the_leader_is_held_only_by_a_track_where_it_is():
+    from pipeline.envs.closedloop_metrics import holds_leader
+
+    truth = np.array([1.0, 40.0, -2.0])
+    assert holds_leader(truth, np.array([1.0, 47.0, 0.0]))  # within 20 % of 40 m
+    assert not holds_leader(truth, np.array([1.0, 49.0, -2.0]))  # a false track further on
+    assert holds_leader(np.array([1.0, 10.0, 0.0]), np.array([1.0, 14.5, 0.0]))  # within 5 m near by
+    assert not holds_leader(truth, np.array([0.0, 40.0, -2.0]))  # nothing observed
+    assert not holds_leader(np.array([0.0, 0.0, 0.0]), np.array([1.0, 20.0, 0.0]))  # no leader to hold
+
+
 def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
     leader = [("a", 80.0, 0.0, False), ("a", 70.0, 0.0, False), ("a", 60.0, 0.0, True), ("a", 50.0, 0.0, True),
               ("b", 90.0, 0.0, False), ("b", 40.0, 0.0, True), ("", math.nan, math.nan, False)]
