@@ -178,9 +178,9 @@ def inscatter_tables(origin: np.ndarray, directions: np.ndarray, lights: SpotLig
     accumulated from the camera to each of the B + 1 distances ``edges`` (edges[0] = 0: zero), in the renderer's
     radiance units before the condition's exposure (see the module docstring). Each light is sampled along each ray
     within its range at points uniform in the angle they subtend at the light, ``samples`` to a half circle
-    (equiangular sampling:
-    dense where the ray passes the light, where the cone's edges and the phase change fastest, and exact for the
-    inverse square, whose closest approach is clamped at MIN_DISTANCE_M as the surfaces' shading clamps it)."""
+    (equiangular sampling: dense where the ray passes the light, where the cone's edges and the phase change
+    fastest, and exact for the inverse square, whose closest approach is clamped at MIN_DISTANCE_M as the surfaces'
+    shading clamps it), no sample standing for more than MAX_STRETCH_M or MAX_STRETCH_SHARE of its distance."""
     if not len(lights) or extinction_per_m <= 0 or not len(directions):
         return np.zeros((len(directions), len(edges), 3), np.float32)
     rows, rgb = light_table(lights, origin)
@@ -210,15 +210,12 @@ def beams(origin: np.ndarray, pixel_directions: np.ndarray, distance_m: np.ndarr
     dirs = np.asarray(pixel_directions, np.float32).reshape(h, w, 3)[rows][:, cols].reshape(-1, 3)
     tables = inscatter_tables(o, dirs, lights, extinction_per_m, edges).reshape(len(rows), len(cols), -1, 3)
     # Each pixel: its distance's place between two edges, in the four tables around it.
-    t = np.minimum(np.where(np.isfinite(distance_m), distance_m, np.inf), edges[-1]).astype(np.float32)
+    t = np.minimum(np.asarray(distance_m, np.float32), edges[-1])  # a ray to the sky reads the table's end
     j = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(edges) - 2)
     frac = ((t - edges[j]) / (edges[j + 1] - edges[j])).astype(np.float32)[:, None]
     y, x = np.divmod(np.arange(h * w), w)
-    r1 = np.clip(np.searchsorted(rows, y, side="left"), 1, len(rows) - 1)
-    c1 = np.clip(np.searchsorted(cols, x, side="left"), 1, len(cols) - 1)
-    r0, c0 = r1 - 1, c1 - 1
-    wy = ((y - rows[r0]) / (rows[r1] - rows[r0])).astype(np.float32)[:, None]
-    wx = ((x - cols[c0]) / (cols[c1] - cols[c0])).astype(np.float32)[:, None]
+    r0, r1, wy = _between(rows, y)
+    c0, c1, wx = _between(cols, x)
 
     def at(r, c):
         low, high = tables[r, c, j], tables[r, c, j + 1]
@@ -227,3 +224,13 @@ def beams(origin: np.ndarray, pixel_directions: np.ndarray, distance_m: np.ndarr
     top = at(r0, c0) * (1 - wx) + at(r0, c1) * wx
     bottom = at(r1, c0) * (1 - wx) + at(r1, c1) * wx
     return (top * (1 - wy) + bottom * wy).astype(np.float32)
+
+
+def _between(grid: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each of ``at`` (pixel rows or columns), the grid entries on either side (indices) and the (K, 1) float32
+    weight of the second; a single-entry grid gives that entry, weight 0."""
+    second = np.clip(np.searchsorted(grid, at, side="left"), 0, len(grid) - 1)
+    first = np.maximum(second - 1, 0)
+    span = grid[second] - grid[first]
+    weight = np.where(span > 0, (at - grid[first]) / np.maximum(span, 1), 0.0)
+    return first, second, weight.astype(np.float32)[:, None]

@@ -150,3 +150,11 @@ def test_no_lights_or_no_fog_scatter_nothing():
     d = np.array([[1.0, 0.0, 0.0]], np.float32)
     assert not beams(np.zeros(3), d, np.array([50.0], np.float32), (1, 1), lights, 0.0).any()
     assert not beams(np.zeros(3), d, np.array([50.0], np.float32), (1, 1), lights.empty(), 0.02).any()
+
+
+def test_an_image_of_one_row_reads_its_own_tables():
+    lights = _lamp_above(2.0, 10.0)
+    d = np.array([[1.0, 0.0, 0.0], [1.0, 0.1, 0.0], [1.0, 0.2, 0.0]], np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    out = beams(np.zeros(3), d, np.full(3, 30.0, np.float32), (1, 3), lights, 0.01, step=2)
+    assert np.isfinite(out).all() and (out > 0).all() and out[0, 0] > out[2, 0]
