@@ -43,9 +43,15 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
+def _default_interrupt() -> None:
+    """In the child: Ctrl-C as a user's terminal delivers it. A suite started as a background job of a shell without
+    job control (`.ci/run &`, nohup) inherits SIGINT ignored, and Python then installs no handler for it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(args: list[str], cwd: Path) -> subprocess.Popen:
     return subprocess.Popen([*CLI, *args], cwd=cwd, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=_default_interrupt)
 
 
 def _wait_for(condition: Callable[[], bool], proc: subprocess.Popen, timeout_s: float = 120.0) -> None:
