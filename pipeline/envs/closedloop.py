@@ -289,7 +289,8 @@ def _report(config: ClosedLoopConfig, rows: list[dict], comparisons: dict[str, l
 
 
 def _plots(comparisons: dict[str, list[dict]], folder: Path) -> None:
-    """One bar chart per condition: each metric's perceived and ground-truth means."""
+    """One figure per condition: per metric, the perceived and ground-truth means as bars, the perceived bar's whisker
+    the ground-truth mean plus the 95 % interval of the paired difference (where the difference is defined)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -299,17 +300,28 @@ def _plots(comparisons: dict[str, list[dict]], folder: Path) -> None:
     for key, table in comparisons.items():
         if "/" in key:
             continue
-        fig, axes = plt.subplots(1, len(table), figsize=(2.2 * len(table), 2.6))
-        for ax, c in zip(np.atleast_1d(axes), table, strict=True):
+        cols = 4
+        rows = -(-len(table) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.3 * rows), squeeze=False)
+        for ax, c in zip(axes.flat, table, strict=False):
             values = [v if v is not None and np.isfinite(v) else 0.0 for v in (c["perceived"], c["ground_truth"])]
             ax.bar([0, 1], values, color=["#c0504d", "#4f81bd"])
-            ax.set_ylim(min(0.0, *values) * 1.15, max(max(values) * 1.15, 1e-3))
-            ax.set_xticks([0, 1], ["perc.", "GT"])
-            ax.set_title(c["metric"].replace("_", " "), fontsize=7)
+            top = max(values)
+            interval = [c[k] for k in ("ci_low", "ci_high", "ground_truth")]
+            if all(v is not None and np.isfinite(v) for v in interval):
+                low, high = values[1] + c["ci_low"], values[1] + c["ci_high"]
+                ax.errorbar([0], [values[0]], yerr=[[max(values[0] - low, 0.0)], [max(high - values[0], 0.0)]],
+                            color="black", capsize=3, linewidth=1)
+                top = max(top, high)
+            ax.set_ylim(min(0.0, *values) * 1.15, max(top * 1.15, 1e-3))
+            ax.set_xticks([0, 1], ["perceived", "truth"])
+            ax.set_title(f"{c['metric'].replace('_', ' ')} (n {c['seeds']})", fontsize=8)
             ax.tick_params(labelsize=7)
-        fig.suptitle(f"{key}: perceived vs ground truth", fontsize=9)
+        for ax in list(axes.flat)[len(table):]:
+            ax.axis("off")
+        fig.suptitle(f"{key}: perceived vs ground truth (whisker: 95 % interval of the paired difference)", fontsize=9)
         fig.tight_layout()
-        fig.savefig(folder / f"{key}.png", dpi=110, metadata={"Software": "roadsynth closedloop"})
+        fig.savefig(folder / f"{key}.png", dpi=100, metadata={"Software": "roadsynth closedloop"})
         plt.close(fig)
 
 
