@@ -8,8 +8,8 @@ camera (single scattering):
     L = pi * sum over lights of  integral of  beta * p(theta) * E(x) * exp(-beta * (s + d(x))) ds
 
 with x the point at distance s along the ray, E(x) the light's irradiance there (the spot-light model of
-:mod:`pipeline.sensors.lights`: cone, soft edge, beam pattern, inverse square, range window:
-:func:`pipeline.sensors.lights.spot_strength`), d(x) its distance to the light, beta the air's extinction
+:mod:`pipeline.sensors.lights`: cone, soft edge, beam pattern, inverse square, range window; the surfaces' own
+:func:`pipeline.sensors.lights.cone_terms`), d(x) its distance to the light, beta the air's extinction
 (:meth:`pipeline.sensors.conditions.Condition.extinction_per_m`; water droplets absorb almost nothing at visible
 wavelengths, so they scatter all they remove), p the Henyey-Greenstein phase function with the asymmetry
 PHASE_ASYMMETRY of fog droplets, and theta the angle between the light's path and the way on to the camera. The
@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.core.jit import as_input, kernel
-from pipeline.sensors.lights import MIN_DISTANCE_M, SpotLights
+from pipeline.sensors.lights import MIN_DISTANCE_M, SpotLights, cone_terms, light_params
 
 # Fog droplets (effective radii ~5-15 um) at visible wavelengths: Henyey-Greenstein asymmetry g ~ 0.85 (Mie theory for
 # water clouds; Hansen and Travis 1974, "Light scattering in planetary atmospheres", Space Sci. Rev. 16, fig. 10).
@@ -60,49 +60,15 @@ def distance_edges(max_distance_m: float, bins: int = DISTANCE_BINS) -> np.ndarr
     return (max_distance_m * (np.arange(bins + 1, dtype=np.float64) / bins) ** 2).astype(np.float32)
 
 
-def light_table(lights: SpotLights, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The lights as the kernels read them: (L, LIGHT_FIELDS) float64 rows (position relative to ``origin``, axis,
-    up, then the cone and beam-pattern values of :class:`SpotLights`) and (L, 3) float32 rgb."""
-    rows = np.column_stack([lights.position_m - np.asarray(origin, np.float64), lights.axis, lights.up, lights.tan_h,
-                            lights.tan_v, lights.tan_up, lights.soft, lights.range_m, lights.peak_band_rad,
-                            lights.falloff, lights.spread_h_rad, lights.floor_h]).astype(np.float64)
-    return np.ascontiguousarray(rows.reshape(-1, LIGHT_FIELDS)), np.ascontiguousarray(lights.rgb, np.float32)
+def light_rows(lights: SpotLights, origin: np.ndarray) -> np.ndarray:
+    """(L, P) float32 the lights' values as :func:`pipeline.sensors.lights.cone_terms` reads them, their positions
+    relative to ``origin``."""
+    rows = np.stack([light_params(lights, k) for k in range(len(lights))]).astype(np.float32)
+    rows[:, :3] = (lights.position_m - np.asarray(origin, np.float64)).astype(np.float32)
+    return np.ascontiguousarray(rows)
 
 
-LIGHT_FIELDS = 18
-
-
-@kernel("float64(float64[::1], float64, float64, float64, float64)")
-def spot_factor(light, vx, vy, vz, d2):
-    """The direction and range factors of one light (a row of :func:`light_table`) at a point whose offset to the
-    light is (vx, vy, vz), ``d2`` its square length: the soft cone edge, the beam pattern and the range window, i.e.
-    :func:`pipeline.sensors.lights.spot_strength` without its inverse square (tested equal). 0 behind the light."""
-    axial = -(vx * light[3] + vy * light[4] + vz * light[5])
-    if axial <= 0.0 or d2 >= light[13] * light[13]:
-        return 0.0
-    # left = up x axis
-    lx = light[7] * light[5] - light[8] * light[4]
-    ly = light[8] * light[3] - light[6] * light[5]
-    lz = light[6] * light[4] - light[7] * light[3]
-    tan_left = (vx * lx + vy * ly + vz * lz) / axial
-    tan_above = -(vx * light[6] + vy * light[7] + vz * light[8]) / axial
-    a = tan_left / light[9]
-    b = tan_above / (light[11] if tan_above > 0.0 else light[10])
-    edge = min(max((1.0 - np.sqrt(a * a + b * b)) / light[12], 0.0), 1.0)
-    if edge <= 0.0:
-        return 0.0
-    window = min(max(1.0 - (d2 / (light[13] * light[13])) ** 2, 0.0), 1.0) ** 2
-    out = edge * edge * (3.0 - 2.0 * edge) * window
-    if light[15] > 0.0:  # the beam pattern's fall-off below the peak band
-        below = np.arctan(light[11]) - np.arctan(tan_above)
-        out *= (light[14] / max(below, light[14])) ** light[15]
-    if np.isfinite(light[16]):
-        side = np.arctan(abs(tan_left)) / light[16]
-        out *= light[17] + (1.0 - light[17]) * np.exp(-side * side)
-    return out
-
-
-@kernel("float32[:, :, ::1](float32[:, ::1], float64[:, ::1], float32[:, ::1], float32[::1], float64, float64, "
+@kernel("float32[:, :, ::1](float32[:, ::1], float32[:, ::1], float32[:, ::1], float32[::1], float64, float64, "
         "float64, int64)")
 def _tables(directions, lights, rgb, edges, beta, g, cos_min, samples):
     """See :func:`inscatter_tables`: per ray and light, points uniform in the angle they subtend at the light
@@ -115,7 +81,8 @@ def _tables(directions, lights, rgb, edges, beta, g, cos_min, samples):
     for i in range(m):
         dx, dy, dz = np.float64(directions[i, 0]), np.float64(directions[i, 1]), np.float64(directions[i, 2])
         for k in range(n):
-            px, py, pz, reach = lights[k, 0], lights[k, 1], lights[k, 2], lights[k, 13]
+            px, py, pz = np.float64(lights[k, 0]), np.float64(lights[k, 1]), np.float64(lights[k, 2])
+            reach = np.sqrt(np.float64(lights[k, 12]))  # the row holds range^2
             foot = px * dx + py * dy + pz * dz
             miss2 = max(px * px + py * py + pz * pz - foot * foot, 0.0)
             if miss2 >= reach * reach:
@@ -140,7 +107,12 @@ def _tables(directions, lights, rgb, edges, beta, g, cos_min, samples):
                     s = foot + gap * np.tan(lo + (r + 0.5) * sub)
                     vx, vy, vz = px - dx * s, py - dy * s, pz - dz * s
                     d2 = vx * vx + vy * vy + vz * vz
-                    factor = spot_factor(lights[k], vx, vy, vz, d2)
+                    axial = -(vx * lights[k, 3] + vy * lights[k, 4] + vz * lights[k, 5])
+                    if axial <= 0.0 or d2 >= lights[k, 12]:
+                        continue
+                    cone, pattern = cone_terms(lights[k], np.float32(vx), np.float32(vy), np.float32(vz),
+                                               np.float32(d2), np.float32(axial))
+                    factor = np.float64(cone) * np.float64(pattern)
                     if factor <= 0.0:
                         continue
                     dist = np.sqrt(d2)
@@ -183,9 +155,9 @@ def inscatter_tables(origin: np.ndarray, directions: np.ndarray, lights: SpotLig
     shading clamps it), no sample standing for more than MAX_STRETCH_M or MAX_STRETCH_SHARE of its distance."""
     if not len(lights) or extinction_per_m <= 0 or not len(directions):
         return np.zeros((len(directions), len(edges), 3), np.float32)
-    rows, rgb = light_table(lights, origin)
-    return _tables(as_input(directions, np.float32), rows, rgb, as_input(edges, np.float32), float(extinction_per_m),
-                   float(g), float(np.cos(np.radians(forward_lobe_deg))), int(samples))
+    rgb = np.ascontiguousarray(lights.rgb, np.float32)
+    return _tables(as_input(directions, np.float32), light_rows(lights, origin), rgb, as_input(edges, np.float32),
+                   float(extinction_per_m), float(g), float(np.cos(np.radians(forward_lobe_deg))), int(samples))
 
 
 def coarse_grid(height: int, width: int, step: int = COARSE_PX) -> tuple[np.ndarray, np.ndarray]:

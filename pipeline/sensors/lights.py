@@ -308,8 +308,7 @@ def spot_strength(lights: SpotLights, k: int, v: list[np.ndarray], d2: np.ndarra
     cone's soft edge, the range window, the inverse square (clamped at MIN_DISTANCE_M) and the beam pattern.
     ``v``: the three (M,) float32 components of each point's offset to the light; ``d2`` (M,) its square length;
     ``axial`` (M,) > 0 the point's distance ahead of the light along its axis. The numpy definition that the
-    compiled passes (:func:`_lit_pairs` for surfaces, :func:`pipeline.sensors.beams.spot_factor` for the air) repeat
-    and are tested against."""
+    compiled :func:`cone_terms` (the surfaces' and the air's passes) repeats and is tested against."""
     left, up = np.cross(lights.up[k], lights.axis[k]).astype(np.float32), lights.up[k].astype(np.float32)
     # Tangents of the angles to the left of and above the axis (v points from the point to the light).
     tan_left = (v[0] * left[0] + v[1] * left[1] + v[2] * left[2]) / axial
@@ -367,7 +366,7 @@ def light_radiance(
         if not len(cand):
             continue
         kept, w, s, start, seg = _lit_pairs(as_input(cand, np.int64), pos, nrm, view, retro, src_all, spec, shine,
-                                            _light_params(lights, k))
+                                            light_params(lights, k))
         if not len(kept):
             continue
         src = src_all[kept]
@@ -388,7 +387,7 @@ _PARAMS = ("lp", "ax", "left", "up", "range2", "inv_tan_h", "tan_up", "tan_v", "
            "retro_peak")
 
 
-def _light_params(lights: SpotLights, k: int) -> np.ndarray:
+def light_params(lights: SpotLights, k: int) -> np.ndarray:
     """Light ``k``'s values as :func:`_lit_pairs` reads them (float32, rounded as :func:`spot_strength` and
     :func:`beam_pattern` round them)."""
     f32 = np.float32
@@ -404,13 +403,40 @@ def _light_params(lights: SpotLights, k: int) -> np.ndarray:
     return np.array(values, np.float32)
 
 
+@kernel("UniTuple(float32, 2)(float32[::1], float32, float32, float32, float32, float32)")
+def cone_terms(p, v0, v1, v2, d2, axial):
+    """Light ``p``'s (:func:`light_params`) terms at a point whose offset to the light is (v0, v1, v2), ``d2`` its
+    square length and ``axial`` > 0 its distance ahead along the axis: (the cone's smoothstep edge x the range window,
+    the beam pattern), in :func:`spot_strength`'s float32 arithmetic (whose strength is the first over
+    max(d2, MIN_DISTANCE_M^2), times the second). (0, 0) outside the cone or at its range. Shared by the surfaces'
+    pass (:func:`_lit_pairs`) and the air's (:mod:`pipeline.sensors.beams`)."""
+    f = np.float32
+    tan_left = (v0 * p[6] + v1 * p[7] + v2 * p[8]) / axial
+    tan_above = -(v0 * p[9] + v1 * p[10] + v2 * p[11]) / axial
+    a = tan_left * p[13]
+    b = tan_above / (p[14] if tan_above > 0 else p[15])
+    edge = min(max((f(1.0) - np.sqrt(a * a + b * b)) * p[16], f(0.0)), f(1.0))
+    window = min(max(f(1.0) - (d2 * p[17]) * (d2 * p[17]), f(0.0)), f(1.0))
+    window = window * window
+    if edge <= 0 or window <= 0:
+        return f(0.0), f(0.0)
+    pattern = f(1.0)
+    if p[19] > 0:
+        below = p[20] - np.arctan(tan_above)
+        pattern *= (p[21] / max(below, p[21])) ** p[19]
+    if p[22] > 0:
+        side = np.arctan(abs(tan_left)) * p[23]
+        pattern *= p[24] + (f(1) - p[24]) * np.exp(-side * side)
+    return edge * edge * (f(3.0) - f(2.0) * edge) * window, pattern
+
+
 @kernel("Tuple((int64[::1], float32[::1], float32[::1], float32[:, ::1], float32[:, ::1]))(int64[::1], "
         "float32[:, ::1], float32[:, ::1], float32[:, ::1], float32[::1], int64[::1], float32[::1], float32[::1], "
         "float32[::1])")
 def _lit_pairs(cand, pos, nrm, view, retro, src_all, specular, shininess, p):
     """One light's pairs with the hits ``cand`` (positions in the sorted (3, M) ``pos``, ``nrm``, ``view`` rows and
     (M,) ``retro``; ``src_all`` maps them to hit indices for the (N,) ``specular`` and ``shininess``), the light's
-    values ``p`` (:func:`_light_params`). Keeps the pairs in range, in front of the light, facing it and bright
+    values ``p`` (:func:`light_params`). Keeps the pairs in range, in front of the light, facing it and bright
     enough (:data:`MIN_IRRADIANCE` with highlights and retroreflection at their most), and gives each its diffuse
     weight w (irradiance x n.l, plus retroreflection) and specular s per unit of the light's rgb, and the start and
     segment of its shadow ray. The arithmetic is :func:`spot_strength`'s, :func:`beam_pattern`'s and
@@ -433,23 +459,10 @@ def _lit_pairs(cand, pos, nrm, view, retro, src_all, specular, shininess, p):
         if not (d2 < p[12] and axial > 0 and n_dot_v > 0):
             continue
         inv_d = f(1.0) / np.sqrt(d2)
-        tan_left = (v0 * p[6] + v1 * p[7] + v2 * p[8]) / axial
-        tan_above = -(v0 * p[9] + v1 * p[10] + v2 * p[11]) / axial
-        a = tan_left * p[13]
-        b = tan_above / (p[14] if tan_above > 0 else p[15])
-        edge = min(max((f(1.0) - np.sqrt(a * a + b * b)) * p[16], f(0.0)), f(1.0))
-        window = min(max(f(1.0) - (d2 * p[17]) * (d2 * p[17]), f(0.0)), f(1.0))
-        window = window * window
-        if edge <= 0 or window <= 0:  # outside the cone or at its range: no light (and nothing bright enough)
+        cone, pattern = cone_terms(p, v0, v1, v2, d2, axial)
+        if cone <= 0:  # outside the cone or at its range: no light (and nothing bright enough)
             continue
-        strength = edge * edge * (f(3.0) - f(2.0) * edge) * window / max(d2, p[18])
-        pattern = f(1.0)
-        if p[19] > 0:
-            below = p[20] - np.arctan(tan_above)
-            pattern *= (p[21] / max(below, p[21])) ** p[19]
-        if p[22] > 0:
-            side = np.arctan(abs(tan_left)) * p[23]
-            pattern *= p[24] + (f(1) - p[24]) * np.exp(-side * side)
+        strength = cone / max(d2, p[18])
         strength *= pattern
         r = retro[i]
         gain = f(1.0) + r * p[27]

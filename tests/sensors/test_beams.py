@@ -13,11 +13,16 @@ from pipeline.sensors.beams import (
     distance_edges,
     henyey_greenstein,
     inscatter_tables,
-    light_table,
-    spot_factor,
 )
 from pipeline.sensors.conditions import get_condition
-from pipeline.sensors.lights import MIN_DISTANCE_M, ego_headlights, spot_strength, street_lamp_lights
+from pipeline.sensors.lights import (
+    MIN_DISTANCE_M,
+    cone_terms,
+    ego_headlights,
+    light_params,
+    spot_strength,
+    street_lamp_lights,
+)
 
 
 def _lamp_above(height_m: float, foot_m: float, intensity: float = 1000.0):
@@ -62,26 +67,25 @@ def test_the_closest_approach_is_clamped_as_the_surfaces_shading_clamps_it():
     assert near <= bound * 1.001 and near > 0.5 * bound
 
 
-def test_spot_factor_is_the_surfaces_spot_strength_without_the_inverse_square():
+def test_the_compiled_cone_is_the_surfaces_spot_strength_without_the_inverse_square():
     condition = get_condition("night")
     pose = Transform.from_xyz_rpy([3.0, -1.0, 0.75], [0.0, 0.0, 0.3])
     lights = ego_headlights(pose, condition.headlights)
     lights = lights.concatenate([lights, street_lamp_lights(np.array([[10.0, 5.0, 6.7]]), condition.street_lamps,
                                                             np.zeros(3))])
-    rows, _ = light_table(lights, np.zeros(3))
     rng = np.random.default_rng(0)
     points = rng.uniform([-5, -20, -1], [60, 20, 8], (4000, 3))
     for k in range(len(lights)):
+        p = light_params(lights, k)
         v = (lights.position_m[k] - points).astype(np.float32)
         d2 = (v * v).sum(axis=1)
         axial = -(v @ lights.axis[k].astype(np.float32))
-        front = axial > 0
+        front = np.flatnonzero((axial > 0) & (d2 < np.float32(lights.range_m[k] ** 2)))
         numpy = spot_strength(lights, k, [v[front, c] for c in range(3)], d2[front], axial[front])
         numpy = numpy * np.maximum(d2[front], np.float32(MIN_DISTANCE_M ** 2))
-        compiled = np.array([spot_factor(rows[k], *map(float, v[i]), float(d2[i])) for i in np.flatnonzero(front)])
+        compiled = np.array([np.prod(cone_terms(p, *v[i], d2[i], axial[i])) for i in front], np.float32)
         assert np.count_nonzero(compiled) > 50
-        assert np.allclose(compiled, numpy, rtol=1e-4, atol=1e-6)
-        assert all(spot_factor(rows[k], *map(float, v[i]), float(d2[i])) == 0 for i in np.flatnonzero(~front))
+        assert np.allclose(compiled, numpy, rtol=1e-5, atol=1e-7)
 
 
 def test_low_beams_in_fog_match_a_dense_quadrature_of_the_same_integrand():

@@ -274,7 +274,7 @@ def test_lit_windows_glow_with_the_lamps_only_when_lights_are_on():
 def test_the_compiled_light_pass_is_the_numpy_definition_term_by_term():
     """_lit_pairs against spot_strength (cone, window, inverse square, beam pattern) times n.l / d, for the ego's
     low beams and a street lamp, on random hits: the same float32 values where both keep a pair."""
-    from pipeline.sensors.lights import _light_params, _lit_pairs, spot_strength
+    from pipeline.sensors.lights import _lit_pairs, light_params, spot_strength
 
     condition = get_condition("night")
     lights = ego_headlights(Transform.from_xyz_rpy([0.0, 0.0, 0.75], [0.0, 0.0, 0.2]), condition.headlights)
@@ -292,7 +292,7 @@ def test_the_compiled_light_pass_is_the_numpy_definition_term_by_term():
     everyone = np.arange(m, dtype=np.int64)
     for k in range(len(lights)):
         kept, w, s, start, seg = _lit_pairs(everyone, pos, nrm, view.astype(np.float32), retro, everyone, specular,
-                                            shininess, _light_params(lights, k))
+                                            shininess, light_params(lights, k))
         assert len(kept) > 100 and not s.any()
         v = [np.float32(lights.position_m[k, c]) - pos[c, kept] for c in range(3)]
         d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
