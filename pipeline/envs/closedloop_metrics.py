@@ -14,6 +14,10 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
   first held each new leader (perceived runs; with ground truth, the range it appears in the observation). The
   observation holds the leader when its leader slot is filled within LEADER_MATCH_SHARE of the true leader's offset
   along the road (at least LEADER_MATCH_M; :func:`holds_leader`): a false track in the slot is not the leader;
+- ``leader_held_<lo>_<hi>m``: by the ground-truth leader's gap (bins of ``LEADER_RANGE_BINS_M``), the share of the
+  steps with the leader in that bin on which the observation held it: the lead vehicle's recall by range, from every
+  step rather than from the one step each leader is first seen (which depends on how each leader came to lead, and
+  on the ego's own driving: braking for a false track lets the leader draw away);
 - ``mean_speed_mps`` and ``progress_m``;
 - the perception's own errors on the three leader slots (the front camera's view; :meth:`EpisodeLog.add_slots`):
   ``slot_missed_share`` (slots the ground truth fills and the observation leaves empty, over those it fills),
@@ -39,8 +43,11 @@ HARD_BRAKE_MPS2 = -4.0
 LEADER_MATCH_SHARE = 0.2
 LEADER_MATCH_M = 5.0
 TTC_CRITICAL_S = 1.5
+# Gap bins of the leader's recall by range (m; the last closes at the features' default range, 100 m).
+LEADER_RANGE_BINS_M = (0.0, 20.0, 40.0, 60.0, 100.0)
+LEADER_HELD = tuple(f"leader_held_{lo:g}_{hi:g}m" for lo, hi in zip(LEADER_RANGE_BINS_M, LEADER_RANGE_BINS_M[1:]))
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
-           "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
+           *LEADER_HELD, "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
            "slot_dv_error_mps")
 
 
@@ -107,6 +114,12 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
         if lid and saw and lid not in seen:  # the first step the agent held this ground-truth leader
             seen.add(lid)
             first_ranges.append(g)
+    held = np.asarray(log.leader_seen, bool)
+    # The first bin takes a gap below its lower edge (bumpers overlapping in a collision), the last one above its
+    # upper edge (a leader the features hold beyond the default range).
+    bin_of = np.digitize(gap, LEADER_RANGE_BINS_M[1:-1])
+    by_range = {name: float(np.mean(held[np.isfinite(gap) & (bin_of == k)]))
+                if np.any(np.isfinite(gap) & (bin_of == k)) else math.nan for k, name in enumerate(LEADER_HELD)}
     km = progress / 1000.0
     slots = np.concatenate(log.slots) if log.slots else np.zeros((0, 2, 3))
     truth, seen = slots[:, 0, 0] > 0.5, slots[:, 1, 0] > 0.5
@@ -118,6 +131,7 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
         "share_ttc_below_1_5s": float(np.mean(ttc < TTC_CRITICAL_S)) if len(ttc) else 0.0,
         "hard_brakes": float(_events(np.asarray(log.accel_mps2) < HARD_BRAKE_MPS2)),
         "first_tracked_range_m": float(np.median(first_ranges)) if first_ranges else math.nan,
+        **by_range,
         "mean_speed_mps": float(speed.mean()) if len(speed) else math.nan,
         "progress_m": progress,
         "slot_missed_share": float(np.mean(~seen[truth])) if truth.any() else math.nan,

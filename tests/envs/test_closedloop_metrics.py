@@ -60,7 +60,8 @@ def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
 
 def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
     gt = [{"collisions_per_100km": 0.0, "min_ttc_s": 3.0, "share_ttc_below_1_5s": 0.0, "hard_brakes": 0.0,
-           "first_tracked_range_m": 80.0, "mean_speed_mps": 25.0, "progress_m": 750.0, "slot_missed_share": 0.0,
+           "first_tracked_range_m": 80.0, "leader_held_0_20m": 1.0, "leader_held_20_40m": 1.0,
+           "leader_held_40_60m": 1.0, "leader_held_60_100m": 1.0, "mean_speed_mps": 25.0, "progress_m": 750.0, "slot_missed_share": 0.0,
            "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0} for _ in range(5)]
     perceived = [{**m, "first_tracked_range_m": 80.0 - d, "min_ttc_s": math.inf if d == 30 else 2.0}
                  for m, d in zip(gt, (10, 20, 30, 40, 50), strict=True)]
@@ -92,3 +93,18 @@ def test_perception_errors_on_the_slots():
     assert m["slot_false_share"] == pytest.approx(1 / 3)  # 3 observed slots, 1 not in the truth
     assert m["slot_ds_error_m"] == pytest.approx(1.0) and m["slot_dv_error_mps"] == pytest.approx(0.5)
     assert math.isnan(episode_metrics(_log([10.0]))["slot_ds_error_m"])
+
+
+def test_the_leader_is_held_by_range_over_every_step_with_a_leader():
+    from pipeline.envs.closedloop_metrics import LEADER_HELD
+
+    assert LEADER_HELD == ("leader_held_0_20m", "leader_held_20_40m", "leader_held_40_60m", "leader_held_60_100m")
+    leader = [("a", 95.0, 0.0, False), ("a", 70.0, 0.0, False), ("a", 61.0, 0.0, True), ("a", 55.0, 0.0, False),
+              ("a", 45.0, 0.0, True), ("a", 40.0, 0.0, True), ("a", 19.9, 0.0, True), ("a", -0.5, 0.0, False),
+              ("", math.nan, math.nan, False), ("b", 120.0, 0.0, True)]
+    m = episode_metrics(_log([10.0] * len(leader), leader=leader))
+    assert m["leader_held_60_100m"] == pytest.approx(2 / 4)  # 95, 70 missed; 61 and 120 (beyond: last bin) held
+    assert m["leader_held_40_60m"] == pytest.approx(2 / 3)  # 40.0 falls in [40, 60)
+    assert m["leader_held_20_40m"] != m["leader_held_20_40m"]  # no step with a leader there: NaN
+    assert m["leader_held_0_20m"] == pytest.approx(1 / 2)  # an overlap (-0.5 m) counts in the first bin
+    assert all(math.isnan(episode_metrics(_log([10.0] * 3))[k]) for k in LEADER_HELD)
