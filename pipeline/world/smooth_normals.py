@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.core.jit import kernel
+
 CREASE_DEG = 35.0
 
 
@@ -35,21 +37,14 @@ def corner_normals(vertices: np.ndarray, triangles: np.ndarray, extent: np.ndarr
     face = np.cross(b - a, c - a)  # area-weighted
     length = np.linalg.norm(face, axis=1)
     unit = face / np.where(length > 0, length, 1.0)[:, None]
-    # Every pair of corners that share a vertex: (corner i, corner j) in one group per vertex.
+    # The corners grouped by vertex (sorted by vertex, stably); each corner sums the faces of its group's corners on
+    # its side of the crease.
     corner_vertex = tris.reshape(-1)
     corner_tri = np.repeat(np.arange(len(tris)), 3)
     order = np.argsort(corner_vertex, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(corner_vertex[order]) != 0])
-    sizes = np.diff(np.r_[starts, len(order)])
-    size_of = np.repeat(sizes, sizes)  # per sorted corner: its group's size
-    first_of = np.repeat(starts, sizes)
-    i = np.repeat(np.arange(len(order)), size_of)
-    offset = np.arange(len(i)) - np.repeat(np.cumsum(size_of) - size_of, size_of)
-    j = np.repeat(first_of, size_of) + offset
-    ti, tj = corner_tri[order[i]], corner_tri[order[j]]
-    same_side = np.einsum("ij,ij->i", unit[ti], unit[tj]) >= np.cos(np.radians(crease_deg))
-    summed = np.zeros((len(order), 3))
-    np.add.at(summed, i[same_side], face[tj[same_side]])
+    starts = np.r_[np.flatnonzero(np.r_[True, np.diff(corner_vertex[order]) != 0]), len(order)].astype(np.int64)
+    summed = _same_side_sums(np.ascontiguousarray(face), np.ascontiguousarray(unit), corner_tri[order],
+                             starts, float(np.cos(np.radians(crease_deg))))
     normal_metric = np.empty((len(order), 3))
     normal_metric[order] = summed
     normal_metric = normal_metric.reshape(-1, 3, 3)
@@ -70,3 +65,26 @@ def interpolate(corner: np.ndarray, uv: np.ndarray, face_normal: np.ndarray, dir
     flipped = np.einsum("ij,ij->i", n, directions) * np.einsum("ij,ij->i", face_normal, directions) < 0
     n[flipped] = face_normal[flipped]
     return n.astype(np.float32)
+
+
+@kernel("float64[:, ::1](float64[:, ::1], float64[:, ::1], int64[::1], int64[::1], float64)")
+def _same_side_sums(face, unit, tri_of, starts, cos_crease):
+    """Per corner (in the vertex-sorted order), the sum of the area-weighted ``face`` normals of the triangles
+    ``tri_of`` of its vertex group (``starts[g]`` .. ``starts[g + 1]`` - 1) whose ``unit`` normal lies within the
+    crease of its own (dot >= ``cos_crease``), added in the group's order."""
+    out = np.zeros((tri_of.size, 3))
+    for g in range(starts.size - 1):
+        lo, hi = starts[g], starts[g + 1]
+        for i in range(lo, hi):
+            ti = tri_of[i]
+            s0 = s1 = s2 = 0.0
+            for j in range(lo, hi):
+                tj = tri_of[j]
+                if unit[ti, 0] * unit[tj, 0] + unit[ti, 1] * unit[tj, 1] + unit[ti, 2] * unit[tj, 2] >= cos_crease:
+                    s0 += face[tj, 0]
+                    s1 += face[tj, 1]
+                    s2 += face[tj, 2]
+            out[i, 0] = s0
+            out[i, 1] = s1
+            out[i, 2] = s2
+    return out

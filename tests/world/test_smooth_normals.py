@@ -66,3 +66,32 @@ def test_sphere_hits_get_the_spheres_own_normal():
     faceted = flat.cast(origins, np.tile([1.0, 0.0, 0.0], (len(targets), 1)))
     flat_angle = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", faceted.normal[hits.hit], true), -1, 1)))
     assert flat_angle.max() > 4.0
+
+
+def test_corner_normals_equal_a_loop_over_each_vertexs_triangles():
+    """The compiled grouping against its definition written out: each corner's normal is the sum, in triangle order,
+    of the area-weighted normals of the triangles at its vertex within the crease of its own, scaled to the unit box
+    and normalised; on a sphere (smooth) and a cube (every edge a crease) sharing no vertex (within a float32 ulp or
+    two: the test's own norms may round otherwise)."""
+    sphere = uv_sphere(6, 10)
+    cube = np.array([[x, y, z] for x in (2.0, 3.0) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    cube_tris = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                          [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    vertices = np.vstack([sphere.vertices, cube])
+    tris = np.vstack([sphere.triangles, cube_tris + len(sphere.vertices)])[np.random.default_rng(3).permutation(
+        len(sphere.triangles) + len(cube_tris))]
+    extent = np.array([4.0, 2.0, 1.5])
+    metric = vertices * extent
+    face = np.cross(metric[tris[:, 1]] - metric[tris[:, 0]], metric[tris[:, 2]] - metric[tris[:, 0]])
+    unit = face / np.linalg.norm(face, axis=1, keepdims=True)
+    expected = np.zeros((len(tris), 3, 3))
+    for t, tri in enumerate(tris):
+        for k, v in enumerate(tri):
+            total = np.zeros(3)
+            for u in np.flatnonzero((tris == v).any(axis=1)):
+                if unit[t] @ unit[u] >= np.cos(np.radians(35.0)):
+                    total = total + face[u]
+            expected[t, k] = total * extent / np.linalg.norm(total * extent)
+    got = corner_normals(vertices, tris, extent)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2.5e-7)
+    assert corner_normals(vertices, tris[:0], extent).shape == (0, 3, 3)
