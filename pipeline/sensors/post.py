@@ -178,13 +178,28 @@ def motion_flow(points_cam: np.ndarray, shift_cam: np.ndarray, fx: float, fy: fl
     """(N, 2) float32 image motion (pixels, pinhole) of (N, 3) optical-frame points when the camera moves by
     ``shift_cam`` metres (optical frame) relative to them: (3,) for all, or (N, 3), one per point (a moving road
     user's points move with it); zero for points at infinity or that cross the near plane."""
-    p = np.asarray(points_cam, np.float64)
-    q = p - np.asarray(shift_cam, np.float64)
-    ok = np.isfinite(p).all(axis=1) & (p[:, 2] > 0.1) & (q[:, 2] > 0.1)
-    flow = np.zeros((len(p), 2), np.float32)
-    pz, qz = p[ok, 2], q[ok, 2]
-    flow[ok, 0] = fx * (q[ok, 0] / qz - p[ok, 0] / pz)
-    flow[ok, 1] = fy * (q[ok, 1] / qz - p[ok, 1] / pz)
+    p = as_input(np.asarray(points_cam).reshape(-1, 3), np.float64)
+    shift = as_input(np.asarray(shift_cam, np.float64).reshape(-1, 3), np.float64)
+    if len(shift) not in (1, len(p)):
+        raise ValueError(f"shift_cam: expected (3,) or ({len(p)}, 3), got {np.shape(shift_cam)}")
+    return _flow(p, shift, float(fx), float(fy))
+
+
+@kernel("float32[:, ::1](float64[:, ::1], float64[:, ::1], float64, float64)")
+def _flow(p, shift, fx, fy):
+    """:func:`motion_flow` in one pass, in its float64 arithmetic (q = p - shift; fx (q_x / q_z - p_x / p_z))."""
+    n = p.shape[0]
+    flow = np.zeros((n, 2), np.float32)
+    for i in range(n):
+        k = i if shift.shape[0] > 1 else 0
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)) or not pz > 0.1:
+            continue
+        qx, qy, qz = px - shift[k, 0], py - shift[k, 1], pz - shift[k, 2]
+        if not qz > 0.1:
+            continue
+        flow[i, 0] = np.float32(fx * (qx / qz - px / pz))
+        flow[i, 1] = np.float32(fy * (qy / qz - py / pz))
     return flow
 
 

@@ -70,18 +70,13 @@ class SunMap:
         t = SUN_TILE_CELLS
         lo = np.floor((flat_lo - 1.0) / t).astype(np.int64)
         hi = np.floor((flat_hi + 1.0) / t).astype(np.int64)
-        span = hi - lo + 1
-        count = span[:, 0] * span[:, 1]
-        owner = np.repeat(np.arange(len(triangles)), count)
-        k = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)  # position within each triangle's box
-        tile_i = lo[owner, 0] + k // span[owner, 1]
-        tile_j = lo[owner, 1] + k % span[owner, 1]
-        order = np.lexsort((tile_j, tile_i))
+        owner, code = _tile_entries(lo, hi)
+        order = np.argsort(code, kind="stable")  # by tile (i, j), each tile's triangles in their order
         self._entry_triangle = owner[order]
-        keys = np.column_stack([tile_i[order], tile_j[order]])
-        new = np.r_[True, np.any(keys[1:] != keys[:-1], axis=1)] if len(keys) else np.zeros(0, bool)
-        self._tile_codes = keys[new, 0] * (1 << 32) + keys[new, 1]  # the tiles (i, j) met, sorted, one int64 each
-        self._tile_start = np.r_[np.flatnonzero(new), len(keys)]
+        codes = code[order]
+        new = np.r_[True, codes[1:] != codes[:-1]] if len(codes) else np.zeros(0, bool)
+        self._tile_codes = codes[new]  # the tiles (i, j) met, sorted, one int64 each: i * 2^32 + j
+        self._tile_start = np.r_[np.flatnonzero(new), len(codes)]
         self._slot: dict[tuple[int, int], int] = {}
         self._tiles = np.full((16, t, t), -np.inf, np.float32)  # tiles drawn so far in slots 0 .. _drawn - 1
         self._drawn = 0
@@ -240,3 +235,22 @@ def _draw_tile(flat, z, triangles, i0, j0, side):
                 if h32 > tile[i, j]:
                     tile[i, j] = h32
     return tile
+
+
+@kernel("Tuple((int64[::1], int64[::1]))(int64[:, ::1], int64[:, ::1])")
+def _tile_entries(lo, hi):
+    """Per triangle, the tiles (i, j) of its box ``lo`` .. ``hi`` (each (T, 2), tiles), row by row: the triangle
+    (owner) and the tile's code i * 2^32 + j of every entry (ordered as (i, j) is, for |j| < 2^31)."""
+    n = 0
+    for k in range(lo.shape[0]):
+        n += (hi[k, 0] - lo[k, 0] + 1) * (hi[k, 1] - lo[k, 1] + 1)
+    owner = np.empty(n, np.int64)
+    code = np.empty(n, np.int64)
+    e = 0
+    for k in range(lo.shape[0]):
+        for i in range(lo[k, 0], hi[k, 0] + 1):
+            for j in range(lo[k, 1], hi[k, 1] + 1):
+                owner[e] = k
+                code[e] = i * (np.int64(1) << 32) + j
+                e += 1
+    return owner, code

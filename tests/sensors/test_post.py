@@ -86,6 +86,16 @@ def test_motion_flow_closed_form_and_blur():
     flow = motion_flow(np.array([[0.0, 0.0, 10.0], [1.0, 0.0, 10.0], [np.inf, np.inf, np.inf]]),
                        np.array([0.0, 0.0, 1.0]), 400.0, 400.0)
     np.testing.assert_allclose(flow, [[0, 0], [400.0 * (1 / 9 - 1 / 10), 0], [0, 0]], atol=1e-4)
+    # One shift per point (a road user moving with its pixels): each as if alone; across the near plane, none.
+    points = np.array([[1.0, 2.0, 10.0], [-3.0, 1.0, 5.0], [0.5, 0.5, 0.5]])
+    shifts = np.array([[0.0, 0.0, 1.0], [0.5, 0.0, -2.0], [0.0, 0.0, 0.45]])
+    per_point = motion_flow(points, shifts, 400.0, 300.0)
+    for k in range(2):
+        np.testing.assert_array_equal(per_point[k], motion_flow(points[k:k + 1], shifts[k], 400.0, 300.0)[0])
+    np.testing.assert_allclose(per_point[1], [400.0 * (-3.5 / 7 + 3 / 5), 300.0 * (1 / 7 - 1 / 5)], rtol=1e-6)
+    assert per_point[2].tolist() == [0.0, 0.0]  # q_z = 0.05 m: behind the near plane after the move
+    with pytest.raises(ValueError, match="shift_cam"):
+        motion_flow(points, shifts[:2], 400.0, 300.0)
     edge = np.zeros((40, 40, 3), np.float32)
     edge[:, 20:] = 1.0
     assert motion_blur(edge, np.zeros((40, 40, 2), np.float32)) is edge
