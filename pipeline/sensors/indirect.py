@@ -119,10 +119,15 @@ def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, rad
                 continue
             total = np.float32(0)
             count = 0
+            # same_surface(i, j, ...) written out: called per neighbour, it cost more than the test itself.
+            own, t_i, n0, n1, n2 = instance[i], t_m[i], normal[i, 0], normal[i, 1], normal[i, 2]
+            reach = depth * t_i
             for yy in range(max(0, y - radius), min(height, y + radius + 1)):
                 for xx in range(max(0, x - radius), min(width, x + radius + 1)):
                     j = yy * width + xx
-                    if not traced[j] or not same_surface(i, j, instance, normal, t_m, normal_cos, depth):
+                    if not traced[j] or instance[j] != own or abs(t_m[j] - t_i) > reach:
+                        continue
+                    if not n0 * normal[j, 0] + n1 * normal[j, 1] + n2 * normal[j, 2] >= normal_cos:
                         continue
                     total += blocked[j]
                     count += 1
@@ -131,25 +136,30 @@ def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, rad
 
 
 def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
-                   image_shape: tuple[int, int] | None = None) -> np.ndarray:
+                   image_shape: tuple[int, int] | None = None, given: np.ndarray | None = None) -> np.ndarray:
     """(N,) float32 in [1 - AO_STRENGTH, 1]: how much of the sky fill reaches each hit (1 where not traced).
     With ``image_shape`` (H, W), the rays are a camera's pixel centres in row-major order (N = H * W) and the
-    occlusion is smoothed over each surface (:func:`smooth_visibility`)."""
+    occlusion is smoothed over each surface (:func:`smooth_visibility`). ``given`` (N,) float32, optional: the
+    visibility where it is already known (an anti-aliasing sample's, lent by its pixel centre's surface); only its
+    NaN rows are traced."""
     n = len(rays)
     visibility = np.ones(n, np.float32)
+    if given is not None:
+        known = ~np.isnan(given)
+        visibility[known] = given[known]
     if not len(scene.actors) or not n:
         return visibility
     hit = hits.hit & (hits.t_m < INDIRECT_RANGE_M)
     on_actor = hit & (hits.instance_id > 0)
     t = np.where(hit, hits.t_m, 0.0).astype(np.float32)
-    static = np.flatnonzero(hit & ~on_actor)
+    static = np.flatnonzero(hit & ~on_actor if given is None else hit & ~on_actor & ~known)
     near = np.zeros(n, bool)
     if len(static):
         p = np.take(rays, static, axis=0)
         x, y, z = (p[:, k] + p[:, 3 + k] * t[static] for k in range(3))
         near[static] = scene.near_actors(x.astype(np.float32), y.astype(np.float32), z.astype(np.float32),
                                          AO_RADIUS_M)
-    rows = np.flatnonzero(on_actor | near)
+    rows = np.flatnonzero((on_actor | near) if given is None else (on_actor | near) & ~known)
     if not len(rows):
         return visibility
     ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN)

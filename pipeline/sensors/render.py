@@ -27,6 +27,7 @@ from pipeline.sensors.camera import Camera
 from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.exposure import auto_exposure
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
+from pipeline.sensors.indirect import AO_FILTER_DEPTH, AO_FILTER_NORMAL_COS
 from pipeline.sensors.post import apply_post, motion_flow
 from pipeline.sensors.rain import streak_coverage
 from pipeline.sensors.shading import shade, shading_materials, sky, to_srgb8
@@ -120,12 +121,15 @@ def render_camera(
     else:
         # The pixel centres' share of the sun's disc, smoothed over penumbrae, lent to the samples on their surfaces.
         sunlit = _centre_sun_shares(scene, rays, hits, condition, (h, w), texture_rad) if indirect else None
+        skylit = None
         # Every pixel gets its centre sample; pixels on an edge (edge_pixels) get the stratified samples instead.
         if camera.config.samples_everywhere:
             radiance, where = np.zeros((h * w, 3), np.float32), np.arange(h * w)
         else:
+            # The centres' sky visibility (smoothed over each surface) is kept and lent on to the samples, as the sun.
+            skylit = np.full(h * w, np.nan, np.float32) if indirect else None
             radiance = condition.fog(shade(scene, rays, hits, condition, lights, indirect, texture_rad, (h, w),
-                                           sunlit), hits.t_m, hits.hit)
+                                           sunlit, skylit), hits.t_m, hits.hit)
             where = np.flatnonzero(edge_pixels(hits, depth.reshape(h, w)))
             if reflection is not None:
                 reflection.apply(radiance)
@@ -143,8 +147,9 @@ def render_camera(
             sample_rays = make_rays(cam_to_world.translation, sample[where], cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, mask)
             lent = None if sunlit is None else _lent_sun_shares(sunlit, hits, sample_hits, where, (h, w))
+            lent_sky = None if skylit is None else _lent_sky_visibility(skylit, hits, sample_hits, where, (h, w))
             edge += condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect,
-                                        texture_rad, sunlit=lent), sample_hits.t_m,
+                                        texture_rad, sunlit=lent, sky_visible=lent_sky), sample_hits.t_m,
                                   sample_hits.hit)
         radiance[where] = edge / len(samples)
         if reflection is not None:  # the edge pixels' new radiance, on wet road, mirrors too
@@ -261,6 +266,20 @@ def _lent_sun_shares(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: n
                            as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
                            np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
                            np.float32(SHADOW_FILTER_NORMAL_COS), np.float32(SHADOW_FILTER_DEPTH))
+
+
+def _lent_sky_visibility(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray,
+                         image_shape: tuple[int, int]) -> np.ndarray:
+    """(K,) float32: for the samples of the pixels ``where``, the ``centre`` sky visibility (smoothed over each
+    surface: :func:`pipeline.sensors.indirect.sky_visibility`) of the pixel or a neighbour on the sample's surface,
+    by that smoothing's own test of a surface (:func:`pipeline.sensors.shadows.borrowed_shares`); NaN where there
+    is none (traced for the sample)."""
+    h, w = image_shape
+    return borrowed_shares(centre, as_input(hits.instance_id, np.int32), as_input(hits.normal, np.float32),
+                           as_input(hits.t_m, np.float32), as_input(where, np.int64),
+                           as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
+                           np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
+                           np.float32(AO_FILTER_NORMAL_COS), np.float32(AO_FILTER_DEPTH))
 
 
 def _sky_level(condition: Condition) -> float:

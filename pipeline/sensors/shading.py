@@ -72,7 +72,7 @@ def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
     indirect: bool = False, pixel_angle_rad: float = 0.0, image_shape: tuple[int, int] | None = None,
-    sunlit: np.ndarray | None = None,
+    sunlit: np.ndarray | None = None, sky_visible: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
@@ -81,7 +81,9 @@ def shade(
     sky (:mod:`pipeline.sensors.sky`). ``sunlit`` is the share of the sun's disc a hit sees
     (:mod:`pipeline.sensors.shadows`; with ``indirect`` the sun is a disc, else a point); the ``sunlit`` argument
     ((N,) float32, optional) gives it per ray (NaN: traced here). With ``indirect``, the ambient term is scaled by
-    the sky's visibility and mirror reflections are blended in (:mod:`pipeline.sensors.indirect`; ``image_shape``
+    the sky's visibility (``sky_visible``, (N,) float32, optional: given where not NaN, and its NaN rows are filled
+    in place with what is traced here, so that a pass can lend it on) and mirror reflections are blended in
+    (:mod:`pipeline.sensors.indirect`; ``image_shape``
     (H, W): the rays are a camera's pixel centres, row-major, and the sky occlusion and the penumbrae are smoothed
     over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the static world's
     albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over the rays
@@ -108,7 +110,9 @@ def shade(
                       mats["shininess"], sun, *rgb)
     if indirect:
         # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
-        visibility = sky_visibility(scene, rays, hits, image_shape)
+        visibility = sky_visibility(scene, rays, hits, image_shape, sky_visible)
+        if sky_visible is not None:
+            sky_visible[:] = visibility
         dim = np.flatnonzero(visibility < 1.0)
         out[dim] -= hits.color[dim] * rgb[1] * (1.0 - visibility[dim])[:, None]
         reflections(scene, rays, hits, out, mats["fresnel_f0"], sun, rgb, mats["specular"], mats["shininess"],
