@@ -59,7 +59,19 @@ CLOTHES_SHARES = np.array([0.26, 0.10, 0.07, 0.12, 0.06, 0.04, 0.07, 0.07, 0.05,
 # pedestrian social groups and its impact on crowd dynamics", PLoS ONE 5(4): e10047, 2010).
 STANDING_GROUPS = (1, 2, 3)
 STANDING_GROUP_SHARES = (0.5, 0.35, 0.15)
-STANDING_SPACING_M = 0.75  # between the members of a standing group, along the sidewalk
+STANDING_SPACING_M = 0.75  # between the members of a standing group's stops, along the sidewalk (SUMO's places)
+# Where a standing group's members stand and face, as people who talk to each other do: in an F-formation (Kendon,
+# "Conducting Interaction", 1990), each facing a shared space between them, at the near end of Hall's personal
+# distance ("The Hidden Dimension", 1966: 0.45-1.2 m). Two face each other FORMATION_PAIR_M apart, three stand on a
+# circle of FORMATION_RADIUS_M facing its centre, the formation turned at random on the sidewalk; they stand
+# STANDING_LATERAL_M right of the sidewalk's centre line (negative: towards the kerb; pipeline.traffic.simulation),
+# shifted so that every member keeps FORMATION_MARGIN_M from the sidewalk's edges. Without it the members stood in a
+# file along the sidewalk all facing one way, which a camera down the street sees as one wall of overlapping people.
+FORMATION_PAIR_M = 1.0
+FORMATION_RADIUS_M = 0.65
+FORMATION_MARGIN_M = 0.3
+STANDING_LATERAL_M = -0.9
+FORMATION_PARAM = "roadsynth.stand"  # a person's <param>: "dx dy face" (see _formation)
 
 
 class DemandError(ValueError):
@@ -186,7 +198,8 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
     the ``pedestrians`` walkers, ``standing_pedestrians`` more) the sidewalk lane, the position on it and how long
     they stand (stop_lane, stop_pos_m, stop_s; "" and NaN for walkers)."""
     columns = {"person_id": str, "depart_s": float, "route": str, "speed_mps": float, "color_r": np.uint8,
-               "color_g": np.uint8, "color_b": np.uint8, "stop_lane": str, "stop_pos_m": float, "stop_s": float}
+               "color_g": np.uint8, "color_b": np.uint8, "stop_lane": str, "stop_pos_m": float, "stop_s": float,
+               "stand_dx_m": float, "stand_dy_m": float, "stand_face_rad": float}
     total = config.pedestrians + config.standing_pedestrians
     if total == 0:
         return pd.DataFrame({c: pd.Series(dtype=t) for c, t in columns.items()})
@@ -204,38 +217,44 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
         "depart_s": np.round(np.sort(rng.uniform(0.0, config.depart_window_s, size=n)), 2),
         "route": [" ".join(edges) for _, edges in walks[:n]],
         "speed_mps": config.pedestrian_speed_mps.sample(rng, n),
-        "stop_lane": "", "stop_pos_m": np.nan, "stop_s": np.nan,
+        "stop_lane": "", "stop_pos_m": np.nan, "stop_s": np.nan, "stand_dx_m": np.nan, "stand_dy_m": np.nan,
+        "stand_face_rad": np.nan,
     })
-    standing = _standing(config, _sidewalks(net_file), walks[n:total], rng)
+    standing = _standing(config, _sidewalks(net_file), walks[n:total], rng, np.random.default_rng([seed, 40]))
     persons = pd.concat([walkers, standing], ignore_index=True)
     persons["color_r"], persons["color_g"], persons["color_b"] = clothes.T
     return persons[list(columns)].astype({c: t for c, t in columns.items() if t is not str})
 
 
-def _sidewalks(net_file: Path) -> dict[str, tuple[str, float]]:
-    """Edge id -> (its sidewalk lane's id, that lane's length in metres) for the network's edges with a sidewalk."""
+def _sidewalks(net_file: Path) -> dict[str, tuple[str, float, float]]:
+    """Edge id -> (its sidewalk lane's id, that lane's length and width in metres) for the network's edges with a
+    sidewalk (a lane without a width has SUMO's default, 3.2 m)."""
     out = {}
     for edge in ET.parse(net_file).getroot().iter("edge"):
         if edge.get("function") not in (None, "normal"):
             continue
         for lane in edge.iter("lane"):
             if lane.get("allow") == "pedestrian":
-                out[edge.get("id")] = (lane.get("id"), float(lane.get("length")))
+                out[edge.get("id")] = (lane.get("id"), float(lane.get("length")), float(lane.get("width", "3.2")))
                 break
     return out
 
 
-def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float]], walks: list[tuple[str, list[str]]],
-              rng: np.random.Generator) -> pd.DataFrame:
-    """The standing pedestrians, in groups (STANDING_GROUPS): each group stands side by side, STANDING_SPACING_M
-    apart, at a random place on the sidewalk of its first walk's first edge, from a common departure for a common
-    time, then walks that route together at the slowest member's speed."""
+def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float, float]],
+              walks: list[tuple[str, list[str]]], rng: np.random.Generator,
+              formation_rng: np.random.Generator | None = None) -> pd.DataFrame:
+    """The standing pedestrians, in groups (STANDING_GROUPS): each group's stops lie STANDING_SPACING_M apart at a
+    random place on the sidewalk of its first walk's first edge, from a common departure for a common time, then it
+    walks that route together at the slowest member's speed. The members of a group of two or three stand in a
+    formation (:func:`_formation`, drawn from ``formation_rng``; a stream of its own, so the rest of the demand is
+    the same with or without it): stand_dx_m, stand_dy_m, stand_face_rad (NaN for one standing alone)."""
     rows = []
     k = 0
+    formation_rng = formation_rng or np.random.default_rng(0)
     while k < config.standing_pedestrians:
         size = min(int(rng.choice(STANDING_GROUPS, p=STANDING_GROUP_SHARES)), config.standing_pedestrians - k)
         _, edges = walks[k]
-        lane, length_m = sidewalks.get(edges[0], ("", 0.0))
+        lane, length_m, width_m = sidewalks.get(edges[0], ("", 0.0, 0.0))
         span = STANDING_SPACING_M * (size - 1)
         if length_m < span + 6.0:  # no room for the group on this sidewalk: they walk instead
             lane, pos = "", np.full(size, np.nan)
@@ -244,13 +263,33 @@ def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float]], wal
         depart = round(float(rng.uniform(0.0, config.depart_window_s)), 2)
         stand = float(config.standing_s.sample(rng, 1)[0]) if lane else np.nan
         speed = float(config.pedestrian_speed_mps.sample(rng, size).min())
+        places = _formation(size, pos, width_m, formation_rng) if lane and size > 1 else np.full((size, 3), np.nan)
         for j in range(size):
             rows.append({"person_id": f"ped{config.pedestrians + k + j:04d}", "depart_s": depart,
                          "route": " ".join(edges), "speed_mps": speed, "stop_lane": lane,
-                         "stop_pos_m": round(float(pos[j]), 2), "stop_s": round(stand, 1)})
+                         "stop_pos_m": round(float(pos[j]), 2), "stop_s": round(stand, 1),
+                         "stand_dx_m": round(float(places[j, 0]), 3), "stand_dy_m": round(float(places[j, 1]), 3),
+                         "stand_face_rad": round(float(places[j, 2]), 4)})
         k += size
     return pd.DataFrame(rows, columns=["person_id", "depart_s", "route", "speed_mps", "stop_lane", "stop_pos_m",
-                                       "stop_s"])
+                                       "stop_s", "stand_dx_m", "stand_dy_m", "stand_face_rad"])
+
+
+def _formation(size: int, stops_m: np.ndarray, width_m: float, rng: np.random.Generator) -> np.ndarray:
+    """(size, 3): where each member of a standing group stands and faces, in its sidewalk's frame (a along the lane,
+    l to its right): dx, the member's place along the lane less its own stop ``stops_m[j]`` (SUMO's), dy, its offset
+    right of the lane's centre line, and face, the angle of the way it faces from the lane's direction towards its
+    right (radians). Two face each other FORMATION_PAIR_M apart, three stand on a circle of FORMATION_RADIUS_M facing
+    its centre; the formation is turned by a uniform angle, centred on the stops' mean along the lane and
+    STANDING_LATERAL_M across it, shifted across to keep FORMATION_MARGIN_M inside a sidewalk ``width_m`` wide."""
+    turn = float(rng.uniform(0.0, 2.0 * np.pi))
+    radius = 0.5 * FORMATION_PAIR_M if size == 2 else FORMATION_RADIUS_M
+    angle = turn + 2.0 * np.pi * np.arange(size) / size
+    u, v = radius * np.cos(angle), radius * np.sin(angle)
+    room = max(0.5 * width_m - FORMATION_MARGIN_M, float(np.max(np.abs(v))))
+    centre_l = float(np.clip(STANDING_LATERAL_M, -room - v.min(), room - v.max()))
+    dx = float(np.mean(stops_m)) + u - np.asarray(stops_m, np.float64)
+    return np.column_stack([dx, centre_l + v, np.arctan2(-v, -u)])
 
 
 def _g(x: float) -> str:
@@ -291,6 +330,9 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, dep
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}", departPos=_g(row.stop_pos_m))
             ET.SubElement(person, "stop", lane=row.stop_lane, endPos=_g(row.stop_pos_m), duration=_g(row.stop_s))
             ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))
+            if np.isfinite(row.stand_face_rad):  # a member of a standing group: its place in the formation
+                ET.SubElement(person, "param", key=FORMATION_PARAM, value=f"{_g(row.stand_dx_m)} {_g(row.stand_dy_m)} "
+                                                                         f"{_g(row.stand_face_rad)}")
         else:
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}")
             ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))

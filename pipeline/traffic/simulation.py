@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from pipeline.core.config import EgoConfig, SimulationConfig
 from pipeline.core.geometry import sumo_front_to_center
+from pipeline.traffic.demand import FORMATION_PARAM, STANDING_LATERAL_M
 from pipeline.traffic.sumo_tools import binary
 
 log = logging.getLogger(__name__)
@@ -36,11 +37,13 @@ SIGNAL_BRAKELIGHT = 8
 STAGE_WAITING = 1  # libsumo's stage type of a person who stands (a <stop> in its plan)
 # SUMO draws a person who waits on a lane MSStage::ROADSIDE_OFFSET (3 m) to the right of its edge's first lane, the
 # sidewalk, whose centre it walks on once it moves on: recorded there, a standing person would stand 1.75 m beyond a
-# 2.5 m sidewalk (in a wall) and jump 3 m when it starts to walk. We put it on the sidewalk, this far right of the
-# sidewalk's centre: negative, towards the kerb, where SUMO's striping model starts most of them walking (measured on
-# an urban run: 124 of 139 at -0.93 m, the others at +0.35 m), so that they step off without a jump.
+# 2.5 m sidewalk (in a wall) and jump 3 m when it starts to walk. We put it on the sidewalk, STANDING_LATERAL_M right
+# of the sidewalk's centre: negative, towards the kerb, where SUMO's striping model starts most of them walking
+# (measured on an urban run: 124 of 139 at -0.93 m, the others at +0.35 m), so that they step off without a jump. A
+# member of a standing group stands at its place in the group's formation instead (pipeline.traffic.demand), facing
+# the others, and walks from there onto SUMO's line over STEP_OFF_S once the group moves on.
 SUMO_ROADSIDE_OFFSET_M = 3.0
-STANDING_OFFSET_M = -0.9
+STEP_OFF_S = 1.0
 
 
 class SimulationError(RuntimeError):
@@ -275,6 +278,7 @@ class RunRecorder:
 
     def __init__(self, sumo) -> None:
         self.sumo = sumo
+        self.standing = StandingPlaces(sumo)
         self.vehicles, self.persons = ActorColumns(), ActorColumns()
         self.tls_rows: list[tuple] = []
         self.counters: dict[str, int] = defaultdict(int)
@@ -332,8 +336,7 @@ class RunRecorder:
             return None
         vehicles, persons = ActorColumns(), ActorColumns()
         vehicles.add(frame, time_s, veh_results, person=False)
-        persons.add(frame, time_s, standing_on_the_sidewalk(sumo, sumo.person.getAllSubscriptionResults()),
-                    person=True)
+        persons.add(frame, time_s, self.standing.place(sumo.person.getAllSubscriptionResults(), time_s), person=True)
         tls_rows = [(frame, time_s, tls, res[TL_STATE])
                     for tls, res in sorted(sumo.trafficlight.getAllSubscriptionResults().items())]
         return vehicles, persons, tls_rows
@@ -343,23 +346,63 @@ class RunRecorder:
         return {**self.counters, "collisions": len(self.collisions), "collision_events": self.collisions}
 
 
-def standing_on_the_sidewalk(sumo, results: dict[str, dict[int, object]]) -> dict[str, dict[int, object]]:
-    """Person subscription results with each standing person's position moved from where SUMO draws it (see
-    SUMO_ROADSIDE_OFFSET_M) onto its sidewalk, STANDING_OFFSET_M right of the centre line (negative: towards the
-    kerb). Only persons at rest on a normal edge are asked for their stage (one libsumo call each)."""
-    out = results
-    for pid, r in results.items():
-        if r[VAR_SPEED] != 0.0 or str(r[VAR_ROAD_ID]).startswith(":"):
-            continue
-        if sumo.person.getStage(pid).type != STAGE_WAITING:
-            continue
-        x, y, z = r[VAR_POSITION3D]
-        cx, cy = sumo.simulation.convert2D(r[VAR_ROAD_ID], sumo.person.getLanePosition(pid), 0)
-        share = STANDING_OFFSET_M / SUMO_ROADSIDE_OFFSET_M  # along SUMO's offset, which points right of the lane
-        if out is results:
-            out = dict(results)
-        out[pid] = {**r, VAR_POSITION3D: (cx + share * (x - cx), cy + share * (y - cy), z)}
-    return out
+class StandingPlaces:
+    """Where the standing persons of a running libsumo simulation stand: :meth:`place` moves each standing person
+    from where SUMO draws it (see SUMO_ROADSIDE_OFFSET_M) onto its sidewalk, STANDING_LATERAL_M right of the centre
+    line, or, for a member of a standing group, to its place in the group's formation (the person's FORMATION_PARAM:
+    dx along the sidewalk, dy right of its centre line, the way it faces from the lane's direction), facing the
+    others; and a member who starts to walk from its place onto SUMO's line over STEP_OFF_S (no jump in its track).
+    Only persons at rest on a normal edge are asked for their stage (one libsumo call each), each person's
+    parameter once."""
+
+    def __init__(self, sumo) -> None:
+        self.sumo = sumo
+        self._formation: dict[str, tuple[float, float, float] | None] = {}
+        self._left: dict[str, tuple[float, float, float, float]] = {}  # pid -> its last place: x, y, angle, time
+
+    def _place_of(self, pid: str) -> tuple[float, float, float] | None:
+        if pid not in self._formation:
+            value = self.sumo.person.getParameter(pid, FORMATION_PARAM)
+            self._formation[pid] = tuple(float(v) for v in value.split()) if value else None
+        return self._formation[pid]
+
+    def place(self, results: dict[str, dict[int, object]], time_s: float) -> dict[str, dict[int, object]]:
+        """Person subscription results with the standing persons (and those stepping off) moved; ``time_s`` the
+        snapshot's time (increasing from call to call)."""
+        out = results
+        sumo = self.sumo
+        for pid, r in results.items():
+            standing = r[VAR_SPEED] == 0.0 and not str(r[VAR_ROAD_ID]).startswith(":") and \
+                sumo.person.getStage(pid).type == STAGE_WAITING
+            if standing:
+                x, y, z = r[VAR_POSITION3D]
+                cx, cy = sumo.simulation.convert2D(r[VAR_ROAD_ID], sumo.person.getLanePosition(pid), 0)
+                # SUMO's offset points right of the lane: r; the lane runs along f (r turned left).
+                rx, ry = (x - cx) / SUMO_ROADSIDE_OFFSET_M, (y - cy) / SUMO_ROADSIDE_OFFSET_M
+                fx, fy = -ry, rx
+                formation = self._place_of(pid)
+                dx, dy, face = formation if formation is not None else (0.0, STANDING_LATERAL_M, None)
+                px, py = cx + fx * dx + rx * dy, cy + fy * dx + ry * dy
+                angle = r[VAR_ANGLE]
+                if face is not None:  # SUMO's angle: degrees clockwise from north
+                    c, s = np.cos(face), np.sin(face)
+                    angle = float(np.degrees(np.arctan2(fx * c + rx * s, fy * c + ry * s))) % 360.0
+                    self._left[pid] = (px, py, angle, time_s)
+            elif pid in self._left:
+                lx, ly, la, lt = self._left[pid]
+                w = 1.0 - (time_s - lt) / STEP_OFF_S
+                if w <= 0.0:
+                    del self._left[pid]
+                    continue
+                x, y, z = r[VAR_POSITION3D]
+                px, py = x + w * (lx - x), y + w * (ly - y)
+                angle = (r[VAR_ANGLE] + w * ((la - r[VAR_ANGLE] + 180.0) % 360.0 - 180.0)) % 360.0
+            else:
+                continue
+            if out is results:
+                out = dict(results)
+            out[pid] = {**r, VAR_POSITION3D: (px, py, z), VAR_ANGLE: angle}
+        return out
 
 
 def to_trajectories(vehicles: ActorColumns, persons: ActorColumns, actors: pd.DataFrame,

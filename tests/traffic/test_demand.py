@@ -118,7 +118,7 @@ def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
 
     config = load_config(ScenarioConfig, "urban", "scenarios")[0].demand.model_copy(
         update={"pedestrians": 0, "standing_pedestrians": 300})
-    sidewalks = {"long": ("long_0", 90.0), "short": ("short_0", 5.0)}
+    sidewalks = {"long": ("long_0", 90.0, 2.5), "short": ("short_0", 5.0, 2.5)}
     walks = [("w", ["short" if i % 50 == 7 else "long", "next"]) for i in range(300)]
     rows = _standing(config, sidewalks, walks, np.random.default_rng(4))
     assert len(rows) == 300 and rows["person_id"].is_unique
@@ -133,3 +133,36 @@ def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
         np.testing.assert_allclose(np.diff(group["stop_pos_m"]), STANDING_SPACING_M, atol=0.011)
         assert group["speed_mps"].nunique() == 1 and group["route"].nunique() == 1
     assert pd.isna(rows.loc[rows["stop_lane"] == "", "stop_pos_m"]).all()
+    alone = sizes[sizes == 1].index
+    assert stops.set_index(["depart_s", "stop_s"]).loc[alone, "stand_face_rad"].isna().all()
+
+
+def test_a_standing_group_stands_in_a_formation_facing_each_other():
+    """Two face each other FORMATION_PAIR_M apart, three stand on a circle of FORMATION_RADIUS_M facing its centre
+    (the members' places: their stops plus dx along the sidewalk, dy across it); all within the sidewalk less the
+    margin, the group's centre along the sidewalk at its stops' mean."""
+    from pipeline.traffic.demand import (
+        FORMATION_MARGIN_M,
+        FORMATION_PAIR_M,
+        FORMATION_RADIUS_M,
+        STANDING_LATERAL_M,
+        _formation,
+    )
+
+    rng = np.random.default_rng(1)
+    for size in (2, 3):
+        for _ in range(200):
+            stops = 10.0 + 0.75 * np.arange(size)
+            f = _formation(size, stops, 2.5, rng)
+            a, l = stops + f[:, 0], f[:, 1]
+            centre = np.array([a.mean(), l.mean()])
+            assert abs(centre[0] - stops.mean()) < 1e-9
+            assert np.all(np.abs(l) <= 1.25 - FORMATION_MARGIN_M + 1e-9)
+            radius = np.hypot(a - centre[0], l - centre[1])
+            np.testing.assert_allclose(radius, FORMATION_PAIR_M / 2 if size == 2 else FORMATION_RADIUS_M)
+            facing = np.column_stack([np.cos(f[:, 2]), np.sin(f[:, 2])])
+            towards = (centre - np.column_stack([a, l])) / radius[:, None]
+            np.testing.assert_allclose(facing, towards, atol=1e-9)  # each faces the group's centre
+            # Across the sidewalk as near STANDING_LATERAL_M as the margin allows.
+            if np.all(np.abs(l - l.mean() + STANDING_LATERAL_M) <= 1.25 - FORMATION_MARGIN_M):
+                assert abs(l.mean() - STANDING_LATERAL_M) < 1e-9

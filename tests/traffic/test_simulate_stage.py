@@ -108,6 +108,28 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
         assert _distance_to_polyline((row["x_m"], row["y_m"]), shapes[lane]) < 0.5 * widths[lane]
         checked += 1
     assert checked > 0
+    # The members of a standing group stand in its formation, facing each other (pipeline.traffic.demand): a pair's
+    # recorded centres lie FORMATION_PAIR_M apart plus a person's length (SUMO places a person's front), each
+    # heading towards the other.
+    from pipeline.traffic.demand import FORMATION_PAIR_M
+
+    pairs = 0
+    groups: dict[tuple, list[str]] = {}
+    for person in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person"):
+        if person.find("param") is not None:
+            groups.setdefault((person.get("depart"), person.find("stop").get("lane")), []).append(person.get("id"))
+    frame0 = traj[traj["frame"] == 0].set_index("actor_id")
+    for ids in groups.values():
+        if len(ids) != 2 or not all(i in frame0.index and frame0.loc[i, "speed_mps"] == 0.0 for i in ids):
+            continue
+        a, b = frame0.loc[ids[0]], frame0.loc[ids[1]]
+        gap = np.array([b["x_m"] - a["x_m"], b["y_m"] - a["y_m"]])
+        assert np.linalg.norm(gap) == pytest.approx(FORMATION_PAIR_M + a["length_m"], abs=0.01)
+        for who, towards in ((a, gap), (b, -gap)):
+            heading = np.array([np.cos(who["yaw_rad"]), np.sin(who["yaw_rad"])])
+            assert heading @ towards / np.linalg.norm(towards) > 0.999
+        pairs += 1
+    assert pairs > 0
     last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
     assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")
