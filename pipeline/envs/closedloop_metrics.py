@@ -32,6 +32,7 @@ resampled by a generator of fixed seed.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import asdict, dataclass
 
@@ -45,7 +46,7 @@ LEADER_MATCH_M = 5.0
 TTC_CRITICAL_S = 1.5
 # Gap bins of the leader's recall by range (m; the last closes at the features' default range, 100 m).
 LEADER_RANGE_BINS_M = (0.0, 20.0, 40.0, 60.0, 100.0)
-LEADER_HELD = tuple(f"leader_held_{lo:g}_{hi:g}m" for lo, hi in zip(LEADER_RANGE_BINS_M, LEADER_RANGE_BINS_M[1:]))
+LEADER_HELD = tuple(f"leader_held_{lo:g}_{hi:g}m" for lo, hi in itertools.pairwise(LEADER_RANGE_BINS_M))
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
            *LEADER_HELD, "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
            "slot_dv_error_mps")

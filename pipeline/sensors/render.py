@@ -146,8 +146,10 @@ def render_camera(
         for sample in samples:  # loop over samples; all chosen pixels vectorised
             sample_rays = make_rays(cam_to_world.translation, sample[where], cam_to_world.rotation)
             sample_hits = scene.cast_rays(sample_rays, mask)
-            lent = None if sunlit is None else _lent_sun_shares(sunlit, hits, sample_hits, where, (h, w))
-            lent_sky = None if skylit is None else _lent_sky_visibility(skylit, hits, sample_hits, where, (h, w))
+            lent = None if sunlit is None else _lent(sunlit, hits, sample_hits, where, (h, w),
+                                                     SHADOW_FILTER_NORMAL_COS, SHADOW_FILTER_DEPTH)
+            lent_sky = None if skylit is None else _lent(skylit, hits, sample_hits, where, (h, w),
+                                                         AO_FILTER_NORMAL_COS, AO_FILTER_DEPTH)
             edge += condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect,
                                         texture_rad, sunlit=lent, sky_visible=lent_sky), sample_hits.t_m,
                                   sample_hits.hit)
@@ -256,30 +258,19 @@ def _centre_sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, conditio
     return pixel_shares(len(rays), lit, share)
 
 
-def _lent_sun_shares(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray,
-                     image_shape: tuple[int, int]) -> np.ndarray:
-    """(K,) float32: for the samples of the pixels ``where``, the ``centre`` share of the pixel or a neighbour on
-    the sample's surface (:func:`pipeline.sensors.shadows.borrowed_shares`), NaN where there is none."""
+def _lent(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray, image_shape: tuple[int, int],
+          normal_cos: float, depth: float) -> np.ndarray:
+    """(K,) float32: for the samples of the pixels ``where``, the ``centre`` value (per pixel centre, smoothed over
+    its surface) of the pixel or a neighbour on the sample's surface, by the smoothing's own test of a surface
+    (``normal_cos``, ``depth``: :func:`pipeline.sensors.shadows.borrowed_shares`); NaN where there is none (the
+    sample traces its own). The sun's share lends with the penumbra filter's test, the sky's visibility with the
+    occlusion filter's."""
     h, w = image_shape
     return borrowed_shares(centre, as_input(hits.instance_id, np.int32), as_input(hits.normal, np.float32),
                            as_input(hits.t_m, np.float32), as_input(where, np.int64),
                            as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
                            np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
-                           np.float32(SHADOW_FILTER_NORMAL_COS), np.float32(SHADOW_FILTER_DEPTH))
-
-
-def _lent_sky_visibility(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray,
-                         image_shape: tuple[int, int]) -> np.ndarray:
-    """(K,) float32: for the samples of the pixels ``where``, the ``centre`` sky visibility (smoothed over each
-    surface: :func:`pipeline.sensors.indirect.sky_visibility`) of the pixel or a neighbour on the sample's surface,
-    by that smoothing's own test of a surface (:func:`pipeline.sensors.shadows.borrowed_shares`); NaN where there
-    is none (traced for the sample)."""
-    h, w = image_shape
-    return borrowed_shares(centre, as_input(hits.instance_id, np.int32), as_input(hits.normal, np.float32),
-                           as_input(hits.t_m, np.float32), as_input(where, np.int64),
-                           as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
-                           np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
-                           np.float32(AO_FILTER_NORMAL_COS), np.float32(AO_FILTER_DEPTH))
+                           np.float32(normal_cos), np.float32(depth))
 
 
 def _sky_level(condition: Condition) -> float:

@@ -61,8 +61,9 @@ def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
 def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
     gt = [{"collisions_per_100km": 0.0, "min_ttc_s": 3.0, "share_ttc_below_1_5s": 0.0, "hard_brakes": 0.0,
            "first_tracked_range_m": 80.0, "leader_held_0_20m": 1.0, "leader_held_20_40m": 1.0,
-           "leader_held_40_60m": 1.0, "leader_held_60_100m": 1.0, "mean_speed_mps": 25.0, "progress_m": 750.0, "slot_missed_share": 0.0,
-           "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0} for _ in range(5)]
+           "leader_held_40_60m": 1.0, "leader_held_60_100m": 1.0, "mean_speed_mps": 25.0, "progress_m": 750.0,
+           "slot_missed_share": 0.0, "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0}
+          for _ in range(5)]
     perceived = [{**m, "first_tracked_range_m": 80.0 - d, "min_ttc_s": math.inf if d == 30 else 2.0}
                  for m, d in zip(gt, (10, 20, 30, 40, 50), strict=True)]
     rows = {c.metric: c for c in compare(perceived, gt, resamples=4000)}

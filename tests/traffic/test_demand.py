@@ -154,15 +154,15 @@ def test_a_standing_group_stands_in_a_formation_facing_each_other():
         for _ in range(200):
             stops = 10.0 + 0.75 * np.arange(size)
             f = _formation(size, stops, 2.5, rng)
-            a, l = stops + f[:, 0], f[:, 1]
-            centre = np.array([a.mean(), l.mean()])
+            a, across = stops + f[:, 0], f[:, 1]
+            centre = np.array([a.mean(), across.mean()])
             assert abs(centre[0] - stops.mean()) < 1e-9
-            assert np.all(np.abs(l) <= 1.25 - FORMATION_MARGIN_M + 1e-9)
-            radius = np.hypot(a - centre[0], l - centre[1])
+            assert np.all(np.abs(across) <= 1.25 - FORMATION_MARGIN_M + 1e-9)
+            radius = np.hypot(a - centre[0], across - centre[1])
             np.testing.assert_allclose(radius, FORMATION_PAIR_M / 2 if size == 2 else FORMATION_RADIUS_M)
             facing = np.column_stack([np.cos(f[:, 2]), np.sin(f[:, 2])])
-            towards = (centre - np.column_stack([a, l])) / radius[:, None]
+            towards = (centre - np.column_stack([a, across])) / radius[:, None]
             np.testing.assert_allclose(facing, towards, atol=1e-9)  # each faces the group's centre
             # Across the sidewalk as near STANDING_LATERAL_M as the margin allows.
-            if np.all(np.abs(l - l.mean() + STANDING_LATERAL_M) <= 1.25 - FORMATION_MARGIN_M):
-                assert abs(l.mean() - STANDING_LATERAL_M) < 1e-9
+            if np.all(np.abs(across - across.mean() + STANDING_LATERAL_M) <= 1.25 - FORMATION_MARGIN_M):
+                assert abs(across.mean() - STANDING_LATERAL_M) < 1e-9
