@@ -14,6 +14,9 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
   first held each new leader (perceived runs; with ground truth, the range it appears in the observation). The
   observation holds the leader when its leader slot is filled within LEADER_MATCH_SHARE of the true leader's offset
   along the road (at least LEADER_MATCH_M; :func:`holds_leader`): a false track in the slot is not the leader;
+- ``steady_tracked_range_m``: the same for the start of the first stretch of at least STEADY_S in which the
+  observation holds the leader at every step: a single lucky hold far off (a track born from three hits, then lost)
+  counts in the first tracked range, not here;
 - ``leader_held_<lo>_<hi>m``: by the ground-truth leader's gap (bins of ``LEADER_RANGE_BINS_M``), the share of the
   steps with the leader in that bin on which the observation held it: the lead vehicle's recall by range, from every
   step rather than from the one step each leader is first seen (which depends on how each leader came to lead, and
@@ -44,12 +47,13 @@ HARD_BRAKE_MPS2 = -4.0
 LEADER_MATCH_SHARE = 0.2
 LEADER_MATCH_M = 5.0
 TTC_CRITICAL_S = 1.5
+STEADY_S = 1.0  # a leader is tracked steadily once held this long without a gap
 # Gap bins of the leader's recall by range (m; the last closes at the features' default range, 100 m).
 LEADER_RANGE_BINS_M = (0.0, 20.0, 40.0, 60.0, 100.0)
 LEADER_HELD = tuple(f"leader_held_{lo:g}_{hi:g}m" for lo, hi in itertools.pairwise(LEADER_RANGE_BINS_M))
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
-           *LEADER_HELD, "mean_speed_mps", "progress_m", "slot_missed_share", "slot_false_share", "slot_ds_error_m",
-           "slot_dv_error_mps")
+           "steady_tracked_range_m", *LEADER_HELD, "mean_speed_mps", "progress_m", "slot_missed_share",
+           "slot_false_share", "slot_ds_error_m", "slot_dv_error_mps")
 
 
 @dataclass
@@ -101,6 +105,19 @@ def _events(flags: np.ndarray) -> int:
     return int(np.count_nonzero(flags[1:] & ~flags[:-1]) + (1 if len(flags) and flags[0] else 0))
 
 
+def _steady_ranges(leader_id: list[str], held: np.ndarray, gap: np.ndarray, steps: int) -> list[float]:
+    """Per ground-truth leader, in order of appearance, the gap at the first step of its first run of ``steps``
+    consecutive steps held (the same leader throughout); leaders never held that long give none."""
+    out, done, run = [], set(), 0
+    for k, lid in enumerate(leader_id):
+        same = k > 0 and leader_id[k - 1] == lid
+        run = (run + 1 if same else 1) if lid and held[k] else 0
+        if run == steps and lid not in done:
+            done.add(lid)
+            out.append(float(gap[k - steps + 1]))
+    return out
+
+
 def episode_metrics(log: EpisodeLog) -> dict[str, float]:
     """The metrics of one episode (see the module docstring); NaN where undefined (e.g. no leader ever)."""
     speed = np.asarray(log.speed_mps, np.float64)
@@ -116,6 +133,7 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
             seen.add(lid)
             first_ranges.append(g)
     held = np.asarray(log.leader_seen, bool)
+    steady_ranges = _steady_ranges(log.leader_id, held, gap, max(1, round(STEADY_S / log.dt_s)))
     # The first bin takes a gap below its lower edge (bumpers overlapping in a collision), the last one above its
     # upper edge (a leader the features hold beyond the default range).
     bin_of = np.digitize(gap, LEADER_RANGE_BINS_M[1:-1])
@@ -132,6 +150,7 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
         "share_ttc_below_1_5s": float(np.mean(ttc < TTC_CRITICAL_S)) if len(ttc) else 0.0,
         "hard_brakes": float(_events(np.asarray(log.accel_mps2) < HARD_BRAKE_MPS2)),
         "first_tracked_range_m": float(np.median(first_ranges)) if first_ranges else math.nan,
+        "steady_tracked_range_m": float(np.median(steady_ranges)) if steady_ranges else math.nan,
         **by_range,
         "mean_speed_mps": float(speed.mean()) if len(speed) else math.nan,
         "progress_m": progress,

@@ -60,7 +60,8 @@ def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
 
 def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
     gt = [{"collisions_per_100km": 0.0, "min_ttc_s": 3.0, "share_ttc_below_1_5s": 0.0, "hard_brakes": 0.0,
-           "first_tracked_range_m": 80.0, "leader_held_0_20m": 1.0, "leader_held_20_40m": 1.0,
+           "first_tracked_range_m": 80.0, "steady_tracked_range_m": 80.0, "leader_held_0_20m": 1.0,
+           "leader_held_20_40m": 1.0,
            "leader_held_40_60m": 1.0, "leader_held_60_100m": 1.0, "mean_speed_mps": 25.0, "progress_m": 750.0,
            "slot_missed_share": 0.0, "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0}
           for _ in range(5)]
@@ -109,3 +110,16 @@ def test_the_leader_is_held_by_range_over_every_step_with_a_leader():
     assert m["leader_held_20_40m"] != m["leader_held_20_40m"]  # no step with a leader there: NaN
     assert m["leader_held_0_20m"] == pytest.approx(1 / 2)  # an overlap (-0.5 m) counts in the first bin
     assert all(math.isnan(episode_metrics(_log([10.0] * 3))[k]) for k in LEADER_HELD)
+
+
+def test_steady_tracked_range_needs_the_leader_held_for_a_second():
+    """A leader held once at 80 m, lost, then held from 50 m on: first tracked at 80 m, steadily at 50 m (dt 0.5 s:
+    two steps make a second); a leader held for one step only is never tracked steadily."""
+    leader = [("a", 80.0, 0.0, True), ("a", 70.0, 0.0, False), ("a", 60.0, 0.0, False), ("a", 50.0, 0.0, True),
+              ("a", 45.0, 0.0, True), ("a", 40.0, 0.0, True), ("b", 30.0, 0.0, True), ("b", 29.0, 0.0, False)]
+    m = episode_metrics(_log([10.0] * len(leader), leader=leader, dt=0.5))
+    assert m["first_tracked_range_m"] == pytest.approx(55.0)  # median of a's 80 m and b's 30 m
+    assert m["steady_tracked_range_m"] == pytest.approx(50.0)  # a only
+    # A run across a change of leader does not count for the new one.
+    switch = [("a", 20.0, 0.0, True), ("b", 35.0, 0.0, True), ("b", 34.0, 0.0, False)]
+    assert math.isnan(episode_metrics(_log([10.0] * 3, leader=switch, dt=0.5))["steady_tracked_range_m"])
