@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import json
 import logging
 import os
@@ -34,7 +35,15 @@ import numpy as np
 
 from pipeline.core.config import load_config
 from pipeline.core.config.closedloop import ClosedLoopConfig
-from pipeline.envs.closedloop_metrics import METRICS, EpisodeLog, compare, episode_metrics, holds_leader
+from pipeline.envs.closedloop_metrics import (
+    LEADER_HELD,
+    LEADER_RANGE_BINS_M,
+    METRICS,
+    EpisodeLog,
+    compare,
+    episode_metrics,
+    holds_leader,
+)
 from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
 from pipeline.stages.executor import ExecutorSpec
 
@@ -285,6 +294,7 @@ def _report(config: ClosedLoopConfig, rows: list[dict], comparisons: dict[str, l
         if "/" not in key:
             lines += ["", f"![{key}](plots/{key}.png)"]
         lines.append("")
+    lines += ["## The lead vehicle by range", "", "![lead vehicle held by range](plots/leader_by_range.png)", ""]
     return "\n".join(lines)
 
 
@@ -323,6 +333,31 @@ def _plots(comparisons: dict[str, list[dict]], folder: Path) -> None:
         fig.tight_layout()
         fig.savefig(folder / f"{key}.png", dpi=100, metadata={"Software": "roadsynth closedloop"})
         plt.close(fig)
+    _leader_by_range_plot(comparisons, folder, plt)
+
+
+def _leader_by_range_plot(comparisons: dict[str, list[dict]], folder: Path, plt) -> None:
+    """``leader_by_range.png``: per condition (all scenarios), the perceived lead vehicle's recall by its range
+    (the ``leader_held_*`` metrics: episodes' means, with the paired difference's 95 % interval as a band)."""
+    centres = 0.5 * (np.asarray(LEADER_RANGE_BINS_M[:-1]) + np.asarray(LEADER_RANGE_BINS_M[1:]))
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    for key, table in comparisons.items():
+        if "/" in key:
+            continue
+        rows = {c["metric"]: c for c in table}
+        mean, low, high = (np.array([np.nan if rows[m][k] is None else rows[m][k] for m in LEADER_HELD], float)
+                           for k in ("perceived", "ci_low", "ci_high"))
+        line, = ax.plot(centres, mean, marker="o", label=key)
+        ax.fill_between(centres, 1.0 + low, 1.0 + high, color=line.get_color(), alpha=0.12, linewidth=0)
+    ax.set_xticks(centres, [f"{lo:g}-{hi:g}" for lo, hi in itertools.pairwise(LEADER_RANGE_BINS_M)])
+    ax.set_xlabel("ground-truth gap to the lead vehicle, m")
+    ax.set_ylabel("share of steps held")
+    ax.set_ylim(0.0, 1.05)
+    ax.set_title("Lead vehicle held by the perceived features, by range (ground truth: 1)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(folder / "leader_by_range.png", dpi=100, metadata={"Software": "roadsynth closedloop"})
+    plt.close(fig)
 
 
 def main(args: argparse.Namespace) -> int:

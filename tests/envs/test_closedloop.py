@@ -45,6 +45,8 @@ def test_it_writes_every_episode_the_comparisons_a_report_and_plots(run):
     report = (out / "report.md").read_text()
     assert "| mean_speed_mps |" in report and "plots/morning.png" in report
     assert (out / "plots" / "morning.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (out / "plots" / "leader_by_range.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "plots/leader_by_range.png" in report
     assert json.loads((out / "meta.json").read_text())["stage"] == "closedloop"
 
 
