@@ -234,11 +234,99 @@ def _unit_box_entry(ray, half):
     return t_in
 
 
+@kernel("void(int64[::1], int64)")
+def _ascending(items, n):
+    """Sort ``items[:n]`` ascending in place (insertion sort: a handful each)."""
+    for p in range(1, n):
+        v = items[p]
+        q = p - 1
+        while q >= 0 and items[q] > v:
+            items[q + 1] = items[q]
+            q -= 1
+        items[q + 1] = v
+
+
+@kernel("int64(float64, float64, float64, float64, float64, float64, float64, int64, float64[::1], float64[::1], "
+        "float64, int64, int64, int64[::1], int64[::1], int64[::1], int64[::1])")
+def _walked(o0, o1, o2, d0, d1, d2, t_limit, j, lo, hi, cell, nx, ny, cell_start, cell_item, stamp, cand):
+    """:func:`grid_actor_pairs`' walk: into ``cand``, ascending, the actors (positions in its ``actors``) listed for
+    the cells that ray ``j`` (origin o, direction d) crosses inside the grid's box with t in [0, ``t_limit``];
+    returns how many. ``stamp`` (B,) int64 marks the actors found for ray j."""
+    # The span of t in the box and in [0, t_limit] (slabs).
+    t0, t1 = 0.0, t_limit
+    for c in range(3):
+        o, d = (o0, o1, o2)[c], (d0, d1, d2)[c]
+        if d == 0.0:
+            if o < lo[c] or o > hi[c]:
+                return 0
+            continue
+        ta, tb = (lo[c] - o) / d, (hi[c] - o) / d
+        if ta > tb:
+            ta, tb = tb, ta
+        t0, t1 = max(t0, ta), min(t1, tb)
+    if t0 > t1:
+        return 0
+    dxy = np.sqrt(d0 * d0 + d1 * d1)
+    steps = 0
+    step = 0.0
+    if dxy > 0.0 and t1 > t0:
+        step = cell / dxy
+        steps = np.int64((t1 - t0) / step) + 1
+    n = 0
+    last = np.int64(-1)
+    for k in range(steps + 1):
+        t = min(t0 + k * step, t1)
+        ci = min(max(np.int64(np.floor((o0 + t * d0 - lo[0]) / cell)), 0), nx - 1)
+        cj = min(max(np.int64(np.floor((o1 + t * d1 - lo[1]) / cell)), 0), ny - 1)
+        cc = ci * ny + cj
+        if cc == last:
+            continue
+        last = cc
+        for m in range(cell_start[cc], cell_start[cc + 1]):
+            b = cell_item[m]
+            if stamp[b] != j:
+                stamp[b] = j
+                cand[n] = b
+                n += 1
+    _ascending(cand, n)
+    return n
+
+
+@kernel("int64(float64, float64, float64, float64, int64, int64[::1], float64[:, ::1], float64[::1], float64[::1], "
+        "float64, int64, int64, int64[::1], int64[::1], int64[::1], int64[::1])")
+def _near_origin(o0, o1, o2, reach, j, actors, centre, radius, lo, cell, nx, ny, cell_start, cell_item, stamp, near):
+    """:func:`grid_actor_pairs`' short segments: into ``near``, ascending, the actors (positions in ``actors``)
+    listed for the cells that the square of half-side ``reach`` about the origin o overlaps whose sphere comes
+    within ``reach`` of o (every segment from o no longer than ``reach`` that meets an actor's sphere is among
+    them); returns how many. ``stamp`` (B,) int64 marks the actors found for ray j."""
+    i0 = max(np.int64(np.floor((o0 - reach - lo[0]) / cell)), 0)
+    i1 = min(np.int64(np.floor((o0 + reach - lo[0]) / cell)), nx - 1)
+    j0 = max(np.int64(np.floor((o1 - reach - lo[1]) / cell)), 0)
+    j1 = min(np.int64(np.floor((o1 + reach - lo[1]) / cell)), ny - 1)
+    n = 0
+    for ci in range(i0, i1 + 1):
+        for cj in range(j0, j1 + 1):
+            cc = ci * ny + cj
+            for m in range(cell_start[cc], cell_start[cc + 1]):
+                b = cell_item[m]
+                if stamp[b] == j:
+                    continue
+                stamp[b] = j
+                a = actors[b]
+                v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
+                r = radius[a] + reach
+                if v0 * v0 + v1 * v1 + v2 * v2 <= r * r:
+                    near[n] = b
+                    n += 1
+    _ascending(near, n)
+    return n
+
+
 @kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
         "float64[:, :, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1], float64, int64, "
-        "int64, int64[::1], int64[::1])")
+        "int64, int64[::1], int64[::1], float64)")
 def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo, hi, cell, nx, ny, cell_start,
-                     cell_item):
+                     cell_item, near_m):
     """:func:`actor_pairs` of the pairs that can give a ray ``rows[j]`` a hit at t <= ``t_limit[j]``, each ray
     tested only against the actors listed for the grid cells it crosses in that span.
 
@@ -251,6 +339,14 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
     :func:`actor_pairs` tests them (the same arithmetic), in the order of ``actors``; a pair whose box the ray
     enters beyond ``t_limit[j]`` (grown by 0.1 % and 1 cm for rounding) is left out: its hit would lie there.
 
+    A short segment, one whose reach (that grown limit times its direction's length) is at most ``near_m``, takes
+    instead the actors listed for the cells within its reach of its origin whose sphere comes within its reach of
+    the origin: found once for consecutive rays from one origin (a pixel's sky-occlusion segments, which share
+    their origin and length), where walking each ray's cells found the same actors again per ray. Both find every
+    pair whose box the ray enters by ``t_limit``; the reach's test may also keep one entered between the limit and
+    its margin, which the walk leaves out, so give ``near_m`` > 0 only where such a pair cannot change the result
+    (an occlusion test up to ``t_limit``) and 0 where it could (a nearest hit).
+
     Returns what :func:`actor_pairs` returns, less the pairs that cannot be hit within ``t_limit``.
     """
     local = np.empty(6, np.float32)
@@ -262,59 +358,30 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
     pair_actor = np.empty(rows.size, np.int64)
     pair_rays = np.empty((rows.size, 6), np.float32)
     half = 0.5 + BOX_MARGIN
+    # The actors in reach of the last short segment's origin (ascending), and that origin and reach.
+    near = np.empty(nb, np.int64)
+    near_stamp = np.full(nb, -1, np.int64)
+    n_near = 0
+    near_o0 = near_o1 = near_o2 = np.nan
+    near_reach = -1.0
     for j in range(rows.size):
         i = rows[j]
         o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
         d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
-        # The span of t in the box and in [0, t_limit] (slabs).
-        t0, t1 = 0.0, np.float64(t_limit[j])
-        limit = t1 * 1.001 + 0.01
-        ok = True
-        for c in range(3):
-            o, d = (o0, o1, o2)[c], (d0, d1, d2)[c]
-            if d == 0.0:
-                if o < lo[c] or o > hi[c]:
-                    ok = False
-                continue
-            ta, tb = (lo[c] - o) / d, (hi[c] - o) / d
-            if ta > tb:
-                ta, tb = tb, ta
-            t0, t1 = max(t0, ta), min(t1, tb)
-        if not ok or t0 > t1:
-            continue
-        dxy = np.sqrt(d0 * d0 + d1 * d1)
-        steps = 0
-        step = 0.0
-        if dxy > 0.0 and t1 > t0:
-            step = cell / dxy
-            steps = np.int64((t1 - t0) / step) + 1
-        n = 0
-        last = np.int64(-1)
-        for k in range(steps + 1):
-            t = min(t0 + k * step, t1)
-            ci = min(max(np.int64(np.floor((o0 + t * d0 - lo[0]) / cell)), 0), nx - 1)
-            cj = min(max(np.int64(np.floor((o1 + t * d1 - lo[1]) / cell)), 0), ny - 1)
-            cc = ci * ny + cj
-            if cc == last:
-                continue
-            last = cc
-            for m in range(cell_start[cc], cell_start[cc + 1]):
-                b = cell_item[m]
-                if stamp[b] != j:
-                    stamp[b] = j
-                    cand[n] = b
-                    n += 1
-        # In the order of ``actors`` (insertion sort: a handful each).
-        for p in range(1, n):
-            v = cand[p]
-            q = p - 1
-            while q >= 0 and cand[q] > v:
-                cand[q + 1] = cand[q]
-                q -= 1
-            cand[q + 1] = v
         dd = d0 * d0 + d1 * d1 + d2 * d2
+        limit = np.float64(t_limit[j]) * 1.001 + 0.01
+        reach = limit * np.sqrt(dd)
+        if reach <= near_m:
+            if o0 != near_o0 or o1 != near_o1 or o2 != near_o2 or reach > near_reach:
+                near_o0, near_o1, near_o2, near_reach = o0, o1, o2, reach
+                n_near = _near_origin(o0, o1, o2, reach, j, actors, centre, radius, lo, cell, nx, ny, cell_start,
+                                      cell_item, near_stamp, near)
+            src, n = near, n_near
+        else:
+            src, n = cand, _walked(o0, o1, o2, d0, d1, d2, np.float64(t_limit[j]), j, lo, hi, cell, nx, ny,
+                                   cell_start, cell_item, stamp, cand)
         for p in range(n):
-            a = actors[cand[p]]
+            a = actors[src[p]]
             v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
             if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
                 continue
@@ -332,7 +399,6 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
                 pair_rays[count, m] = local[m]
             count += 1
     return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
-
 
 
 GRID_CELL_M = 2.0  # cells of actor_grid at least this wide ...

@@ -512,7 +512,8 @@ class FrameScene:
         sub = np.flatnonzero(~blocked if actor_rays is None else actor_rays & ~blocked)
         rays = as_input(rays, np.float32)
         # Segments (sky occlusion, shadows towards a lamp) test only the actors of the grid cells they cross.
-        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)))
+        # Short ones (a pixel's sky-occlusion rays share an origin) take the actors within their reach of it, once.
+        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)), near=True)
         hit_pair = np.zeros(len(pair_row), bool)
         for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
@@ -523,20 +524,26 @@ class FrameScene:
     def _pairs_by_model(self, pair_actor: np.ndarray):
         """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""
         codes = self._model[pair_actor]
-        for code in np.unique(codes):
-            yield int(code), np.flatnonzero(codes == code)
+        # One stable sort instead of a comparison of every entry per model (an urban frame's casts meet ~100 models).
+        order = np.argsort(codes, kind="stable")
+        ends = np.flatnonzero(np.diff(codes[order])) + 1
+        for sel in np.split(order, ends) if len(order) else ():
+            yield int(codes[sel[0]]), sel
 
-    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray, near: bool = False
+               ) -> tuple[np.ndarray, ...]:
         """:func:`pipeline.world.actor_casts.actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` and
         the placed actors, less the pairs that cannot be hit at t <= ``t_limit`` ((K,) float64, inf: no limit), each
         ray tested only against the actors of the grid cells it crosses (:func:`grid_actor_pairs`; the grid is
-        built once per frame)."""
+        built once per frame). With ``near`` (occlusion tests only: it may keep a pair entered just beyond the
+        limit), a ray that reaches no farther than a cell takes the actors within its reach of its origin."""
         if not len(self._placed) or not len(sub):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 6), np.float32)
         if self._grid is None:
             self._grid = actor_grid(self._center, self._radius, self._placed)
         return grid_actor_pairs(rays, as_input(sub, np.int64), self._placed, self._inv_linear, self._center,
-                                self._radius, as_input(t_limit, np.float64), *self._grid)
+                                self._radius, as_input(t_limit, np.float64), *self._grid,
+                                self._grid[2] if near else 0.0)
 
     def _cast_actors(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray) -> tuple[np.ndarray, ...]:
         """The nearest actor hit of each ray ``sub`` of the (N, 6) float32 ``rays`` where it may lie at t <=

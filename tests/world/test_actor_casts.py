@@ -104,9 +104,11 @@ def _box_entry(rays: np.ndarray, affine: np.ndarray, rows: np.ndarray, actor: np
 
 
 @pytest.mark.parametrize("spread_m", [40.0, 600.0])  # one cell's worth of actors; a grid of many cells
-def test_grid_pairs_are_actor_pairs(spread_m):
+@pytest.mark.parametrize("near_m", [0.0, 100.0])  # each ray walks its cells; limited ones take their origin's reach
+def test_grid_pairs_are_actor_pairs(spread_m, near_m):
     """grid_actor_pairs against actor_pairs: without a limit, the same arrays (pairs, order, unit-frame rays); with
-    a limit per ray, exactly the pairs whose box the ray enters by the limit, and none entered beyond its margin."""
+    a limit per ray, exactly the pairs whose box the ray enters by the limit, and none entered beyond its margin,
+    whether the rays walk the grid's cells or (``near_m``) take the actors within their reach of the origin."""
     rng = np.random.default_rng(int(spread_m))
     n = 300
     centre = np.column_stack([rng.uniform(-spread_m, spread_m, (n, 2)), rng.uniform(0.0, 2.0, n)])
@@ -124,12 +126,12 @@ def test_grid_pairs_are_actor_pairs(spread_m):
     rows, actors = np.arange(0, 6000, 2), np.sort(rng.choice(n, 250, replace=False))
     grid = actor_grid(c, radius, actors)
     full = actor_pairs(rays, rows, actors, inv, c, radius)
-    unlimited = grid_actor_pairs(rays, rows, actors, inv, c, radius, np.full(len(rows), np.inf), *grid)
+    unlimited = grid_actor_pairs(rays, rows, actors, inv, c, radius, np.full(len(rows), np.inf), *grid, near_m)
     assert len(full[0]) > 500
     for a, b in zip(full, unlimited, strict=True):
         np.testing.assert_array_equal(a, b)
     limit = rng.uniform(0.0, 30.0, len(rows))
-    pair_row, pair_actor, _ = grid_actor_pairs(rays, rows, actors, inv, c, radius, limit, *grid)
+    pair_row, pair_actor, _ = grid_actor_pairs(rays, rows, actors, inv, c, radius, limit, *grid, near_m)
     entry = _box_entry(rays, affine, rows[full[0]], full[1])
     within = entry <= limit[full[0]]
     beyond = entry > limit[full[0]] * 1.001 + 0.01
@@ -157,8 +159,9 @@ def test_short_segments_see_only_actors_in_reach_and_block_as_a_brute_force_cast
     scene = FrameScene(StaticScene([]), cars, threads=1)
     d = rng.normal(size=(4000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
+    # Some alone, some 8 from one origin near a car (as a pixel's sky-occlusion rays: its reach found once).
     origins = np.concatenate([rng.uniform([-45, -10, 0], [45, 10, 2], (3000, 3)),
-                              boxes.center[rng.integers(0, n, 1000)] + rng.normal(0, 2.0, (1000, 3))])
+                              np.repeat(boxes.center[rng.integers(0, n, 125)] + rng.normal(0, 2.0, (125, 3)), 8, 0)])
     rays = np.concatenate([origins, d], axis=1).astype(np.float32)
     for t_max in (0.5, 1.5, 6.0):
         expected = np.zeros(len(rays), bool)
