@@ -60,7 +60,8 @@ system-deps:
 		exit 1; \
 	fi
 
-# The benchmarks that make their own input; bench_antialias (--sim DIR) and bench_detector (--coco DIR) take one.
+# The benchmarks that make their own input; bench_antialias (--sim DIR), bench_detector (--coco DIR) and
+# bench_people_scale (--onnx MODEL --photo PHOTO, a control of a detector on real people by height) take one.
 bench: setup-dev
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_render_core.py
