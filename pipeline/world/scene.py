@@ -350,8 +350,10 @@ class StaticScene:
         row = self._smooth_row[prim[hit]]
         on = hit[row >= 0]
         if len(on):
-            normal[on] = smooth_normals.interpolate(self._corner_normals[row[row >= 0]], uv[on], normal[on],
-                                                    rays[on, 3:])
+            normal[on] = smooth_normals.interpolated(as_input(self._corner_normals, np.float32),
+                                                     as_input(row[row >= 0], np.int64),
+                                                     as_input(uv[on], np.float32), as_input(normal[on], np.float32),
+                                                     as_input(rays[on, 3:], np.float32))
         return t, prim, normal
 
     def occluded(self, rays: np.ndarray, t_max_m: float, threads: int = 0, where: np.ndarray | None = None
@@ -561,8 +563,10 @@ class FrameScene:
             t[sel], model_prim, face, uv = _cast(scene, model_rays, self.threads, uv=True)
             # Shading normals: the model's corner normals interpolated at the hits (pipeline.world.smooth_normals).
             hit = np.flatnonzero(np.isfinite(t[sel]))
-            face[hit] = smooth_normals.interpolate(self.meshes.corner_normals(model)[model_prim[hit]], uv[hit],
-                                                   face[hit], model_rays[hit, 3:])
+            face[hit] = smooth_normals.interpolated(as_input(self.meshes.corner_normals(model), np.float32),
+                                                    as_input(model_prim[hit], np.int64), as_input(uv[hit], np.float32),
+                                                    as_input(face[hit], np.float32),
+                                                    as_input(model_rays[hit, 3:], np.float32))
             normal[sel] = face
             prim[sel] = model_prim + np.uint32(offsets[model])  # hits only are read
         return nearest_actor_hits(len(sub), pair_row, pair_actor, t, prim, normal, self._inv_linear)

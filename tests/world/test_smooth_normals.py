@@ -10,7 +10,7 @@ from pipeline.world.actors import ActorMeshes, Actors, normalise_to_unit_box
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import FrameScene, StaticScene
-from pipeline.world.smooth_normals import corner_normals
+from pipeline.world.smooth_normals import corner_normals, interpolate, interpolated
 
 
 def uv_sphere(rings: int = 12, segments: int = 24) -> Mesh:
@@ -95,3 +95,25 @@ def test_corner_normals_equal_a_loop_over_each_vertexs_triangles():
     got = corner_normals(vertices, tris, extent)
     np.testing.assert_allclose(got, expected, rtol=0, atol=2.5e-7)
     assert corner_normals(vertices, tris[:0], extent).shape == (0, 3, 3)
+
+
+def test_compiled_interpolation_gives_the_numpy_definitions_bits():
+    """interpolated (the renderer's compiled pass over a table of corner normals) against interpolate (numpy) on the
+    gathered rows: the same float32 bits, with zero corner normals (the 1e-12 floor), barycentrics outside the
+    triangle, and rays grazing the face (where the flip test's sign is decided by the last bits)."""
+    rng = np.random.default_rng(3)
+    table = rng.normal(size=(300, 3, 3)).astype(np.float32)
+    table /= np.linalg.norm(table, axis=2, keepdims=True)
+    table[:20] = 0.0
+    k = 50_000
+    rows = rng.integers(0, len(table), k).astype(np.int64)
+    uv = rng.uniform(-0.2, 1.0, (k, 2)).astype(np.float32)
+    face = rng.normal(size=(k, 3)).astype(np.float32)
+    face /= np.linalg.norm(face, axis=1, keepdims=True)
+    d = rng.normal(size=(k, 3)).astype(np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[: k // 2] -= np.sum(d[: k // 2] * face[: k // 2], axis=1, keepdims=True) * face[: k // 2] * np.float32(0.99999)
+    expected = interpolate(table[rows], uv, face, d)
+    got = interpolated(table, rows, uv, face, d)
+    assert np.array_equal(expected.view(np.uint32), got.view(np.uint32))
+    assert np.any(np.all(got == face, axis=1)) and not np.all(np.all(got == face, axis=1))  # both branches taken
