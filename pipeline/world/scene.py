@@ -614,11 +614,11 @@ class FrameScene:
             groups, whole = [(np.asarray(slope, np.float64), None)], True
         else:
             whole = False
-        lo, hi = np.full((len(self._placed), 2), np.inf), np.full((len(self._placed), 2), -np.inf)
+        if not groups:
+            return np.zeros(len(x), bool)
+        lo, hi = self._union_footprints(np.array([np.asarray(g, np.float64) for g, _ in groups]))
         bounds = []
         for g_slope, rows in groups:
-            g_lo, g_hi = self._sun_footprints(g_slope)
-            lo, hi = np.minimum(lo, g_lo), np.maximum(hi, g_hi)
             sx, sy = np.asarray(g_slope, np.float32)
             picked = (x, y, z) if whole else (x[rows], y[rows], z[rows])
             bounds.append((picked, sx, sy, _projection_bounds(*picked, sx, sy)))
@@ -643,6 +643,19 @@ class FrameScene:
         for (_, rows), (picked, sx, sy, _) in zip(groups, bounds, strict=True):
             out[rows] = _in_marked_cells(*picked, sx, sy, *lookup)
         return out
+
+    def _union_footprints(self, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (A, 2): the union over the (S, 2) ``slopes`` of :meth:`_sun_footprints`, in one pass. Along
+        x a vertex projects to x - z sx, monotone in sx (rounding is monotone too), so its least and greatest values
+        over the slopes lie at their least and greatest sx: the same bits as S passes and their minimum and maximum."""
+        if len(slopes) == 1:
+            return self._sun_footprints(slopes[0])
+        lo_s, hi_s = slopes.min(axis=0), slopes.max(axis=0)
+        key = ("union", *lo_s.tolist(), *hi_s.tolist())
+        if key not in self._footprints:
+            starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
+            self._footprints[key] = _run_bounds_along_suns(self.hull_vertices, starts, *lo_s, *hi_s)
+        return self._footprints[key]
 
     def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
@@ -704,5 +717,27 @@ def _run_bounds_along_sun(vertices, starts, sx, sy):
             py = vertices[v, 1] - vertices[v, 2] * sy
             lx, hx = min(lx, px), max(hx, px)
             ly, hy = min(ly, py), max(hy, py)
+        lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
+    return lo, hi
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[::1], float64, float64, float64, float64)")
+def _run_bounds_along_suns(vertices, starts, sx_lo, sy_lo, sx_hi, sy_hi):
+    """:func:`_run_bounds_along_sun` for every slope in [sx_lo, sx_hi] x [sy_lo, sy_hi] at once: per run, the bounds
+    of x - z sx and y - z sy over its vertices and those slopes, each vertex's extremes taken at the end of the
+    slopes' range that its z (its sign) picks, computed as the one-slope pass computes them."""
+    r_count = starts.size
+    lo = np.empty((r_count, 2))
+    hi = np.empty((r_count, 2))
+    for r in range(r_count):
+        end = starts[r + 1] if r + 1 < r_count else vertices.shape[0]
+        lx, ly, hx, hy = np.inf, np.inf, -np.inf, -np.inf
+        for v in range(starts[r], end):
+            x, y, z = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+            up = z > 0
+            lx = min(lx, x - z * (sx_hi if up else sx_lo))
+            hx = max(hx, x - z * (sx_lo if up else sx_hi))
+            ly = min(ly, y - z * (sy_hi if up else sy_lo))
+            hy = max(hy, y - z * (sy_lo if up else sy_hi))
         lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
     return lo, hi

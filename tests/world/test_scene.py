@@ -296,6 +296,23 @@ def test_sun_footprints_are_each_runs_projected_bounds():
         np.testing.assert_array_equal(hi, np.maximum.reduceat(flat, starts, axis=0))
 
 
+def test_union_of_sun_footprints_over_a_disc_is_the_per_slope_passes_union():
+    """One pass over a range of slopes (the sun's disc) against the union of one pass per slope, to the bit: vertices
+    above, below and on z = 0, slopes of both signs."""
+    from pipeline.world.scene import _run_bounds_along_sun, _run_bounds_along_suns
+
+    rng = np.random.default_rng(5)
+    vertices = rng.uniform(-800, 800, (6000, 3)) * [1, 1, 0.02]
+    vertices[::7, 2] = 0.0
+    starts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, 6000), 50, replace=False))])
+    slopes = np.column_stack([rng.uniform(-0.9, -0.85, 16), rng.uniform(0.31, 0.33, 16)])
+    slopes[3] = [0.2, -0.1]  # a range across 0 in both axes
+    per = [_run_bounds_along_sun(vertices, starts, *s) for s in slopes]
+    lo, hi = _run_bounds_along_suns(vertices, starts, *slopes.min(axis=0), *slopes.max(axis=0))
+    np.testing.assert_array_equal(lo, np.minimum.reduce([p[0] for p in per]))
+    np.testing.assert_array_equal(hi, np.maximum.reduce([p[1] for p in per]))
+
+
 def test_frame_scene_hull_vertices_are_the_placed_meshes_on_the_hull():
     """FrameScene places only the hull vertices per frame: the same numbers, in the same order, as those of the
     whole placed meshes (geometry, placed on demand)."""
