@@ -56,11 +56,12 @@ def _hemisphere(samples: int) -> np.ndarray:
 _PATTERN = _hemisphere(AO_SAMPLES)
 
 
-@kernel("float32[:, ::1](float32[:, ::1], float32[::1], float32[:, ::1], int64[::1], float32[:, ::1])")
-def occlusion_rays(rays, t_m, normal, rows, pattern):
+@kernel("float32[:, ::1](float32[:, ::1], float32[::1], float32[:, ::1], int64[::1], float32[:, ::1], int64)")
+def occlusion_rays(rays, t_m, normal, rows, pattern, period):
     """(K * S, 6) float32 rays from the hits ``rows`` of the (N, 6) float32 camera ``rays`` (hit at ``t_m``, unit
     ``normal`` facing the viewer): for each, the S directions of ``pattern`` ((S, 3), about +z) turned onto its
-    normal and rotated about it by an angle hashed from the row, from the hit lifted 2 mm + 0.1 mm per metre."""
+    normal and rotated about it by an angle hashed from the row modulo ``period`` (rays that stack passes of
+    ``period`` rays each hash as each pass alone would), from the hit lifted 2 mm + 0.1 mm per metre."""
     s = pattern.shape[0]
     out = np.empty((rows.size * s, 6), np.float32)
     for j in range(rows.size):
@@ -74,7 +75,7 @@ def occlusion_rays(rays, t_m, normal, rows, pattern):
         b10, b11, b12 = np.float32(1) + sign * n0 * n0 * a, sign * b, -sign * n0
         b20, b21, b22 = b, sign + n1 * n1 * a, -n1
         # A rotation angle from the row: SplitMix64's finaliser, top 24 bits.
-        z = np.uint64(i) * np.uint64(0x9E3779B97F4A7C15)
+        z = np.uint64(i % period) * np.uint64(0x9E3779B97F4A7C15)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
         z = z ^ (z >> np.uint64(31))
@@ -136,12 +137,14 @@ def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, rad
 
 
 def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
-                   image_shape: tuple[int, int] | None = None, given: np.ndarray | None = None) -> np.ndarray:
+                   image_shape: tuple[int, int] | None = None, given: np.ndarray | None = None,
+                   period: int | None = None) -> np.ndarray:
     """(N,) float32 in [1 - AO_STRENGTH, 1]: how much of the sky fill reaches each hit (1 where not traced).
     With ``image_shape`` (H, W), the rays are a camera's pixel centres in row-major order (N = H * W) and the
     occlusion is smoothed over each surface (:func:`smooth_visibility`). ``given`` (N,) float32, optional: the
     visibility where it is already known (an anti-aliasing sample's, lent by its pixel centre's surface); only its
-    NaN rows are traced."""
+    NaN rows are traced. ``period``: the rays are passes of this many rays stacked (the anti-aliasing samples), each
+    ray's directions hashed from its place in its pass (:func:`occlusion_rays`); default N."""
     n = len(rays)
     visibility = np.ones(n, np.float32)
     if given is not None:
@@ -162,7 +165,8 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
     rows = np.flatnonzero((on_actor | near) if given is None else (on_actor | near) & ~known)
     if not len(rows):
         return visibility
-    ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN)
+    ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN,
+                             n if period is None else int(period))
     # From the world, only actors occlude (their contact shadow): the world's own occlusion is traced nowhere, so
     # tracing it near actors only would draw the edges of that region.
     static_rays = np.repeat(on_actor[rows], AO_SAMPLES)

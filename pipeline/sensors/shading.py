@@ -72,7 +72,7 @@ def sky(directions: np.ndarray, condition: Condition) -> np.ndarray:
 def shade(
     scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, lights: SpotLights | None = None,
     indirect: bool = False, pixel_angle_rad: float = 0.0, image_shape: tuple[int, int] | None = None,
-    sunlit: np.ndarray | None = None, sky_visible: np.ndarray | None = None,
+    sunlit: np.ndarray | None = None, sky_visible: np.ndarray | None = None, period: int | None = None,
 ) -> np.ndarray:
     """(N, 3) float32 linear radiance of N camera rays ((N, 6) float32 [origin | unit direction], world).
 
@@ -86,7 +86,10 @@ def shade(
     (:mod:`pipeline.sensors.indirect`; ``image_shape``
     (H, W): the rays are a camera's pixel centres, row-major, and the sky occlusion and the penumbrae are smoothed
     over each surface). A positive ``pixel_angle_rad`` (the camera's angle per pixel) textures the static world's
-    albedo (:mod:`pipeline.sensors.textures`). The sun's and the sky's terms are compiled passes over the rays
+    albedo (:mod:`pipeline.sensors.textures`). ``period``: the rays are passes of this many rays stacked (the
+    anti-aliasing samples, shaded in one call), each shaded as its pass alone would be (the sun's disc direction and
+    the sky occlusion's pattern are chosen by a ray's place in its pass); default N.
+    The sun's and the sky's terms are compiled passes over the rays
     (:mod:`pipeline.sensors.sunlight`); the few glowing hits, the spot lights and the
     wet sheen add theirs with numpy.
     """
@@ -103,14 +106,15 @@ def shade(
     normal = as_input(hits.normal, np.float32)
     # The realistic camera's sun is a disc (soft shadows: pipeline.sensors.shadows); the fast preset's a point.
     disc = condition.sun_disc if indirect else sun[None]
-    n_dot_l, lit, sunlit = sun_shares(scene, rays, hits, condition, disc, image_shape, pixel_angle_rad, sunlit)
+    n_dot_l, lit, sunlit = sun_shares(scene, rays, hits, condition, disc, image_shape, pixel_angle_rad, sunlit,
+                                      period)
     rgb = [np.asarray(c, np.float32) for c in (condition.sun_rgb, condition.ambient_rgb)] + [condition.sky_params]
     out = sky_and_sun(rays, as_input(hits.hit, bool), normal, as_input(mat, np.int32),
                       as_input(hits.color, np.float32), n_dot_l, lit, sunlit, mats["specular"],
                       mats["shininess"], sun, *rgb)
     if indirect:
         # The sky fill shut out by nearby geometry, then one bounce of mirror reflection (pipeline.sensors.indirect).
-        visibility = sky_visibility(scene, rays, hits, image_shape, sky_visible)
+        visibility = sky_visibility(scene, rays, hits, image_shape, sky_visible, period)
         if sky_visible is not None:
             sky_visible[:] = visibility
         dim = np.flatnonzero(visibility < 1.0)

@@ -97,8 +97,8 @@ def stratum(i, width, samples):
 
 
 @kernel("Tuple((float32[::1], int64[::1], float32[:, ::1], int64[::1]))(float32[:, ::1], float32[:, ::1], "
-        "float32[::1], float32[::1], float32[:, ::1], int64)")
-def sun_rays(rays, normal, t_m, sun, disc, width):
+        "float32[::1], float32[::1], float32[:, ::1], int64, int64)")
+def sun_rays(rays, normal, t_m, sun, disc, width, period):
     """The hits facing the sun, and their shadow rays.
 
     Args:
@@ -107,7 +107,8 @@ def sun_rays(rays, normal, t_m, sun, disc, width):
         sun: (3,) float32 unit vector towards the sun's centre.
         disc: (S, 3) float32 unit directions over the sun's disc (:func:`sun_disc`).
         width: the rays are a camera's pixel centres, row-major, ``width`` a row (0: any rays); it chooses each
-            ray's direction from ``disc`` (:func:`stratum`).
+            ray's direction from ``disc`` (:func:`stratum`), from its row modulo ``period`` (rays that stack passes
+            of ``period`` rays each choose as each pass alone would).
 
     Returns:
         n_dot_l: (N,) float32 normal . sun (0 for misses).
@@ -134,7 +135,7 @@ def sun_rays(rays, normal, t_m, sun, disc, width):
             lit[j] = i
             t = t_m[i]
             lift = np.float32(1e-3) + np.float32(1e-4) * t
-            k = stratum(i, width, samples)
+            k = stratum(i % period, width, samples)
             which[j] = k
             for c in range(3):
                 shadow[j, c] = rays[i, c] + rays[i, 3 + c] * t + normal[i, c] * lift
@@ -205,17 +206,20 @@ def sun_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits, lit: np.ndar
 
 def sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition, disc: np.ndarray,
                image_shape: tuple[int, int] | None = None, pixel_angle_rad: float = 0.0,
-               given: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               given: np.ndarray | None = None, period: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The hits of (N, 6) float32 ``rays`` that face the sun and how much of it they see.
 
     Returns n_dot_l (N,) float32 and lit (M,) int64 (:func:`sun_rays`), and sunlit (M,) float32: the share of the
     sun's ``disc`` ((S, 3), the condition's or its centre alone) each lit hit sees, 1 without shadows; taken from
     ``given`` ((N,) float32 per ray, optional) where that is not NaN, else traced (:func:`sun_visibility`).
+    ``period``: the rays are passes of this many rays stacked, each ray's disc direction chosen by its place in its
+    pass (:func:`sun_rays`); default N.
     """
     normal, t_m = as_input(hits.normal, np.float32), as_input(hits.t_m, np.float32)
     width = image_shape[1] if image_shape is not None else 0
     n_dot_l, lit, shadow, which = sun_rays(as_input(rays, np.float32), normal, t_m, condition.sun_direction, disc,
-                                           width)
+                                           width, len(rays) if period is None else int(period))
     sunlit = np.ones(len(lit), np.float32)
     if not (condition.shadows and condition.sun_elevation_deg > 0 and len(lit)):
         return n_dot_l, lit, sunlit

@@ -56,7 +56,7 @@ def test_occlusion_rays_leave_the_surface_into_its_hemisphere():
     rays = np.column_stack([rng.uniform(-5, 5, (n, 3)), -normal]).astype(np.float32)  # looking at the surface
     t = rng.uniform(1.0, 50.0, n).astype(np.float32)
     rows = np.arange(0, n, 2, dtype=np.int64)
-    out = occlusion_rays(rays, t, normal, rows, _hemisphere(AO_SAMPLES)).reshape(len(rows), AO_SAMPLES, 6)
+    out = occlusion_rays(rays, t, normal, rows, _hemisphere(AO_SAMPLES), n).reshape(len(rows), AO_SAMPLES, 6)
     hit = rays[rows, :3] + rays[rows, 3:] * t[rows, None]
     lift = out[:, :, :3] - hit[:, None, :]
     np.testing.assert_allclose(np.einsum("rsk,rk->rs", lift, normal[rows]),
@@ -69,8 +69,15 @@ def test_occlusion_rays_leave_the_surface_into_its_hemisphere():
     np.testing.assert_allclose(np.sort(cos, axis=1), np.broadcast_to(np.sort(_hemisphere(AO_SAMPLES)[:, 2]),
                                                                       cos.shape), atol=1e-5)
     # Same row, same rays: the rotation is a function of the row.
-    again = occlusion_rays(rays, t, normal, rows, _hemisphere(AO_SAMPLES)).reshape(len(rows), AO_SAMPLES, 6)
+    again = occlusion_rays(rays, t, normal, rows, _hemisphere(AO_SAMPLES), n).reshape(len(rows), AO_SAMPLES, 6)
     np.testing.assert_array_equal(out, again)
+    # Passes of n rays stacked (the anti-aliasing samples, shaded in one call): each pass's rows as if alone.
+    two = occlusion_rays(np.concatenate([rays, rays]), np.concatenate([t, t]), np.concatenate([normal, normal]),
+                         np.concatenate([rows, rows + n]), _hemisphere(AO_SAMPLES), n)
+    np.testing.assert_array_equal(two.reshape(2, len(rows), AO_SAMPLES, 6), np.stack([out, out]))
+    unstacked = occlusion_rays(np.concatenate([rays, rays]), np.concatenate([t, t]), np.concatenate([normal, normal]),
+                               rows + n, _hemisphere(AO_SAMPLES), 2 * n).reshape(len(rows), AO_SAMPLES, 6)
+    assert not np.array_equal(unstacked, out)  # the row's place sets the rotation
 
 
 def test_sky_visibility_darkens_the_ground_beside_an_actor_only(box_meshes, actors_factory):

@@ -149,7 +149,7 @@ def test_every_disc_direction_keeps_its_conservative_tests_exact(box_meshes, act
                             -np.ones(n)]).astype(np.float32)
     hits = scene.cast_rays(rays)
     disc = lighting.sun_disc
-    _, lit, shadow, which = sun_rays(rays, hits.normal, hits.t_m, lighting.sun_direction, disc, 60)
+    _, lit, shadow, which = sun_rays(rays, hits.normal, hits.t_m, lighting.sun_direction, disc, 60, n)
     assert set(which.tolist()) == set(range(SUN_SAMPLES))
     blocked, _, _ = sun_blocked(scene, shadow, which, disc, hits.t_m[lit])
     np.testing.assert_array_equal(blocked, scene.occluded_rays(shadow))

@@ -26,7 +26,7 @@ def test_hits_facing_the_sun_get_shadow_rays_from_just_above_the_hit():
     rays = _rays([[1, 0, -1], [1, 0, -1], [0, 1, 0], [0, 0, 1]])
     normal = np.float32([[0, 0, 1], [0, 0, -1], [0, -1, 0], [0, 0, 0]])  # up; down; towards y-; a miss
     t = np.float32([10.0, 10.0, 20.0, np.inf])
-    n_dot_l, lit, shadow, which = sun_rays(rays, normal, t, SUN, POINT_SUN, 0)
+    n_dot_l, lit, shadow, which = sun_rays(rays, normal, t, SUN, POINT_SUN, 0, len(rays))
     np.testing.assert_allclose(n_dot_l, [0.8, -0.8, -0.6, 0.0], atol=1e-7)
     assert lit.tolist() == [0]
     hit_point = rays[0, :3] + 10.0 * rays[0, 3:]
@@ -41,7 +41,7 @@ def test_shadow_rays_follow_the_disc_cell_of_their_pixel():
     rays = _rays([[0, 0, -1]] * 16)
     normal = np.tile(np.float32([0, 0, 1]), (16, 1))
     disc = np.arange(48, dtype=np.float32).reshape(16, 3)  # stand-ins: only which row is copied matters
-    _, lit, shadow, which = sun_rays(rays, normal, np.full(16, 2.0, np.float32), SUN, disc, 4)
+    _, lit, shadow, which = sun_rays(rays, normal, np.full(16, 2.0, np.float32), SUN, disc, 4, 16)
     reversed2 = [0, 2, 1, 3]
     expected = [4 * reversed2[y] + reversed2[x] for y in range(4) for x in range(4)]
     assert lit.tolist() == list(range(16)) and which.tolist() == expected
@@ -52,8 +52,23 @@ def test_shadow_rays_follow_the_disc_cell_of_their_pixel():
             assert sorted((k % 4) // 2 + 2 * ((k // 4) // 2) for k in block) == [0, 1, 2, 3]
 
 
+def test_stacked_passes_choose_their_disc_rows_as_each_pass_alone():
+    # Rays of no image (width 0: as if in rows of 4), 10 a pass, stacked three times (the anti-aliasing samples,
+    # shaded in one call with period 10): each pass takes the rows it would take alone.
+    rays = _rays([[0, 0, -1]] * 10)
+    normal = np.tile(np.float32([0, 0, 1]), (10, 1))
+    disc = np.arange(48, dtype=np.float32).reshape(16, 3)
+    t = np.full(10, 2.0, np.float32)
+    _, _, _, alone = sun_rays(rays, normal, t, SUN, disc, 0, 10)
+    _, _, _, stacked = sun_rays(np.tile(rays, (3, 1)), np.tile(normal, (3, 1)), np.tile(t, 3), SUN, disc, 0, 10)
+    np.testing.assert_array_equal(stacked, np.tile(alone, 3))
+    _, _, _, one_pass = sun_rays(np.tile(rays, (3, 1)), np.tile(normal, (3, 1)), np.tile(t, 3), SUN, disc, 0, 30)
+    assert not np.array_equal(one_pass, stacked)
+
+
 def _shade(rays, hit, normal, material, color, unshadowed, specular, shininess):
-    n_dot_l, lit, _, _ = sun_rays(rays, normal, np.full(len(rays), 5.0, np.float32), SUN, POINT_SUN, 0)
+    n_dot_l, lit, _, _ = sun_rays(rays, normal, np.full(len(rays), 5.0, np.float32), SUN, POINT_SUN, 0,
+                              len(rays))
     return sky_and_sun(rays, np.asarray(hit), normal, np.asarray(material, np.int32), np.asarray(color, np.float32),
                        n_dot_l, lit, np.asarray(unshadowed, np.float32)[: len(lit)], np.asarray(specular, np.float32),
                        np.asarray(shininess, np.float32), SUN, SUN_RGB, AMBIENT, gradient_params(ZENITH, HORIZON))
