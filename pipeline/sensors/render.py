@@ -141,22 +141,27 @@ def render_camera(
                 display = to_srgb8(radiance.reshape(h, w, 3) * np.float32(exposure.scale / compensation),
                                    "filmic" if indirect else "soft")
                 where = where[window_contrast(display).reshape(-1)[where] > AA_MIN_CONTRAST]
-        # All the samples in one pass (fewer, larger casts), each shaded as if alone (``period``), summed in order.
+        # The samples stacked into as few passes as hold no more rays than the centres' (fewer, larger casts; no
+        # more memory), each sample shaded as if alone (``period``), summed in the samples' order.
         m, count = len(where), len(samples)
-        mask = np.tile(actor_rays.reshape(-1)[where], count)
-        stacked = np.tile(where, count)
-        sample_rays = make_rays(cam_to_world.translation, np.concatenate([sample[where] for sample in samples]),
-                                cam_to_world.rotation)
-        sample_hits = scene.cast_rays(sample_rays, mask)
-        lent = None if sunlit is None else _lent(sunlit, hits, sample_hits, stacked, (h, w),
-                                                 SHADOW_FILTER_NORMAL_COS, SHADOW_FILTER_DEPTH)
-        lent_sky = None if skylit is None else _lent(skylit, hits, sample_hits, stacked, (h, w),
-                                                     AO_FILTER_NORMAL_COS, AO_FILTER_DEPTH)
-        shaded = condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect, texture_rad,
-                                     sunlit=lent, sky_visible=lent_sky, period=m), sample_hits.t_m, sample_hits.hit)
+        per_pass = max(1, (h * w) // max(m, 1))
         edge = np.zeros((m, 3), np.float32)
-        for k in range(count):
-            edge += shaded[k * m:(k + 1) * m]
+        for first in range(0, count, per_pass):
+            group = samples[first:first + per_pass]
+            mask = np.tile(actor_rays.reshape(-1)[where], len(group))
+            stacked = np.tile(where, len(group))
+            sample_rays = make_rays(cam_to_world.translation, np.concatenate([sample[where] for sample in group]),
+                                    cam_to_world.rotation)
+            sample_hits = scene.cast_rays(sample_rays, mask)
+            lent = None if sunlit is None else _lent(sunlit, hits, sample_hits, stacked, (h, w),
+                                                     SHADOW_FILTER_NORMAL_COS, SHADOW_FILTER_DEPTH)
+            lent_sky = None if skylit is None else _lent(skylit, hits, sample_hits, stacked, (h, w),
+                                                         AO_FILTER_NORMAL_COS, AO_FILTER_DEPTH)
+            shaded = condition.fog(shade(scene, sample_rays, sample_hits, condition, lights, indirect, texture_rad,
+                                         sunlit=lent, sky_visible=lent_sky, period=m), sample_hits.t_m,
+                                   sample_hits.hit)
+            for k in range(len(group)):
+                edge += shaded[k * m:(k + 1) * m]
         radiance[where] = edge / count
         if reflection is not None:  # the edge pixels' new radiance, on wet road, mirrors too
             reflection.apply(radiance, where if not camera.config.samples_everywhere else None)
