@@ -700,32 +700,13 @@ def _in_marked_cells(x, y, z, sx, sy, x0, y0, scale, grid, top_z):
     return out
 
 
-@kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[::1], float64, float64)")
-def _run_bounds_along_sun(vertices, starts, sx, sy):
-    """(lo, hi), each (R, 2) float64: the bounds of each run of the (V, 3) float64 ``vertices`` (run r from
-    ``starts[r]`` to the next start) projected along the sun (slope (sx, sy)) onto z = 0, each point as
-    :func:`pipeline.world.sunmap.along_sun` computes it (x - z sx, y - z sy): one pass instead of two vertex-sized
-    columns and two reductions per sun direction (16 directions over the sun's disc)."""
-    r_count = starts.size
-    lo = np.empty((r_count, 2))
-    hi = np.empty((r_count, 2))
-    for r in range(r_count):
-        end = starts[r + 1] if r + 1 < r_count else vertices.shape[0]
-        lx, ly, hx, hy = np.inf, np.inf, -np.inf, -np.inf
-        for v in range(starts[r], end):
-            px = vertices[v, 0] - vertices[v, 2] * sx
-            py = vertices[v, 1] - vertices[v, 2] * sy
-            lx, hx = min(lx, px), max(hx, px)
-            ly, hy = min(ly, py), max(hy, py)
-        lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
-    return lo, hi
-
-
 @kernel("Tuple((float64[:, ::1], float64[:, ::1]))(float64[:, ::1], int64[::1], float64, float64, float64, float64)")
 def _run_bounds_along_suns(vertices, starts, sx_lo, sy_lo, sx_hi, sy_hi):
-    """:func:`_run_bounds_along_sun` for every slope in [sx_lo, sx_hi] x [sy_lo, sy_hi] at once: per run, the bounds
-    of x - z sx and y - z sy over its vertices and those slopes, each vertex's extremes taken at the end of the
-    slopes' range that its z (its sign) picks, computed as the one-slope pass computes them."""
+    """(lo, hi), each (R, 2) float64: the bounds of each run of the (V, 3) float64 ``vertices`` (run r from
+    ``starts[r]`` to the next start) projected along every sun of slope in [sx_lo, sx_hi] x [sy_lo, sy_hi] onto
+    z = 0, each point as :func:`pipeline.world.sunmap.along_sun` computes it (x - z sx, y - z sy); a vertex's extremes
+    lie at the end of the slopes' range that its z (its sign) picks. One pass instead of two vertex-sized columns and
+    two reductions per sun direction; one slope: :func:`_run_bounds_along_sun`."""
     r_count = starts.size
     lo = np.empty((r_count, 2))
     hi = np.empty((r_count, 2))
@@ -741,3 +722,9 @@ def _run_bounds_along_suns(vertices, starts, sx_lo, sy_lo, sx_hi, sy_hi):
             hy = max(hy, y - z * (sy_lo if up else sy_hi))
         lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
     return lo, hi
+
+
+def _run_bounds_along_sun(vertices: np.ndarray, starts: np.ndarray, sx: float, sy: float
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_run_bounds_along_suns` of the one slope (sx, sy)."""
+    return _run_bounds_along_suns(vertices, starts, float(sx), float(sy), float(sx), float(sy))
