@@ -616,7 +616,7 @@ class FrameScene:
             whole = False
         if not groups:
             return np.zeros(len(x), bool)
-        lo, hi = self._union_footprints(np.array([np.asarray(g, np.float64) for g, _ in groups]))
+        lo, hi = self._sun_footprints(np.array([np.asarray(g, np.float64) for g, _ in groups]))
         bounds = []
         for g_slope, rows in groups:
             sx, sy = np.asarray(g_slope, np.float32)
@@ -644,27 +644,17 @@ class FrameScene:
             out[rows] = _in_marked_cells(*picked, sx, sy, *lookup)
         return out
 
-    def _union_footprints(self, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi), each (A, 2): the union over the (S, 2) ``slopes`` of :meth:`_sun_footprints`, in one pass. Along
-        x a vertex projects to x - z sx, monotone in sx (rounding is monotone too), so its least and greatest values
-        over the slopes lie at their least and greatest sx: the same bits as S passes and their minimum and maximum."""
-        if len(slopes) == 1:
-            return self._sun_footprints(slopes[0])
+    def _sun_footprints(self, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected onto z = 0 along every sun whose slope
+        (:func:`sun_slope`) lies in the box of the (S, 2) ``slopes`` (one sun, or the sun's disc), in one pass
+        (:func:`_run_bounds_along_suns`: the same bits as one pass per slope and their union); computed once per
+        set of suns and frame."""
         lo_s, hi_s = slopes.min(axis=0), slopes.max(axis=0)
-        key = ("union", *lo_s.tolist(), *hi_s.tolist())
-        if key not in self._footprints:
-            starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
-            self._footprints[key] = _run_bounds_along_suns(self.hull_vertices, starts, *lo_s, *hi_s)
-        return self._footprints[key]
-
-    def _sun_footprints(self, slope: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi), each (A, 2): 2D bounds of each actor's vertices projected along the sun (:func:`sun_slope`)
-        onto z = 0; computed once per sun and frame (shade casts shadows once per anti-aliasing sample)."""
-        key = tuple(slope.tolist())
+        key = (*lo_s.tolist(), *hi_s.tolist())
         if key not in self._footprints:
             # Each actor's vertices are one run (place_hulls): bounds per run.
             starts = np.flatnonzero(np.r_[True, np.diff(self.hull_actor) != 0])
-            self._footprints[key] = _run_bounds_along_sun(self.hull_vertices, starts, *np.asarray(slope, np.float64))
+            self._footprints[key] = _run_bounds_along_suns(self.hull_vertices, starts, *lo_s, *hi_s)
         return self._footprints[key]
 
 
@@ -706,7 +696,7 @@ def _run_bounds_along_suns(vertices, starts, sx_lo, sy_lo, sx_hi, sy_hi):
     ``starts[r]`` to the next start) projected along every sun of slope in [sx_lo, sx_hi] x [sy_lo, sy_hi] onto
     z = 0, each point as :func:`pipeline.world.sunmap.along_sun` computes it (x - z sx, y - z sy); a vertex's extremes
     lie at the end of the slopes' range that its z (its sign) picks. One pass instead of two vertex-sized columns and
-    two reductions per sun direction; one slope: :func:`_run_bounds_along_sun`."""
+    two reductions per sun direction; one sun: equal ends."""
     r_count = starts.size
     lo = np.empty((r_count, 2))
     hi = np.empty((r_count, 2))
@@ -723,8 +713,3 @@ def _run_bounds_along_suns(vertices, starts, sx_lo, sy_lo, sx_hi, sy_hi):
         lo[r, 0], lo[r, 1], hi[r, 0], hi[r, 1] = lx, ly, hx, hy
     return lo, hi
 
-
-def _run_bounds_along_sun(vertices: np.ndarray, starts: np.ndarray, sx: float, sy: float
-                          ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_run_bounds_along_suns` of the one slope (sx, sy)."""
-    return _run_bounds_along_suns(vertices, starts, float(sx), float(sy), float(sx), float(sy))

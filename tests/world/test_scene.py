@@ -283,7 +283,7 @@ def test_static_foliage_gets_smooth_normals(material):
 def test_sun_footprints_are_each_runs_projected_bounds():
     """The compiled footprint pass against its definition: along_sun of every vertex, then min and max per run
     (numpy's reduceat), to the bit."""
-    from pipeline.world.scene import _run_bounds_along_sun
+    from pipeline.world.scene import _run_bounds_along_suns
     from pipeline.world.sunmap import along_sun
 
     rng = np.random.default_rng(3)
@@ -291,7 +291,7 @@ def test_sun_footprints_are_each_runs_projected_bounds():
     starts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, 5000), 40, replace=False))])
     for slope in (np.array([0.3, -1.7]), np.zeros(2)):
         flat = np.column_stack(along_sun(*vertices.T, slope))
-        lo, hi = _run_bounds_along_sun(vertices, starts, *slope)
+        lo, hi = _run_bounds_along_suns(vertices, starts, *slope, *slope)  # one sun: equal ends
         np.testing.assert_array_equal(lo, np.minimum.reduceat(flat, starts, axis=0))
         np.testing.assert_array_equal(hi, np.maximum.reduceat(flat, starts, axis=0))
 
@@ -299,7 +299,7 @@ def test_sun_footprints_are_each_runs_projected_bounds():
 def test_union_of_sun_footprints_over_a_disc_is_the_per_slope_passes_union():
     """One pass over a range of slopes (the sun's disc) against the union of one pass per slope, to the bit: vertices
     above, below and on z = 0, slopes of both signs."""
-    from pipeline.world.scene import _run_bounds_along_sun, _run_bounds_along_suns
+    from pipeline.world.scene import _run_bounds_along_suns
 
     rng = np.random.default_rng(5)
     vertices = rng.uniform(-800, 800, (6000, 3)) * [1, 1, 0.02]
@@ -307,7 +307,7 @@ def test_union_of_sun_footprints_over_a_disc_is_the_per_slope_passes_union():
     starts = np.concatenate([[0], np.sort(rng.choice(np.arange(1, 6000), 50, replace=False))])
     slopes = np.column_stack([rng.uniform(-0.9, -0.85, 16), rng.uniform(0.31, 0.33, 16)])
     slopes[3] = [0.2, -0.1]  # a range across 0 in both axes
-    per = [_run_bounds_along_sun(vertices, starts, *s) for s in slopes]
+    per = [_run_bounds_along_suns(vertices, starts, *s, *s) for s in slopes]
     lo, hi = _run_bounds_along_suns(vertices, starts, *slopes.min(axis=0), *slopes.max(axis=0))
     np.testing.assert_array_equal(lo, np.minimum.reduce([p[0] for p in per]))
     np.testing.assert_array_equal(hi, np.maximum.reduce([p[1] for p in per]))
