@@ -358,9 +358,9 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
     pair_actor = np.empty(rows.size, np.int64)
     pair_rays = np.empty((rows.size, 6), np.float32)
     half = 0.5 + BOX_MARGIN
-    # The actors in reach of the last short segment's origin (ascending), and that origin and reach.
+    # The actors in reach of the last short segment's origin (ascending), and that origin and reach. A row either
+    # walks or looks about its origin, so both mark the actors they find in ``stamp`` with the row.
     near = np.empty(nb, np.int64)
-    near_stamp = np.full(nb, -1, np.int64)
     n_near = 0
     near_o0 = near_o1 = near_o2 = np.nan
     near_reach = -1.0
@@ -375,7 +375,7 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
             if o0 != near_o0 or o1 != near_o1 or o2 != near_o2 or reach > near_reach:
                 near_o0, near_o1, near_o2, near_reach = o0, o1, o2, reach
                 n_near = _near_origin(o0, o1, o2, reach, j, actors, centre, radius, lo, cell, nx, ny, cell_start,
-                                      cell_item, near_stamp, near)
+                                      cell_item, stamp, near)
             src, n = near, n_near
         else:
             src, n = cand, _walked(o0, o1, o2, d0, d1, d2, np.float64(t_limit[j]), j, lo, hi, cell, nx, ny,
