@@ -159,7 +159,7 @@ def sun_blocked(scene: FrameScene, shadow: np.ndarray, which: np.ndarray, disc: 
         direction = disc[k]
         # Near hits (most of the lit pixels) skip the static world where its projection along the sun lies below them.
         rows = rows[near[rows]]
-        static_rays[rows] = scene.static.sun_candidates(*origin, direction, rows=rows)
+        static_rays[rows] = scene.static.sun_candidates(*origin, direction, rows=rows, disc=disc)
     return scene.occluded_rays(shadow, actor_rays=actor_rays, static_rays=static_rays), actor_rays, static_rays
 
 

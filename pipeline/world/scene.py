@@ -62,7 +62,7 @@ from pipeline.world.actors import (
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import TINTED_MATERIALS, material_arrays, material_index
 from pipeline.world.mesh import Mesh, triangle_bounds
-from pipeline.world.sunmap import SunMap, sun_slope
+from pipeline.world.sunmap import SunMap, SunTiles, sun_slope
 
 
 @dataclass(frozen=True)
@@ -291,6 +291,7 @@ class StaticScene:
     def __init__(self, meshes: list[Mesh]) -> None:
         self.mesh_offsets = np.cumsum([0] + [len(m) for m in meshes]).astype(np.int64)
         self._sun_maps: dict[tuple[float, ...], SunMap] = {}  # see sun_candidates
+        self._sun_tiles: dict[bytes, SunTiles] = {}
         meshes = [m for m in meshes if len(m)]
         self.num_triangles = sum(len(m) for m in meshes)
         if meshes:
@@ -372,14 +373,23 @@ class StaticScene:
         return blocked
 
     def sun_candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, sun: np.ndarray,
-                       rows: np.ndarray | None = None) -> np.ndarray:
+                       rows: np.ndarray | None = None, disc: np.ndarray | None = None) -> np.ndarray:
         """(M,) bool, conservative: which rays from the world points (x, y, z) (each (N,) float32) along the upward
         unit direction ``sun`` (3,) may meet the static world (:class:`pipeline.world.sunmap.SunMap`, one per sun
         direction, its tiles drawn as points fall in them and kept for the next frames); of the points ``rows``
-        ((M,) int64) only, if given."""
+        ((M,) int64) only, if given. ``disc`` ((S, 3), optional): the directions ``sun`` is one of (a sun's disc),
+        whose maps share one index of the triangles per tile (:class:`pipeline.world.sunmap.SunTiles`)."""
         key = tuple(np.asarray(sun, np.float64).tolist())
         if key not in self._sun_maps:
-            self._sun_maps[key] = SunMap(self._vertices, self._triangles, np.asarray(sun, np.float64))
+            index = None
+            if disc is not None:
+                group = np.asarray(disc, np.float64).reshape(-1, 3)
+                group_key = group.tobytes()
+                if group_key not in self._sun_tiles:
+                    self._sun_tiles[group_key] = SunTiles(self._vertices, self._triangles,
+                                                          np.array([sun_slope(d) for d in group]).reshape(-1, 2))
+                index = self._sun_tiles[group_key]
+            self._sun_maps[key] = SunMap(self._vertices, self._triangles, np.asarray(sun, np.float64), index)
         return self._sun_maps[key].candidates(x, y, z, rows)
 
 

@@ -52,33 +52,54 @@ def along_sun(x: np.ndarray, y: np.ndarray, z: np.ndarray, slope: np.ndarray) ->
     return x - z * sx, y - z * sy
 
 
+class SunTiles:
+    """Which of the static world's triangles ((V, 3) float64 world ``vertices``, (T, 3) int64 ``triangles``) may
+    draw into each tile along any of a set of sun directions (``slopes`` (S, 2), :func:`sun_slope` of each): per
+    triangle, the tiles of its projections' box over the slopes' range, grown by one cell (more than the drawing's
+    widening). One index serves the maps of all the directions of a sun's disc (:class:`SunMap`): a triangle listed
+    for a tile it does not meet along one of them draws nothing there, so each map's tiles are those of its own
+    index (a projection x - z sx is monotone in sx, and so is its rounding: the range's ends bound it)."""
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, slopes: np.ndarray) -> None:
+        slopes = np.asarray(slopes, np.float64).reshape(-1, 2)
+        ends = [along_sun(*vertices.T, slope) for slope in (slopes.min(axis=0), slopes.max(axis=0))]
+        (ax, ay), (bx, by) = ends
+        lo, _ = triangle_bounds(np.column_stack([np.fmin(ax, bx), np.fmin(ay, by)]) / SUN_CELL_M, triangles)
+        _, hi = triangle_bounds(np.column_stack([np.fmax(ax, bx), np.fmax(ay, by)]) / SUN_CELL_M, triangles)
+        t = SUN_TILE_CELLS
+        owner, code = _tile_entries(np.floor((lo - 1.0) / t).astype(np.int64),
+                                    np.floor((hi + 1.0) / t).astype(np.int64))
+        order = np.argsort(code, kind="stable")  # by tile (i, j), each tile's triangles in their order
+        self.entry_triangle = owner[order]
+        codes = code[order]
+        new = np.r_[True, codes[1:] != codes[:-1]] if len(codes) else np.zeros(0, bool)
+        self.tile_codes = codes[new]  # the tiles (i, j) met, sorted, one int64 each: i * 2^32 + j
+        self.tile_start = np.r_[np.flatnonzero(new), len(codes)]
+
+    def entries(self, i: int, j: int) -> np.ndarray | None:
+        """The triangles listed for tile (i, j), None where none is."""
+        code = i * (1 << 32) + j
+        k = int(np.searchsorted(self.tile_codes, code))
+        if k >= len(self.tile_codes) or self.tile_codes[k] != code:
+            return None
+        return self.entry_triangle[self.tile_start[k]: self.tile_start[k + 1]]
+
+
 class SunMap:
     """The static world's triangles ((V, 3) world ``vertices``, (T, 3) ``triangles``) seen along the upward unit
-    direction ``sun`` (3,): :meth:`candidates` tells which shadow rays may meet them (see the module docstring)."""
+    direction ``sun`` (3,): :meth:`candidates` tells which shadow rays may meet them (see the module docstring).
+    ``tiles``: a :class:`SunTiles` of the same triangles over directions ``sun`` is among (the sun's disc; default
+    one of ``sun`` alone)."""
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, sun: np.ndarray) -> None:
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, sun: np.ndarray,
+                 tiles: SunTiles | None = None) -> None:
         self.slope = sun_slope(sun)
         vertices = np.asarray(vertices, np.float64)
         triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
-        # Projections, in cells.
-        self._flat = np.column_stack(along_sun(*vertices.T, self.slope)) / SUN_CELL_M
-        flat_lo, flat_hi = triangle_bounds(self._flat, triangles)
-        self._triangles = triangles
-        self._z = np.ascontiguousarray(vertices[:, 2])
-        # Tiles each triangle meets (its cells' box grown by one cell: more than the drawing's widening), listed per
-        # tile.
-        t = SUN_TILE_CELLS
-        lo = np.floor((flat_lo - 1.0) / t).astype(np.int64)
-        hi = np.floor((flat_hi + 1.0) / t).astype(np.int64)
-        owner, code = _tile_entries(lo, hi)
-        order = np.argsort(code, kind="stable")  # by tile (i, j), each tile's triangles in their order
-        self._entry_triangle = owner[order]
-        codes = code[order]
-        new = np.r_[True, codes[1:] != codes[:-1]] if len(codes) else np.zeros(0, bool)
-        self._tile_codes = codes[new]  # the tiles (i, j) met, sorted, one int64 each: i * 2^32 + j
-        self._tile_start = np.r_[np.flatnonzero(new), len(codes)]
+        self._index = SunTiles(vertices, triangles, self.slope) if tiles is None else tiles
+        self._vertices, self._triangles = vertices, triangles
         self._slot: dict[tuple[int, int], int] = {}
-        self._tiles = np.full((16, t, t), -np.inf, np.float32)  # tiles drawn so far in slots 0 .. _drawn - 1
+        self._tiles = np.full((16, SUN_TILE_CELLS, SUN_TILE_CELLS), -np.inf, np.float32)  # drawn: slots 0 .. _drawn - 1
         self._drawn = 0
 
     def candidates(self, x: np.ndarray, y: np.ndarray, z: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -107,13 +128,16 @@ class SunMap:
         """The slot of tile (i, j) in ``_tiles``, drawn now if it is not yet; -1 where no triangle meets it."""
         if (i, j) in self._slot:
             return self._slot[(i, j)]
-        k = int(np.searchsorted(self._tile_codes, i * (1 << 32) + j))
-        if k >= len(self._tile_codes) or self._tile_codes[k] != i * (1 << 32) + j:
+        entries = self._index.entries(i, j)
+        if entries is None:
             self._slot[(i, j)] = -1
             return -1
+        # The listed triangles' corners, projected (in cells): each corner its own row.
+        corners = self._vertices[self._triangles[entries].reshape(-1)]
+        flat = np.column_stack(along_sun(*corners.T, self.slope)) / SUN_CELL_M
         t = SUN_TILE_CELLS
-        entries = self._entry_triangle[self._tile_start[k]: self._tile_start[k + 1]]
-        tile = _draw_tile(self._flat, self._z, self._triangles[entries], i * t, j * t, t)
+        tile = _draw_tile(flat, np.ascontiguousarray(corners[:, 2]), np.arange(len(corners)).reshape(-1, 3),
+                          i * t, j * t, t)
         slot = self._drawn
         if slot + 1 == len(self._tiles):  # one spare slot stays -inf (see candidates)
             self._tiles = np.concatenate([self._tiles, np.full_like(self._tiles, -np.inf)])

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from pipeline.core.classes import SemanticClass
+from pipeline.sensors.shadows import sun_disc
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.scene import StaticScene
-from pipeline.world.sunmap import SUN_CELL_M, SUN_TILE_CELLS, SunMap
+from pipeline.world.sunmap import SUN_CELL_M, SUN_TILE_CELLS, SunMap, SunTiles, sun_slope
 
 CONCRETE = material_index("concrete")
 
@@ -170,3 +171,46 @@ def test_every_blocked_shadow_ray_from_a_surface_is_a_candidate(seed):
     assert not np.any(blocked & ~found)
     on_ground = tri < len(GROUND.triangles)  # flat open ground: only what else lies near the sun line counts
     assert np.count_nonzero(found[on_ground & ~blocked]) < 0.5 * np.count_nonzero(on_ground & ~blocked)
+
+
+def _listed(index: SunTiles) -> set[tuple[int, int]]:
+    """The (tile code, triangle) pairs an index lists."""
+    codes = np.repeat(index.tile_codes, np.diff(index.tile_start))
+    return set(zip(codes.tolist(), index.entry_triangle.tolist(), strict=True))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_maps_of_a_disc_share_one_index_and_draw_the_same_tiles(seed):
+    """One index of triangles per tile over the slopes of a whole disc of directions (a superset of each one's own
+    list) draws, for every direction, the tiles that direction's own index draws: the same heights, so the same
+    candidates. The disc is 5 degrees wide (the sun's is 0.27) so that the lists differ."""
+    rng = np.random.default_rng(200 + seed)
+    merged = Mesh.concatenate(sloped_world(rng))
+    disc = sun_disc(sun_at(rng.uniform(-180, 180), rng.uniform(15, 60)), np.radians(5.0))
+    shared = SunTiles(merged.vertices, merged.triangles, np.array([sun_slope(d) for d in disc]))
+    points = np.column_stack([rng.uniform(-70, 70, (20_000, 2)), rng.uniform(0.0, 4.0, 20_000)]).astype(np.float32)
+    x, y, z = (points[:, k].copy() for k in range(3))
+    listed_more = 0
+    for direction in disc[::3]:
+        own = SunMap(merged.vertices, merged.triangles, direction)
+        with_shared = SunMap(merged.vertices, merged.triangles, direction, shared)
+        np.testing.assert_array_equal(with_shared.candidates(x, y, z), own.candidates(x, y, z))
+        assert with_shared._drawn == own._drawn > 16
+        np.testing.assert_array_equal(with_shared._tiles[: own._drawn], own._tiles[: own._drawn])
+        listed_more += len(shared.entry_triangle) > len(own._index.entry_triangle)
+        own_pairs = _listed(own._index)
+        shared_pairs = _listed(shared)
+        assert own_pairs <= shared_pairs
+    assert listed_more >= 4
+
+
+def test_the_scene_answers_alike_with_and_without_the_disc():
+    rng = np.random.default_rng(11)
+    meshes = sloped_world(rng)
+    disc = sun_disc(sun_at(40.0, 30.0), np.radians(2.0))
+    points = np.column_stack([rng.uniform(-70, 70, (8000, 2)), rng.uniform(0.0, 3.0, 8000)]).astype(np.float32)
+    alone, grouped = StaticScene(meshes), StaticScene(meshes)
+    for direction in disc[:5]:
+        cols = [points[:, k].copy() for k in range(3)]
+        np.testing.assert_array_equal(grouped.sun_candidates(*cols, direction, disc=disc),
+                                      alone.sun_candidates(*cols, direction))
