@@ -290,6 +290,14 @@ class ActorMeshes:
             self._hulls[model] = mask
         return self._hulls[model]
 
+    def complete(self) -> ActorMeshes:
+        """Compute every model's hull mask and corner normals now (what frames otherwise compute on a model's first
+        use in each process), e.g. before the meshes are cached for other processes; returns self."""
+        for model in range(len(self.models)):
+            self.hull_mask(model)
+            self.corner_normals(model)
+        return self
+
     def __getitem__(self, object_class: ObjectClass) -> Mesh:
         """The class's first model."""
         return self.models[int(self._first[list(ObjectClass).index(ObjectClass(object_class))])]
@@ -348,9 +356,9 @@ class ActorMeshes:
 
 # Classes whose SUMO box is not the body's (see ActorMeshes.body_lengths).
 BODY_SIZED_CLASSES = (ObjectClass.PEDESTRIAN,)
-# Built once per installation and code version, then loaded (~25 ms instead of ~2.6 s of CPU per process:
-# pipeline.core.build_cache).
-DEFAULT_MESHES: ActorMeshes = cached("actor-meshes", ActorMeshes)
+# Built once per installation and code version, with every model's hull and corner normals, then loaded (~50 ms
+# instead of ~3.3 s of CPU per process: pipeline.core.build_cache).
+DEFAULT_MESHES: ActorMeshes = cached("actor-meshes", lambda: ActorMeshes().complete())
 
 
 def unit_to_world(boxes: Boxes3D) -> np.ndarray:

@@ -67,3 +67,30 @@ def test_the_cached_actor_meshes_are_the_built_ones():
     for field in ("model_extent", "model_low"):
         assert all(np.array_equal(x, y) for x, y in zip(getattr(DEFAULT_MESHES, field), getattr(fresh, field),
                                                         strict=True))
+    # Every model's hull and corner normals come with them (computed when the cache was written), as built lazily.
+    assert len(DEFAULT_MESHES._hulls) == len(DEFAULT_MESHES._corners) == len(fresh.models)
+    for model in range(0, len(fresh.models), 7):
+        assert np.array_equal(DEFAULT_MESHES.hull_mask(model), fresh.hull_mask(model))
+        assert np.array_equal(DEFAULT_MESHES.corner_normals(model), fresh.corner_normals(model))
+
+
+def test_keep_holds_the_most_recently_used_keys(tmp_path):
+    import os
+
+    assert cached("thing", lambda: 1, folder=tmp_path, key="k1", keep=2) == 1
+    assert cached("thing", lambda: 2, folder=tmp_path, key="k2", keep=2) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["thing-k1.pickle", "thing-k2.pickle"]
+    os.utime(tmp_path / "thing-k1.pickle", ns=(10**9, 10**9))
+    os.utime(tmp_path / "thing-k2.pickle", ns=(2 * 10**9, 2 * 10**9))
+    assert cached("thing", lambda: "never built", folder=tmp_path, key="k1", keep=2) == 1  # a use: k1 newest now
+    assert cached("thing", lambda: 3, folder=tmp_path, key="k3", keep=2) == 3  # k2, the least recently used, goes
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["thing-k1.pickle", "thing-k3.pickle"]
+    cached("other", lambda: 0, folder=tmp_path, key="k1")  # another name's files are its own
+    assert len(list(tmp_path.iterdir())) == 3
+
+
+def test_keep_must_be_positive(tmp_path):
+    import pytest
+
+    with pytest.raises(ValueError, match="keep must be at least 1"):
+        cached("thing", lambda: 1, folder=tmp_path, key="k1", keep=0)
