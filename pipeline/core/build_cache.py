@@ -1,13 +1,18 @@
-"""A disk cache for what a process builds from the project's own code alone at import: the procedural actor meshes.
+"""A disk cache for what processes build again and again from the same inputs: the procedural actor meshes at
+import, and the static world of a simulation.
 
-Importing :mod:`pipeline.world.actors` builds every body family in every pose and their smooth normals (310 models,
-~2.6 s of CPU), once per process: each render worker that starts fresh, each closed-loop episode on Ray, each CLI
-command that renders, each test process. What it builds depends on nothing but the code, so, like numba's and
+Importing :mod:`pipeline.world.actors` builds every body family in every pose, their hulls and smooth normals (310
+models, ~3.3 s of CPU), once per process: each render worker that starts fresh, each closed-loop episode on Ray, each
+CLI command that renders, each test process. What it builds depends on nothing but the code, so, like numba's and
 Python's own caches, it is kept on disk beside the code (``pipeline/__pycache__/``, or ``$ROADSYNTH_CACHE_DIR``) under
 a key that changes with any byte of the package's Python sources, the Python and numpy versions and the machine's
-architecture (numpy's floating-point paths), and loaded from there (~25 ms). A stale or damaged file is never read:
-another key is another file, and a file that does not load is rebuilt. Where the folder cannot be written the value
-is built as before. Files of older keys are removed when a new one is written.
+architecture (numpy's floating-point paths), and loaded from there (~50 ms). The static world of a simulation
+(:func:`pipeline.world.static.load_static_world`: ~3 s of CPU for the urban network) is kept the same way, its key
+the sources' and its road tables' bytes and seed: each condition rendered from one simulation, and each closed-loop
+episode on one network, builds it once. A stale or damaged file is never read: another key is another file, and a
+file that does not load is rebuilt. Where the folder cannot be written the value is built as before. Of each name,
+the files of the ``keep`` most recently used keys stay (one for the meshes: older keys' files are removed when a new
+one is written).
 """
 
 from __future__ import annotations
@@ -47,15 +52,23 @@ def source_key(root: Path = PACKAGE) -> str:
     return digest.hexdigest()
 
 
-def cached(name: str, build: Callable[[], T], *, folder: Path | None = None, key: str | None = None) -> T:
+def cached(name: str, build: Callable[[], T], *, folder: Path | None = None, key: str | None = None,
+           keep: int = 1) -> T:
     """``build()``'s value, from ``folder/NAME-KEY.pickle`` when an earlier process with the same sources wrote it;
-    otherwise built and written there (atomically) for the next one. ``key`` defaults to :func:`source_key`."""
+    otherwise built and written there (atomically) for the next one. ``key`` defaults to :func:`source_key`.
+    ``keep``: how many of NAME's files stay, the most recently used (a load counts as a use)."""
+    if keep < 1:
+        raise ValueError(f"keep must be at least 1, got {keep}")
     folder = cache_dir() if folder is None else Path(folder)
     key = source_key() if key is None else key
     path = folder / f"{name}-{key[:24]}.pickle"
     try:
         with path.open("rb") as handle:
-            return pickle.load(handle)
+            value = pickle.load(handle)
+        if keep > 1:
+            with contextlib.suppress(OSError):
+                os.utime(path)  # used now: the last to go
+        return value
     except FileNotFoundError:
         pass
     except Exception as exc:  # a damaged or foreign file: build again (and replace it)
@@ -67,12 +80,21 @@ def cached(name: str, build: Callable[[], T], *, folder: Path | None = None, key
         with tmp.open("wb") as handle:
             pickle.dump(value, handle, protocol=5)
         os.replace(tmp, path)
-        for old in folder.glob(f"{name}-*.pickle"):
-            if old != path:
-                old.unlink(missing_ok=True)
+        _forget_all_but(folder, name, path, keep)
     except OSError as exc:
         log.debug("%s: not written (%s)", path, exc)
     finally:
         with contextlib.suppress(OSError):  # nothing half-written is left behind
             tmp.unlink(missing_ok=True)
     return value
+
+
+def _forget_all_but(folder: Path, name: str, newest: Path, keep: int) -> None:
+    """Remove NAME's files in ``folder`` but ``newest`` and the ``keep`` - 1 most recently used others."""
+    others = []
+    for old in folder.glob(f"{name}-*.pickle"):
+        if old != newest:
+            with contextlib.suppress(OSError):  # another process may have removed it meanwhile
+                others.append((old.stat().st_mtime_ns, old.name, old))
+    for _, _, old in sorted(others, reverse=True)[keep - 1:]:
+        old.unlink(missing_ok=True)

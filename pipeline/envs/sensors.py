@@ -43,7 +43,7 @@ from pipeline.stages.render_frames import (
 )
 from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import StaticScene
-from pipeline.world.static import build_static_world
+from pipeline.world.static import load_static_world
 
 SENSOR_NAMES = ("camera", "lidar", "radar")
 # Columns of the "radar" observation, one row per detection (radar frame; docs/envs.md).
@@ -105,7 +105,7 @@ class LiveSensors:
         """Build the static world of the run (``roads_dir``: its road geometry tables; ``seed``: the run seed)."""
         key = (str(roads_dir), seed)
         if key != self._world_key:
-            self.world = build_static_world(roads_dir, seed=seed)
+            self.world = load_static_world(roads_dir, seed=seed)
             self.static = StaticScene(self.world.meshes)
             self.signals = SignalState(self.world, self.static, pd.DataFrame(columns=["frame", "tls_id", "state"]))
             self._world_key = key

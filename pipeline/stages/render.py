@@ -235,12 +235,13 @@ def _check_frame_files(record_dir: Path, frames: tuple[int, ...]) -> None:
 
 
 def pickle_static_world(sim_dir: Path, seed: int, path: Path) -> StaticWorld | None:
-    """Build and pickle the static world to ``path`` and return it, unless the pickle is there already (None)."""
+    """Build (or load from the build cache: :func:`pipeline.world.static.load_static_world`) and pickle the static
+    world to ``path`` and return it, unless the pickle is there already (None)."""
     if path.is_file():
         return None
-    from pipeline.world.static import build_static_world
+    from pipeline.world.static import load_static_world
 
-    world = build_static_world(sim_dir / "roads", seed=seed)
+    world = load_static_world(sim_dir / "roads", seed=seed)
     tmp = path.with_suffix(".tmp")
     with tmp.open("wb") as fh:
         pickle.dump(world, fh, protocol=pickle.HIGHEST_PROTOCOL)

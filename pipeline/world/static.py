@@ -11,12 +11,14 @@ signal lamps per (tls_id, link_index) and the street-light positions. All random
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from pipeline.core.build_cache import cached, source_key
 from pipeline.core.classes import SemanticClass
 from pipeline.traffic.roadgeometry import RoadGeometry, load_road_geometry
 from pipeline.world.mesh import Mesh
@@ -119,3 +121,21 @@ def build_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
         FileNotFoundError: a table is missing (names the directory and the files).
     """
     return build_world_from_geometry(load_road_geometry(roads_dir), seed=seed)
+
+
+# Static worlds kept in the build cache: a few simulations rendered in turn each build theirs once (urban ~18 MB).
+CACHED_WORLDS = 4
+
+
+def load_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
+    """:func:`build_static_world`'s world, from the build cache (:mod:`pipeline.core.build_cache`) when a process
+    built it from the same road tables (every file's name and bytes), seed and code; else built, and kept there for
+    the next render of the same simulation (another condition, a closed-loop episode on the same network)."""
+    roads_dir = Path(roads_dir)
+    if not roads_dir.is_dir():
+        raise FileNotFoundError(f"{roads_dir}: no road geometry folder (written by `roadsynth simulate`)")
+    digest = hashlib.sha256(f"{source_key()}|{int(seed)}".encode())
+    for path in sorted(p for p in roads_dir.iterdir() if p.is_file()):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return cached("static-world", lambda: build_static_world(roads_dir, seed=seed), key=digest.hexdigest(),
+                  keep=CACHED_WORLDS)

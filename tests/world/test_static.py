@@ -14,7 +14,7 @@ from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
 from pipeline.traffic.roadgeometry import read_network_geometry, write_road_geometry
 from pipeline.world.materials import MATERIAL_NAMES
-from pipeline.world.static import build_static_world
+from pipeline.world.static import build_static_world, load_static_world
 
 
 def _sumo_tool(name: str) -> str:
@@ -259,3 +259,31 @@ def test_camera_skips_only_rays_that_cannot_hit_the_static_world(grid_world, pos
     assert where[~sky].all()
     if pose[1][1] < 0:  # looking up: most rays are sky and skipped, so the subset path ran
         assert where.mean() < 0.8 and sky.mean() > 0.3
+
+
+def test_the_cached_world_is_the_built_one_and_follows_the_tables_and_seed(grid_roads: Path, grid_world, tmp_path,
+                                                                         monkeypatch) -> None:
+    """load_static_world builds once per (tables, seed, code) and then loads the same world from the build cache."""
+    import pipeline.world.static as static
+
+    monkeypatch.setenv("ROADSYNTH_CACHE_DIR", str(tmp_path / "cache"))
+    builds = []
+    monkeypatch.setattr(static, "build_static_world", lambda *a, **k: builds.append(1) or build_static_world(*a, **k))
+    first = load_static_world(grid_roads, seed=7)
+    again = load_static_world(grid_roads, seed=7)
+    assert len(builds) == 1 and len(list((tmp_path / "cache").glob("static-world-*.pickle"))) == 1
+    for world in (first, again):
+        assert list(world.parts) == list(grid_world.parts)
+        for name, mesh in grid_world.parts.items():
+            for field in ("vertices", "triangles", "material"):
+                np.testing.assert_array_equal(getattr(world.parts[name], field), getattr(mesh, field))
+        np.testing.assert_array_equal(world.street_lights, grid_world.street_lights)
+    other_seed = load_static_world(grid_roads, seed=8)
+    assert not np.array_equal(other_seed.parts["building"].vertices, grid_world.parts["building"].vertices)
+    changed = tmp_path / "roads"
+    shutil.copytree(grid_roads, changed)
+    (changed / "network.json").write_text((changed / "network.json").read_text() + "\n")  # another byte: rebuilt
+    load_static_world(changed, seed=7)
+    assert len(builds) == 3 and len(list((tmp_path / "cache").glob("static-world-*.pickle"))) == 3
+    with pytest.raises(FileNotFoundError, match="no road geometry folder"):
+        load_static_world(tmp_path / "nowhere", seed=7)
