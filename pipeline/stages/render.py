@@ -55,6 +55,7 @@ from pipeline.stages.render_frames import (
     SHARD_FORMAT,
     SIMULATED_COLUMNS,
     ShardJob,
+    prepared_state,
     remembered_world,
     render_shard,
     rig_actor_meshes,
@@ -309,7 +310,8 @@ def _render(sim_dir: Path, condition: ConditionConfig, rig: RigConfig, out: Path
         render_shards_on_ray(jobs, executor, progress_bar)
     else:
         # This process's shards set OpenCV's threads (render_shard): its own setting comes back at the end.
-        with remembered_world(work / "static.pkl", world), _restored_opencv_threads():
+        with remembered_world(work / "static.pkl", world), _restored_opencv_threads(), \
+                prepared_state(jobs[0]) if jobs else contextlib.nullcontext():
             run_in_pool(jobs, render_shard, workers, context, progress_bar)
     summary = _finalize(work, out, sim_dir, sim_meta, rig, condition, seed, selection, len(shards))
     summary["shards_resumed"] = resumed

@@ -185,7 +185,20 @@ class _WorkerState:
     meshes: ActorMeshes
 
 
+@dataclass
+class _Shared:
+    """The part of a :class:`_WorkerState` that needs no Embree scene (see :func:`prepared_state`)."""
+
+    world: StaticWorld
+    cameras: list
+    lidars: list
+    condition: object
+    trajectories: Trajectories
+    meshes: ActorMeshes
+
+
 _STATE = ProcessCache()  # the _WorkerState of the render this process serves
+_SHARED = ProcessCache()  # its part without Embree, built before the workers fork (prepared_state)
 _MESHES = ProcessCache()  # the actor models of the last rig (its JSON) this process built them for
 _WORLDS = ProcessCache()  # the static world this process built, by the path it was pickled to
 
@@ -205,26 +218,45 @@ def remembered_world(path: Path, world: StaticWorld | None) -> contextlib.Abstra
     return _WORLDS.lent(str(path), world)
 
 
+def _state_key(job: ShardJob) -> tuple[str, ...]:
+    return str(job.static_pickle), str(job.sim_dir), job.rig.model_dump_json(), job.condition.model_dump_json()
+
+
 def _state(job: ShardJob) -> _WorkerState:
-    key = (str(job.static_pickle), str(job.sim_dir), job.rig.model_dump_json(), job.condition.model_dump_json())
-    return _STATE.get(key, lambda: _worker_state(job))
+    return _STATE.get(_state_key(job), lambda: _worker_state(job))
 
 
-def _worker_state(job: ShardJob) -> _WorkerState:
+def prepared_state(job: ShardJob) -> contextlib.AbstractContextManager[None]:
+    """Within the block, the part of the render's worker state that needs no Embree scene (the static world, the
+    rig's sensors with their rays and anti-aliasing samples, the condition, the body-sized trajectories) is the one
+    built now, in this process, before its pool forks the workers: built once, not once per worker (~1 s of an
+    urban render's each). Forgotten at the end, like :func:`remembered_world`."""
+    return _SHARED.lent(_state_key(job), _shared(job))
+
+
+def _shared(job: ShardJob) -> _Shared:
     from pipeline.sensors import conditions
 
-    keep_freed_memory(RENDER_THRESHOLDS)
     world = _WORLDS.peek(str(job.static_pickle))
     if world is None:
         with job.static_pickle.open("rb") as fh:
             world = pickle.load(fh)
-    static = StaticScene(world.meshes)
     cameras, lidars = build_sensors(job.rig)
-    return _WorkerState(world, static, cameras, lidars, conditions.Condition(job.condition),
-                        Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"),
-                                                 rig_actor_meshes(job.rig), job.seed)),
-                        SignalState(world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
-                        rig_actor_meshes(job.rig))
+    for camera in cameras:
+        camera.sample_directions  # noqa: B018 -- computed and kept now (a cached property)
+    meshes = rig_actor_meshes(job.rig)
+    trajectories = Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"), meshes,
+                                                        job.seed))
+    return _Shared(world, cameras, lidars, conditions.Condition(job.condition), trajectories, meshes)
+
+
+def _worker_state(job: ShardJob) -> _WorkerState:
+    keep_freed_memory(RENDER_THRESHOLDS)
+    shared = _SHARED.get(_state_key(job), lambda: _shared(job))
+    static = StaticScene(shared.world.meshes)
+    return _WorkerState(shared.world, static, shared.cameras, shared.lidars, shared.condition, shared.trajectories,
+                        SignalState(shared.world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
+                        shared.meshes)
 
 
 @functools.cache
