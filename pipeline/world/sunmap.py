@@ -58,9 +58,12 @@ class SunTiles:
     triangle, the tiles of its projections' box over the slopes' range, grown by one cell (more than the drawing's
     widening). One index serves the maps of all the directions of a sun's disc (:class:`SunMap`): a triangle listed
     for a tile it does not meet along one of them draws nothing there, so each map's tiles are those of its own
-    index (a projection x - z sx is monotone in sx, and so is its rounding: the range's ends bound it)."""
+    index (a projection x - z sx is monotone in sx, and so is its rounding: the range's ends bound it). Its maps read
+    the vertices and triangles it keeps (as float64 and int64, converted once)."""
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, slopes: np.ndarray) -> None:
+        self.vertices = vertices = np.asarray(vertices, np.float64)
+        self.triangles = triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         slopes = np.asarray(slopes, np.float64).reshape(-1, 2)
         ends = [along_sun(*vertices.T, slope) for slope in (slopes.min(axis=0), slopes.max(axis=0))]
         (ax, ay), (bx, by) = ends
@@ -94,10 +97,8 @@ class SunMap:
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, sun: np.ndarray,
                  tiles: SunTiles | None = None) -> None:
         self.slope = sun_slope(sun)
-        vertices = np.asarray(vertices, np.float64)
-        triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         self._index = SunTiles(vertices, triangles, self.slope) if tiles is None else tiles
-        self._vertices, self._triangles = vertices, triangles
+        self._vertices, self._triangles = self._index.vertices, self._index.triangles
         self._slot: dict[tuple[int, int], int] = {}
         self._tiles = np.full((16, SUN_TILE_CELLS, SUN_TILE_CELLS), -np.inf, np.float32)  # drawn: slots 0 .. _drawn - 1
         self._drawn = 0
