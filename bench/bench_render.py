@@ -20,11 +20,13 @@ if all but the casts were free.
 Also prints the default rig's labelled frames per CPU-second (all the stage's processes, start-up included) and
 that rate as a share of the bare casts' (issue 41: >= 0.3), the peak resident memory of each render worker, the
 frames/s beside MetaDrive's (METADRIVE_FPS, 800x600, measured on the development machine), and what a
-100,000-frame dataset costs in CPU-hours at this rate. The breakdown is in CPU time (cProfile timing with
-``time.process_time``: other work on shared cores does not inflate it).
+100,000-frame dataset costs in CPU-hours at this rate. The stage loads the run's static world from the build cache
+when an earlier render of the same simulation built it (pipeline.world.static.load_static_world), as every render of
+a simulation but its first does; --cold-world removes it first, to measure a first render. The breakdown is in CPU
+time (cProfile timing with ``time.process_time``: other work on shared cores does not inflate it).
 
     python bench/bench_render.py [--frames 100] [--sim DIR] [--scenario highway] [--condition noon] [--workers 2]
-        [--breakdown 10] [--no-fast]
+        [--breakdown 10] [--no-fast] [--cold-world]
 """
 
 from __future__ import annotations
@@ -39,14 +41,15 @@ from pathlib import Path
 import numpy as np
 from bench_render_core import BareCasts, frame_rays, sim_frames
 
+from pipeline.core.build_cache import cache_path
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.sensors import conditions
 from pipeline.sensors.groundtruth import project_actors
-from pipeline.stages.render import render, select_frames
+from pipeline.stages.render import check_sim, render, select_frames
 from pipeline.stages.rig import build_sensors
 from pipeline.stages.simulate import resolve_scenario, simulate
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
-from pipeline.world.static import build_static_world
+from pipeline.world.static import WORLD_CACHE_NAME, build_static_world, static_world_key
 
 
 def cpu_seconds() -> float:
@@ -161,7 +164,7 @@ def breakdown(sim: Path, rig: RigConfig, condition_cfg: ConditionConfig, frames:
     import dataclasses
     import pstats
 
-    from pipeline.stages.render import check_sim, pickle_static_world
+    from pipeline.stages.render import pickle_static_world
     from pipeline.stages.render_frames import ShardJob, render_shard
 
     tmp.mkdir(parents=True, exist_ok=True)
@@ -242,6 +245,9 @@ def main() -> None:
     ap.add_argument("--condition", default="noon")
     ap.add_argument("--no-fast", action="store_true", help="skip the fast preset's render (and its rows)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--cold-world", action="store_true",
+                    help="remove the run's static world from the build cache first, so that the stage builds it (as "
+                         "the first render of a simulation does; later ones load it)")
     ap.add_argument("--breakdown", type=int, default=10, metavar="N",
                     help="also profile N of the frames on one thread and print where the time goes (0: skip)")
     args = ap.parse_args()
@@ -254,6 +260,10 @@ def main() -> None:
             config, _ = resolve_scenario(args.scenario, duration_s=args.frames / 10.0, warmup_s=90.0)
             sim = tmp / "sim"
             simulate(config, 1, sim, progress=False)
+        cached_world = cache_path(WORLD_CACHE_NAME, static_world_key(sim / "roads", int(check_sim(sim)["seed"])))
+        if args.cold_world:
+            cached_world.unlink(missing_ok=True)
+        world_was_cached = cached_world.is_file()
         start, cpu = time.perf_counter(), cpu_seconds()
         with PeakWorkerMemory() as memory:
             render(sim, condition, rig, tmp / "record", frames=args.frames, workers=args.workers, shard_size=5,
@@ -283,7 +293,9 @@ def main() -> None:
     n = len(frames)
     rows = [
         ("frames rendered (800x600 camera + 64x1800 LiDAR + GT, on disk)", f"{n} ({size_mb:.0f} MB)"),
-        (f"render stage, {args.workers} workers, incl. static world build", f"{stage_s:.1f} s"),
+        (f"render stage, {args.workers} workers, incl. the static world", f"{stage_s:.1f} s"),
+        ("the run's static world (first render of a simulation: built; later ones: loaded; --cold-world)",
+         "loaded from the build cache" if world_was_cached else "built"),
         ("labelled frames per second (the default rig: realistic quality)", f"{n / stage_s:.2f}"),
         ("the same frames in the fast preset (1 sample, direct light; target >= 10)",
          f"{fast_s:.1f} s, {n / fast_s:.2f} frames/s"),

@@ -52,6 +52,11 @@ def source_key(root: Path = PACKAGE) -> str:
     return digest.hexdigest()
 
 
+def cache_path(name: str, key: str, folder: Path | None = None) -> Path:
+    """Where :func:`cached` keeps NAME's value of ``key`` (in ``folder``, default :func:`cache_dir`)."""
+    return (cache_dir() if folder is None else Path(folder)) / f"{name}-{key[:24]}.pickle"
+
+
 def cached(name: str, build: Callable[[], T], *, folder: Path | None = None, key: str | None = None,
            keep: int = 1) -> T:
     """``build()``'s value, from ``folder/NAME-KEY.pickle`` when an earlier process with the same sources wrote it;
@@ -59,9 +64,8 @@ def cached(name: str, build: Callable[[], T], *, folder: Path | None = None, key
     ``keep``: how many of NAME's files stay, the most recently used (a load counts as a use)."""
     if keep < 1:
         raise ValueError(f"keep must be at least 1, got {keep}")
-    folder = cache_dir() if folder is None else Path(folder)
-    key = source_key() if key is None else key
-    path = folder / f"{name}-{key[:24]}.pickle"
+    path = cache_path(name, source_key() if key is None else key, folder)
+    folder = path.parent
     try:
         with path.open("rb") as handle:
             value = pickle.load(handle)

@@ -125,17 +125,25 @@ def build_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
 
 # Static worlds kept in the build cache: a few simulations rendered in turn each build theirs once (urban ~18 MB).
 CACHED_WORLDS = 4
+WORLD_CACHE_NAME = "static-world"
 
 
-def load_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
-    """:func:`build_static_world`'s world, from the build cache (:mod:`pipeline.core.build_cache`) when a process
-    built it from the same road tables (every file's name and bytes), seed and code; else built, and kept there for
-    the next render of the same simulation (another condition, a closed-loop episode on the same network)."""
+def static_world_key(roads_dir: Path, seed: int) -> str:
+    """The build cache's key of the static world of ``roads_dir``'s tables and ``seed`` (:func:`load_static_world`):
+    a digest of the package's sources, the seed and every file's name and bytes in ``roads_dir``."""
     roads_dir = Path(roads_dir)
     if not roads_dir.is_dir():
         raise FileNotFoundError(f"{roads_dir}: no road geometry folder (written by `roadsynth simulate`)")
     digest = hashlib.sha256(f"{source_key()}|{int(seed)}".encode())
     for path in sorted(p for p in roads_dir.iterdir() if p.is_file()):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
-    return cached("static-world", lambda: build_static_world(roads_dir, seed=seed), key=digest.hexdigest(),
-                  keep=CACHED_WORLDS)
+    return digest.hexdigest()
+
+
+def load_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
+    """:func:`build_static_world`'s world, from the build cache (:mod:`pipeline.core.build_cache`, name
+    :data:`WORLD_CACHE_NAME`) when a process built it from the same road tables (every file's name and bytes), seed
+    and code; else built, and kept there for the next render of the same simulation (another condition, a
+    closed-loop episode on the same network)."""
+    return cached(WORLD_CACHE_NAME, lambda: build_static_world(roads_dir, seed=seed),
+                  key=static_world_key(roads_dir, seed), keep=CACHED_WORLDS)
