@@ -65,7 +65,8 @@ class SunTiles:
         self.vertices = vertices = np.asarray(vertices, np.float64)
         self.triangles = triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         slopes = np.asarray(slopes, np.float64).reshape(-1, 2)
-        ends = [along_sun(*vertices.T, slope) for slope in (slopes.min(axis=0), slopes.max(axis=0))]
+        self.slope_range = slopes.min(axis=0), slopes.max(axis=0)
+        ends = [along_sun(*vertices.T, slope) for slope in self.slope_range]
         (ax, ay), (bx, by) = ends
         lo, _ = triangle_bounds(np.column_stack([np.fmin(ax, bx), np.fmin(ay, by)]) / SUN_CELL_M, triangles)
         _, hi = triangle_bounds(np.column_stack([np.fmax(ax, bx), np.fmax(ay, by)]) / SUN_CELL_M, triangles)
@@ -97,6 +98,9 @@ class SunMap:
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, sun: np.ndarray,
                  tiles: SunTiles | None = None) -> None:
         self.slope = sun_slope(sun)
+        if tiles is not None and not (np.all(tiles.slope_range[0] <= self.slope)
+                                      and np.all(self.slope <= tiles.slope_range[1])):
+            raise ValueError(f"sun {np.asarray(sun).tolist()} lies outside the directions its tile index was built for")
         self._index = SunTiles(vertices, triangles, self.slope) if tiles is None else tiles
         self._vertices, self._triangles = self._index.vertices, self._index.triangles
         self._slot: dict[tuple[int, int], int] = {}

@@ -204,6 +204,14 @@ def test_the_maps_of_a_disc_share_one_index_and_draw_the_same_tiles(seed):
     assert listed_more >= 4
 
 
+def test_a_direction_outside_the_index_is_refused():
+    disc = sun_disc(sun_at(40.0, 30.0), np.radians(0.27))
+    index = SunTiles(WALL.vertices, WALL.triangles, np.array([sun_slope(d) for d in disc]))
+    SunMap(WALL.vertices, WALL.triangles, disc[3], index)
+    with pytest.raises(ValueError, match="outside the directions its tile index was built for"):
+        SunMap(WALL.vertices, WALL.triangles, sun_at(40.0, 35.0), index)
+
+
 def test_the_scene_answers_alike_with_and_without_the_disc():
     rng = np.random.default_rng(11)
     meshes = sloped_world(rng)
