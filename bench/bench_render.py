@@ -45,7 +45,7 @@ from pipeline.core.build_cache import cache_path
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.sensors import conditions
 from pipeline.sensors.groundtruth import project_actors
-from pipeline.stages.render import check_sim, render, select_frames
+from pipeline.stages.render import check_sim, render
 from pipeline.stages.rig import build_sensors
 from pipeline.stages.simulate import resolve_scenario, simulate
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
@@ -281,8 +281,10 @@ def main() -> None:
             fast_s, fast_cpu_s = time.perf_counter() - start, cpu_seconds() - cpu
         import pandas as pd
 
-        frames = select_frames(pd.read_parquet(sim / "trajectories.parquet", columns=["frame"])["frame"].to_numpy(),
-                               args.frames)
+        # The frames the stage rendered (its selection skips an ego's standing repeats: an urban ego that waits at
+        # a red light for the whole run gives fewer frames than --frames asks), so the rates and the bare casts count
+        # exactly those.
+        frames = pd.read_parquet(tmp / "record" / "frames.parquet", columns=["frame"])["frame"].tolist()
         bare_s, bare_cpu_s = bare_seconds(sim, frames, rig, condition)
         imports_s, world_s = startup_seconds(sim) if args.breakdown > 0 else (0.0, 0.0)
         # Consecutive frames from the middle of the run, as a worker renders them (its caches warm, e.g. the sun map's
