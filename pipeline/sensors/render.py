@@ -28,7 +28,7 @@ from pipeline.sensors.conditions import Condition, get_condition
 from pipeline.sensors.exposure import auto_exposure
 from pipeline.sensors.groundtruth import CameraLabels, camera_labels, project_actors
 from pipeline.sensors.indirect import AO_FILTER_DEPTH, AO_FILTER_NORMAL_COS
-from pipeline.sensors.post import apply_post, motion_flow
+from pipeline.sensors.post import apply_post, channel_max, motion_flow
 from pipeline.sensors.rain import streak_coverage
 from pipeline.sensors.shading import shade, shading_materials, sky, to_srgb8
 from pipeline.sensors.shadows import (
@@ -256,7 +256,7 @@ def window_contrast(image: np.ndarray) -> np.ndarray:
     """(H, W) uint8: for each pixel of an (H, W, 3) uint8 image, the greatest spread (brightest less darkest) over
     its 3x3 window (clipped to the image), over the channels."""
     kernel3 = np.ones((3, 3), np.uint8)
-    return (cv2.dilate(image, kernel3) - cv2.erode(image, kernel3)).max(axis=2)
+    return channel_max(cv2.dilate(image, kernel3) - cv2.erode(image, kernel3))
 
 
 def _centre_sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condition,

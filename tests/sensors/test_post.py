@@ -278,3 +278,21 @@ def test_highlights_beyond_white_keep_their_hue_and_bloom_no_more_than_white():
     glow, glow_at_white = (bloom(x, 1.2, 0.5, 2.0) - x for x in (image, at_white))
     assert glow.max() > 0.01
     np.testing.assert_allclose(glow, glow_at_white, rtol=1e-5, atol=1e-5)  # float32 sums near 40 round at 4e-6
+
+
+def test_channel_max_equals_numpys_reduce_over_the_channels():
+    """The element-wise maxima of whole channels give numpy's ``max(axis=2)`` exactly: float32 with NaN (which both
+    propagate), infinities and signed zeros, uint8, and a strided view."""
+    from pipeline.sensors.post import channel_max
+
+    rng = np.random.default_rng(3)
+    image = rng.normal(size=(31, 47, 3)).astype(np.float32)
+    image[2, 3, 1] = np.nan
+    image[4, 5] = (np.inf, -np.inf, 0.0)
+    image[6, 7] = (-0.0, 0.0, -1.0)
+    bytes8 = rng.integers(0, 256, size=(31, 47, 3), dtype=np.uint8)
+    for a in (image, bytes8, image[::2, ::3], rng.normal(size=(5, 6, 4))):
+        got = channel_max(a)
+        assert got.dtype == a.dtype and got.shape == a.shape[:2]
+        np.testing.assert_array_equal(got, a.max(axis=2))
+    assert np.isnan(channel_max(image)[2, 3])
