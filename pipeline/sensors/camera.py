@@ -221,8 +221,20 @@ class Camera:
         Each box is clipped to the plane z = CLIP_Z_M (its corners in front, and where its edges cross the
         plane) and projected without the lens's distortion, which keeps the projection of a convex box convex: its
         bounding rectangle, grown by ``margin_px``, covers every ray through the box. With distortion the
-        rectangles are drawn on a grid of undistorted pixel coordinates and each pixel looks up its own cell.
+        rectangles are drawn on a grid of undistorted pixel coordinates and each pixel looks up its own cell
+        (:meth:`boxes_pixel_rects`).
         """
+        _, rect_lo, rect_hi = self.boxes_pixel_rects(cam_to_world, lo, hi, margin_px)
+        shape, cells = self.pixel_cells
+        mask = rectangles_mask(shape[0], shape[1], rect_lo, rect_hi).reshape(-1)
+        return mask if cells is None else mask[cells]
+
+    def boxes_pixel_rects(
+        self, cam_to_world: Transform, lo: np.ndarray, hi: np.ndarray, margin_px: int = 1
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rectangles of :meth:`boxes_pixel_mask`, box by box: (K,) int64 the boxes that may show, and (K, 2)
+        int64 (row, col) of each one's first and last cell on the grid of :attr:`pixel_cells` (inclusive, clipped to
+        one cell beyond the grid). The pixels whose cell lies in a box's rectangle hold every centre ray through it."""
         lo, hi = np.asarray(lo, np.float64).reshape(-1, 3), np.asarray(hi, np.float64).reshape(-1, 3)
         world_to_cam = cam_to_world.inverse()
         keep = self.spheres_in_view(world_to_cam.apply((lo + hi) / 2), 0.5 * np.linalg.norm(hi - lo, axis=1))
@@ -231,7 +243,8 @@ class Camera:
         front = corners[:, :, 2] > CLIP_Z_M
         whole = front.all(axis=1)
         # Boxes across the clip plane (few: the ground under the camera) add where their edges cross it.
-        part = corners[front.any(axis=1) & ~whole]
+        across = front.any(axis=1) & ~whole
+        part = corners[across]
         a, b = part[:, _BOX_EDGES[:, 0]], part[:, _BOX_EDGES[:, 1]]
         cross = (a[:, :, 2] > CLIP_Z_M) != (b[:, :, 2] > CLIP_Z_M)
         s = (CLIP_Z_M - a[:, :, 2]) / np.where(cross, b[:, :, 2] - a[:, :, 2], 1.0)
@@ -239,12 +252,19 @@ class Camera:
             np.concatenate([part, a + s[:, :, None] * (b - a)], axis=1),
             np.concatenate([part[:, :, 2] > CLIP_Z_M, cross], axis=1))]
         rect_lo, rect_hi = (np.concatenate([r[i] for r in rects]) for i in range(2))
-        origin, shape, cells = self._undistorted_grid
+        origin, shape, _ = self._undistorted_grid
         limit = np.array(shape) + margin_px + 1
         rect_lo = np.clip(np.floor(rect_lo) - origin - margin_px, -1, limit).astype(np.int64)
         rect_hi = np.clip(np.ceil(rect_hi) - origin + margin_px, -1, limit).astype(np.int64)
-        mask = rectangles_mask(shape[0], shape[1], rect_lo, rect_hi).reshape(-1)
-        return mask if cells is None else mask[cells]
+        index = np.flatnonzero(keep)
+        return np.concatenate([index[whole], index[across]]), rect_lo, rect_hi
+
+    @property
+    def pixel_cells(self) -> tuple[tuple[int, int], np.ndarray | None]:
+        """The grid of undistorted pixel coordinates that :meth:`boxes_pixel_rects` draws on: its (rows, cols), and
+        each pixel's flat (row-major) cell, (H*W,) int64 (None without distortion: the grid is the image)."""
+        _, shape, cells = self._undistorted_grid
+        return shape, cells
 
     def _undistorted_bounds(self, points: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Bounding (row, col) lo and hi, each (N, 2) float64, of N sets of optical-frame points (N, P, 3), or of
