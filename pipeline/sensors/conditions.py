@@ -36,7 +36,14 @@ from pipeline.sensors.lights import SpotLights, ego_headlights, street_lamp_ligh
 from pipeline.sensors.post import luminance
 from pipeline.sensors.shadows import sun_disc
 from pipeline.sensors.sky import gradient_params, preetham_params, sky_rays
-from pipeline.sensors.weather import KOSCHMIEDER, fog_extinction_per_m, rain_extinction_per_m, road_wetness
+from pipeline.sensors.spray import NO_SPRAY, SprayClouds, spray_clouds
+from pipeline.sensors.weather import (
+    KOSCHMIEDER,
+    fog_extinction_per_m,
+    rain_extinction_per_m,
+    road_water_mm,
+    road_wetness,
+)
 from pipeline.world.actors import Actors
 
 SHIPPED = ("morning", "noon", "dusk", "night", "fog", "rain")
@@ -158,6 +165,14 @@ class Condition:
         if rain is None:
             return 0.0
         return rain.wetness if rain.wetness is not None else road_wetness(rain.rate_mm_h)
+
+    def spray(self, actors: Actors, velocity_mps: np.ndarray | None, active: np.ndarray | None = None) -> SprayClouds:
+        """The spray clouds of a frame's moving vehicles (:func:`pipeline.sensors.spray.spray_clouds`) on the road's
+        water at the rain's rate; none without rain or with ``rain.spray`` 0, or where ``wetness`` is given and 0."""
+        rain = self.rain
+        if rain is None or rain.spray == 0 or rain.wetness == 0:
+            return NO_SPRAY
+        return spray_clouds(actors, velocity_mps, road_water_mm(rain.rate_mm_h), rain.spray, active)
 
     # -- weather and sensor effects ---------------------------------------------------------------
     @property

@@ -27,6 +27,7 @@ import numpy as np
 from pipeline.core.config.sensors import LidarConditionConfig, LidarConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.spray import SprayClouds, sweep_optical_depths
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
@@ -147,12 +148,17 @@ class Lidar:
 
 
 def render_lidar(
-    scene: FrameScene, lidar: Lidar, ego_pose: Transform, rng: np.random.Generator, *, condition=None
+    scene: FrameScene, lidar: Lidar, ego_pose: Transform, rng: np.random.Generator, *, condition=None,
+    spray: SprayClouds | None = None,
 ) -> LidarSweep:
     """Cast one sweep of ``lidar`` on the ego at ``ego_pose`` (ego -> world) and apply the sensor model.
 
     ``condition`` (a :class:`pipeline.sensors.conditions.Condition`, optional) degrades the sweep; do not also
-    build ``lidar`` from ``condition.lidar(...)``, which would apply the factors twice.
+    build ``lidar`` from ``condition.lidar(...)``, which would apply the factors twice. ``spray`` (the frame's
+    clouds, :mod:`pipeline.sensors.spray`): a pulse through a cloud of optical depth tau loses exp(-2 tau) of its
+    intensity, and its return is lost where that loss takes it below what the LiDAR detects at its range R in the
+    condition's air of extinction beta: kept while ln t + beta t + tau <= ln R + beta R (the power ~ exp(-2 beta t
+    - 2 tau) / t^2, as :func:`pipeline.sensors.conditions.lidar_range_m`).
     """
     cfg = lidar.config if condition is None else condition.lidar(lidar)
     effects = LidarConditionConfig() if condition is None else condition.lidar_effects
@@ -168,6 +174,12 @@ def render_lidar(
                                   as_input(material_arrays()["reflectivity"], np.float32), drop,
                                   np.float32(lidar.range_min_m), np.float32(cfg.range_m))
     intensity = reflected * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
+    if spray is not None and len(spray) and len(keep):
+        tau = sweep_optical_depths(spray, rays, as_input(hits.t_m, np.float64), keep)[keep].astype(np.float64)
+        beta = 0.0 if condition is None else condition.extinction_per_m(cfg.wavelength_nm)
+        seen = np.log(t) + beta * t + tau <= np.log(cfg.range_m) + beta * cfg.range_m
+        intensity = intensity * np.exp(-2.0 * tau).astype(np.float32)
+        keep, t, intensity = keep[seen], t[seen], intensity[seen]
     if effects.min_intensity > 0:  # returns too weak to detect are lost
         strong = intensity >= effects.min_intensity
         keep, t, intensity = keep[strong], t[strong], intensity[strong]

@@ -38,6 +38,7 @@ from pipeline.sensors.shadows import (
     pixel_shares,
     sun_shares,
 )
+from pipeline.sensors.spray import SprayClouds, camera_optical_depths
 from pipeline.sensors.wet import road_reflections
 from pipeline.world.scene import FrameScene, Hits, make_rays
 
@@ -76,6 +77,7 @@ def render_camera(
     ego_speed_mps: float = 0.0,
     ego_size_m: tuple[float, float, float] | None = None,
     actor_velocity_mps: np.ndarray | None = None,
+    spray: SprayClouds | None = None,
 ) -> CameraFrame:
     """Render ``camera`` on the ego at ``ego_pose`` (ego frame -> world, origin at the ego's box centre).
 
@@ -85,7 +87,8 @@ def render_camera(
     (:attr:`pipeline.world.static.StaticWorld.street_lights`), lit where the condition has street lamps;
     ``ego_speed_mps`` (forward) and ``actor_velocity_mps`` ((A, 3) world velocities of the scene's actors; None:
     they stand) move the image during the exposure (motion blur); ``ego_size_m``
-    (length, width, height) places the ego's headlights (a 4.5 x 1.8 x 1.5 m car by default).
+    (length, width, height) places the ego's headlights (a 4.5 x 1.8 x 1.5 m car by default). ``spray``: the
+    frame's spray clouds (:meth:`pipeline.sensors.conditions.Condition.spray`), which veil what lies behind them.
     """
     condition = get_condition("noon") if condition is None else condition
     h, w = camera.height, camera.width
@@ -167,6 +170,8 @@ def render_camera(
             reflection.apply(radiance, where if not camera.config.samples_everywhere else None)
     if reflection is not None and len(samples) == 1:
         reflection.apply(radiance)
+    if spray is not None and len(spray):
+        _spray_veil(radiance, spray, rays, hits, camera, cam_to_world, condition)
     if condition.visibility_m is not None:  # lamps glow through fog and rain, and their beams show in it
         ends = np.where(hits.hit, hits.t_m, np.inf)
         glowing = hits.hit & shading_materials()["glows"][hits.material]
@@ -280,6 +285,18 @@ def _lent(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray, 
                            as_input(sample_hits.instance_id, np.int32), as_input(sample_hits.normal, np.float32),
                            np.where(sample_hits.hit, sample_hits.t_m, 0.0).astype(np.float32), h, w,
                            np.float32(normal_cos), np.float32(depth))
+
+
+def _spray_veil(radiance: np.ndarray, clouds: SprayClouds, rays: np.ndarray, hits: Hits, camera: Camera,
+                cam_to_world: Transform, condition: Condition) -> None:
+    """Dim, in place, the (H*W, 3) ``radiance`` of the pixels whose centre ray passes a spray cloud before its hit by
+    its transmittance T = exp(-tau) and add the airlight's (1 - T) (:mod:`pipeline.sensors.spray`): the droplets
+    scatter the same light as the fog's and the rain's."""
+    rows, tau = camera_optical_depths(clouds, camera, cam_to_world, rays, np.where(hits.hit, hits.t_m, np.inf))
+    met = tau > 0
+    rows, transmittance = rows[met], np.exp(-tau[met])[:, None]
+    air = np.asarray(condition.airlight_rgb, np.float32) * np.float32(condition.exposure)
+    radiance[rows] = radiance[rows] * transmittance + air * (np.float32(1.0) - transmittance)
 
 
 def _sky_level(condition: Condition) -> float:

@@ -90,3 +90,11 @@ def road_wetness(rate_mm_h: float, texture_mm: float = ROAD_TEXTURE_DEPTH_MM) ->
     if rate_mm_h <= 0:
         return 0.0
     return min(1.0, (water_film_depth_mm(rate_mm_h, texture_mm) + texture_mm) / texture_mm)
+
+
+def road_water_mm(rate_mm_h: float, texture_mm: float = ROAD_TEXTURE_DEPTH_MM) -> float:
+    """The water a road holds at ``rate_mm_h``, mm: what fills its texture plus Gallaway's film above the texture's
+    peaks (the water a tyre meets); 0 without rain."""
+    if rate_mm_h <= 0:
+        return 0.0
+    return max(water_film_depth_mm(rate_mm_h, texture_mm) + texture_mm, 0.0)

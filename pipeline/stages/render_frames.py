@@ -343,6 +343,8 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
         active |= radar_frames.radar_reach(list(radars), actors, ego_pose)
     scene = FrameScene(static, actors, meshes, threads=threads, active=active)
     lidar_points = np.zeros(len(scene.actors), np.int64)
+    actor_velocity = heading_velocity(others["speed_mps"], others["yaw_rad"])
+    spray = condition.spray(scene.actors, actor_velocity, scene.active)
     sweeps, frames, labels = [], [], []
     scans = []
     if radars:  # scanned before the others; each sensor draws from its own generator, so the order changes nothing
@@ -350,15 +352,14 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
                                           functools.partial(frame_rng, seed, condition.name, frame))
     for k, lidar in enumerate(lidars):
         sweep = render_lidar(scene, lidar, ego_pose, frame_rng(seed, condition.name, frame, 1000 + k),
-                             condition=condition)
+                             condition=condition, spray=spray)
         sweeps.append(sweep)
         labels.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
         lidar_points += sweep.points_per_actor
-    actor_velocity = heading_velocity(others["speed_mps"], others["yaw_rad"]) if cameras else None
     for k, camera in enumerate(cameras):
         cam = render_camera(scene, camera, ego_pose, condition, frame_rng(seed, condition.name, frame, k),
                             street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
-                            ego_size_m=ego_size_m, actor_velocity_mps=actor_velocity)
+                            ego_size_m=ego_size_m, actor_velocity_mps=actor_velocity, spray=spray)
         frames.append(cam)
         labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
     if radars:

@@ -374,6 +374,8 @@ class RainConfig(_Model):
     wind_mps: tuple[float, float] = Field((0.0, 0.0), description="horizontal wind (east, north), m/s: drops fall "
                                           "at their terminal speed plus the wind")
     drops: int = Field(0, ge=0, le=200, description="blurry raindrops on the lens (0 = none)")
+    spray: float = Field(1.0, ge=0.0, le=10.0, description="the spray vehicles throw up from the wet road, times the "
+                         "model's density (pipeline.sensors.spray; 0 = none)")
 
 
 class LensConfig(_Model):
