@@ -238,18 +238,24 @@ class Condition:
         return cv2.merge([c.reshape(-1) * transmittance + air[k] * haze for k, c in enumerate(channels)]).reshape(-1, 3)
 
     def halos(self, radiance: np.ndarray, distance_m: np.ndarray, sources: np.ndarray, image_shape: tuple[int, int],
-              fy_px: float) -> None:
+              fy_px: float, spray_transmittance: np.ndarray | None = None) -> None:
         """Add, in place, to a frame's fogged (H*W, 3) float32 ``radiance`` the light that the fog and rain scatter
         forwards from its glowing ``sources`` ((H*W,) bool: lamps, lit windows) at (H*W,) ``distance_m``: the haloes
         round lamps in fog. A source of radiance L0 seen through a transmittance T loses L0 (1 - T) from its direct
         image; HALO_FORWARD_SHARE of that reaches the camera within the droplets' forward lobe (HALO_LOBES: their
-        diffraction peak and its tail, widened by multiple scattering), the rest joins the airlight."""
+        diffraction peak and its tail, widened by multiple scattering), the rest joins the airlight.
+        ``spray_transmittance`` (H*W,) float32, optional: each pixel's transmittance through spray
+        (:mod:`pipeline.sensors.spray`, composited with the same airlight), by which T is multiplied: lamps glow in
+        the spray behind vehicles as in fog."""
         beta = self.extinction_per_m()
         if beta == 0 or not sources.any():
             return
         h, w = image_shape
         rows = np.flatnonzero(sources)
-        t = np.maximum(np.exp(-beta * distance_m[rows]), HALO_MIN_TRANSMITTANCE).astype(np.float32)[:, None]
+        t = np.exp(-beta * distance_m[rows])
+        if spray_transmittance is not None:
+            t = t * spray_transmittance[rows]
+        t = np.maximum(t, HALO_MIN_TRANSMITTANCE).astype(np.float32)[:, None]
         air = np.asarray(self.airlight_rgb, np.float32) * np.float32(self.exposure)
         direct = np.maximum(radiance[rows] - air * (1.0 - t), 0.0) / t  # the source's radiance before the fog
         layer = np.zeros((h * w, 3), np.float32)

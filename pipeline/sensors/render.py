@@ -170,12 +170,13 @@ def render_camera(
             reflection.apply(radiance, where if not camera.config.samples_everywhere else None)
     if reflection is not None and len(samples) == 1:
         reflection.apply(radiance)
+    spray_t = None
     if spray is not None and len(spray):
-        _spray_veil(radiance, spray, rays, hits, camera, cam_to_world, condition)
+        spray_t = _spray_veil(radiance, spray, rays, hits, camera, cam_to_world, condition)
     if condition.visibility_m is not None:  # lamps glow through fog and rain, and their beams show in it
         ends = np.where(hits.hit, hits.t_m, np.inf)
         glowing = hits.hit & shading_materials()["glows"][hits.material]
-        condition.halos(radiance, ends, glowing, (h, w), camera.fy)
+        condition.halos(radiance, ends, glowing, (h, w), camera.fy, spray_t)
         if len(lights):  # the ego's two headlamps apart: the camera sees the air just in front of them
             in_air = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m,
                                             ego_size_m, ego_lamp_pair=True)
@@ -288,15 +289,18 @@ def _lent(centre: np.ndarray, hits: Hits, sample_hits: Hits, where: np.ndarray, 
 
 
 def _spray_veil(radiance: np.ndarray, clouds: SprayClouds, rays: np.ndarray, hits: Hits, camera: Camera,
-                cam_to_world: Transform, condition: Condition) -> None:
+                cam_to_world: Transform, condition: Condition) -> np.ndarray:
     """Dim, in place, the (H*W, 3) ``radiance`` of the pixels whose centre ray passes a spray cloud before its hit by
     its transmittance T = exp(-tau) and add the airlight's (1 - T) (:mod:`pipeline.sensors.spray`): the droplets
-    scatter the same light as the fog's and the rain's."""
+    scatter the same light as the fog's and the rain's. Returns each pixel's T, (H*W,) float32 (1 where no cloud)."""
     rows, tau = camera_optical_depths(clouds, camera, cam_to_world, rays, np.where(hits.hit, hits.t_m, np.inf))
     met = tau > 0
     rows, transmittance = rows[met], np.exp(-tau[met])[:, None]
     air = np.asarray(condition.airlight_rgb, np.float32) * np.float32(condition.exposure)
     radiance[rows] = radiance[rows] * transmittance + air * (np.float32(1.0) - transmittance)
+    every = np.ones(len(rays), np.float32)
+    every[rows] = transmittance[:, 0]
+    return every
 
 
 def _sky_level(condition: Condition) -> float:

@@ -11,9 +11,10 @@ road's texture its water fills, :mod:`pipeline.sensors.weather`).
   dimmed by the fog and rain over both legs of the path. A puddle is a sharp mirror; elsewhere the film over the
   texture's peaks is rough, and its reflection spreads along the image's vertical (the streaks of lights on a wet road:
   microfacets tilted towards the camera reflect what lies above and below the mirror point) over GLOSS_SIGMA_RAD x
-  (1 - w) + PUDDLE_SIGMA_RAD of angle, and a third of that across. The reflected share weighs F (w on the film, 1 in
-  puddles), the surface's own radiance 1 - that. The fast camera instead adds w * WET_SHEEN * Fresnel * the sky in the
-  mirrored direction (:func:`wet_sheen`; the scene itself is not traced there).
+  (1 - w) + PUDDLE_SIGMA_RAD of angle, and that times the sine of the view's grazing angle across (:func:`_lobes`).
+  The reflected share weighs F (w on the film, 1 in puddles), the surface's own radiance 1 - that. The fast camera
+  instead adds w * WET_SHEEN * Fresnel * the sky in the mirrored direction (:func:`wet_sheen`; the scene itself is not
+  traced there).
 - **Vehicles** (WET_VEHICLE_MATERIALS on actors: paint and glass): a water film over the clear coat. Its outer face
   is a second mirror over the coat's: the mirror reflection (:func:`pipeline.sensors.indirect.reflections`) weighs
   F = F_coat + w F_water (1 - F_coat), both Schlick's, the water's with F0 = 0.02 (the layered-coat approximation
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -200,22 +202,52 @@ def road_reflections(scene: FrameScene, rays: np.ndarray, hits: Hits, condition:
     add = np.zeros((len(rows), 3), np.float32)
     # Sharp puddles, then the rough film: each reflection (weighted) and its weight spread over the road's pixels and
     # divided by the road's spread mask, so that the lobes do not bleed off the road.
+    # The view's grazing angle at each hit (sin: its cosine to the surface's normal) narrows the lobe across.
+    grazing = np.abs(rowdot(rays[rows, 3:6], hits.normal[rows]))
     for where, weight, sigma_rad in ((standing, 1.0, PUDDLE_SIGMA_RAD),
                                      (~standing, wetness, GLOSS_SIGMA_RAD * (1.0 - wetness) + PUDDLE_SIGMA_RAD)):
         sel = rows[where]
         if not len(sel):
             continue
         f = (fresnel[where] * np.float32(weight))[:, None]
-        layer = np.zeros((h * w, 4), np.float32)
-        layer[sel, :3] = env[where] * f
-        layer[sel, 3] = f[:, 0]
-        mask = np.zeros(h * w, np.float32)
-        mask[sel] = 1.0
+        layer = np.zeros((h, w, 4), np.float32)
+        layer.reshape(-1, 4)[sel, :3] = env[where] * f
+        layer.reshape(-1, 4)[sel, 3] = f[:, 0]
+        mask = np.zeros((h, w), np.float32)
+        mask.reshape(-1)[sel] = 1.0
         sigma_v = max(2.0 * sigma_rad * fy_px, 0.3)
-        blur = functools.partial(cv2.GaussianBlur, ksize=(0, 0), sigmaX=sigma_v / 3.0, sigmaY=sigma_v,
-                                 borderType=cv2.BORDER_REPLICATE)
-        spread = blur(layer.reshape(h, w, 4)).reshape(-1, 4)[sel]
-        spread /= np.maximum(blur(mask.reshape(h, w)).reshape(-1)[sel], 1e-6)[:, None]
+        spread = _lobes(layer, mask, sel, grazing[where], sigma_v)
         keep[where] = 1.0 - spread[:, 3:4]
         add[where] = spread[:, :3]
     return RoadReflection(rows, keep, add)
+
+
+# Bands of the view's grazing angle (its sine) over which the lobe's width across is taken as one.
+GRAZING_BANDS = (0.0, 0.04, 0.08, 0.16, 0.32, 1.0)
+MIN_GRAZING = 0.02  # the first band's lower end, for its middle
+
+
+def _lobes(layer: np.ndarray, mask: np.ndarray, sel: np.ndarray, grazing: np.ndarray, sigma_v: float) -> np.ndarray:
+    """(len(sel), 4): the (H, W, 4) ``layer`` (weighted reflection, weight) spread over the road (``mask``) as a
+    rough surface's lobe, read at the road's pixels ``sel``, divided by the spread mask (the lobes do not bleed off
+    the road). A facet tilted by d turns the mirror direction by 2 d up or down, but across by only 2 d sin g at a
+    grazing angle g (a glitter path: the streaks of lamps on a wet road, long and thin): the lobe is ``sigma_v``
+    pixels along the image's vertical and sigma_v sin g across, g taken per GRAZING_BANDS band (its geometric
+    middle) of the receiving pixel, each band blurred over its own rows and those its lobe reaches."""
+    h, w = mask.shape
+    out = np.zeros((len(sel), 4), np.float32)
+    reach = int(np.ceil(4.0 * sigma_v)) + 1  # OpenCV's Gaussian kernel reaches 4 sigma (float images)
+    row = sel // w
+    for lo, hi in itertools.pairwise(GRAZING_BANDS):
+        band = np.flatnonzero((grazing >= lo) & (grazing < hi) if hi < 1.0 else grazing >= lo)
+        if not len(band):
+            continue
+        r0, r1 = max(int(row[band].min()) - reach, 0), min(int(row[band].max()) + reach + 1, h)
+        sigma_h = max(sigma_v * float(np.sqrt(max(lo, MIN_GRAZING) * hi)), 0.3)
+        blur = functools.partial(cv2.GaussianBlur, ksize=(0, 0), sigmaX=sigma_h, sigmaY=sigma_v,
+                                 borderType=cv2.BORDER_REPLICATE)
+        local = sel[band] - r0 * w
+        spread = blur(layer[r0:r1]).reshape(-1, 4)[local]
+        spread /= np.maximum(blur(mask[r0:r1]).reshape(-1)[local], 1e-6)[:, None]
+        out[band] = spread
+    return out

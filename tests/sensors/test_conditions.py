@@ -39,6 +39,16 @@ def test_every_shipped_yaml_validates():
         assert Condition(cfg).name == f.stem
 
 
+def test_night_in_rain_is_the_nights_light_in_the_rains_weather():
+    """night-rain takes every light, the sky and the lens from night.yaml and the rain and its mist from rain.yaml
+    (so that a change to either reaches it, or this fails)."""
+    night, rain, both = (get_condition(n).config for n in ("night", "rain", "night-rain"))
+    for section in ("sun", "sky", "vehicle_lights", "headlights", "street_lamps", "lens"):
+        assert getattr(both, section) == getattr(night, section), section
+    for section in ("rain", "fog", "lidar"):
+        assert getattr(both, section) == getattr(rain, section), section
+
+
 @pytest.mark.parametrize(("body", "key"), [
     ("name: bad\nheadlights: {intensity: -1.0}\n", "headlights.intensity"),
     ("name: bad\nfog: {visibility: 50.0}\n", "fog.visibility"),

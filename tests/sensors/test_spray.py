@@ -225,3 +225,36 @@ def test_lidar_pulses_lose_twice_the_optical_depth(actors_factory, box_meshes):
     dense = spray_clouds(scene.actors, _velocity([REFERENCE_SPEED_MPS]), water_mm=1000.0)
     lost = render_lidar(scene, lidar, ego, np.random.default_rng(0), spray=dense)
     assert len(lost) < len(plain)
+
+
+def test_lamps_glow_in_spray_as_in_fog():
+    """A lamp pixel seen through fog of transmittance T_f and spray of T_s (composited with the same airlight, as
+    the render does) sends HALO_FORWARD_SHARE of the light both took, L0 (1 - T_f T_s), into its halo; with the
+    spray's transmittance 1 the halo is the fog's alone, byte for byte."""
+    from pipeline.sensors.conditions import HALO_FORWARD_SHARE
+
+    fog = condition(sun={"elevation_deg": -10.0, "intensity": 0.0, "shadows": False}, fog={"visibility_m": 300.0})
+    h, w = 240, 320
+    distance = np.full(h * w, 60.0)
+    lamp = (h // 2) * w + w // 2
+    sources = np.zeros(h * w, bool)
+    sources[lamp] = True
+    air = np.asarray(fog.airlight_rgb, np.float32) * np.float32(fog.exposure)
+    l0 = np.float32(50.0)
+    t_fog = float(np.exp(-fog.extinction_per_m() * 60.0))
+    totals = {}
+    for t_spray in (1.0, 0.4):
+        radiance = np.tile(air, (h * w, 1)).astype(np.float32)
+        t = t_fog * t_spray
+        radiance[lamp] = l0 * t + air * (1.0 - t)
+        before = radiance.copy()
+        spray_t = np.ones(h * w, np.float32)
+        spray_t[lamp] = t_spray
+        fog.halos(radiance, distance, sources, (h, w), 300.0, spray_t)
+        totals[t_spray] = float((radiance - before).sum(axis=0).mean())
+        assert totals[t_spray] == pytest.approx(HALO_FORWARD_SHARE * l0 * (1.0 - t), rel=0.02)
+        if t_spray == 1.0:
+            alone = before.copy()
+            fog.halos(alone, distance, sources, (h, w), 300.0)
+            np.testing.assert_array_equal(alone, radiance)
+    assert totals[0.4] > totals[1.0]

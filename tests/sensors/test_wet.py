@@ -74,3 +74,26 @@ def test_wet_paint_is_a_little_darker_and_the_dry_image_is_unchanged(box_meshes,
     assert np.all(ratio < 1.0) and np.all(ratio >= 1.0 - WET_PAINT_DARKENING * 0.5 - 1e-6)
     np.testing.assert_array_equal(shade(scene, rays, hits, no_rain, indirect=True),
                                   shade(scene, rays, hits, dry, indirect=True))
+
+
+@pytest.mark.parametrize("grazing", [0.06, 0.5])
+def test_a_rough_wet_roads_lobe_is_long_and_thin_at_grazing_angles(grazing):
+    """One reflecting pixel on a road that fills the image, seen at a grazing angle of sine g: its lobe spreads
+    sigma_v along the image's vertical and sigma_v sin g across (g the middle of its GRAZING_BANDS band), the
+    weights normalised: the second moments of the spread give both widths."""
+    from pipeline.sensors.wet import GRAZING_BANDS, _lobes
+
+    h, w, sigma_v = 201, 181, 12.0
+    layer = np.zeros((h, w, 4), np.float32)
+    layer[100, 90] = (1.0, 1.0, 1.0, 1.0)
+    mask = np.ones((h, w), np.float32)
+    sel = np.arange(h * w)
+    out = _lobes(layer, mask, sel, np.full(h * w, grazing), sigma_v)[:, 0].reshape(h, w)
+    lo = max(b for b in GRAZING_BANDS if b <= grazing)
+    hi = min(b for b in GRAZING_BANDS if b > grazing)
+    sigma_h = sigma_v * np.sqrt(lo * hi)
+    ys, xs = np.mgrid[0:h, 0:w]
+    total = out.sum()
+    assert total == pytest.approx(1.0, rel=1e-3)
+    assert np.sqrt((out * (ys - 100) ** 2).sum() / total) == pytest.approx(sigma_v, rel=0.03)
+    assert np.sqrt((out * (xs - 90) ** 2).sum() / total) == pytest.approx(sigma_h, rel=0.05)
