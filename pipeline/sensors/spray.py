@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
+from pipeline.core.geometry import Boxes3D
 from pipeline.core.jit import as_input, kernel
 
 if TYPE_CHECKING:
@@ -112,12 +113,16 @@ class SprayClouds:
     def __len__(self) -> int:
         return len(self.peak_per_m)
 
+    @property
+    def boxes(self) -> Boxes3D:
+        """Each cloud's bounds as a world box (its a axis, backwards from the vehicle, as the box's heading)."""
+        centre = np.einsum("kij,kj->ki", self.axes, 0.5 * (self.lo + self.hi)) + self.origin
+        return Boxes3D(centre, self.hi - self.lo, np.arctan2(self.axes[:, 1, 0], self.axes[:, 0, 0]))
+
     def world_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(K, 3) lo and hi of each cloud's axis-aligned world box (its bounds' eight corners, turned)."""
-        bits = np.array([[(c >> k) & 1 for k in range(3)] for c in range(8)], bool)
-        corners = np.where(bits[None], self.hi[:, None], self.lo[:, None])  # (K, 8, 3), cloud frame
-        world = np.einsum("kij,kcj->kci", self.axes, corners) + self.origin[:, None]
-        return world.min(axis=1), world.max(axis=1)
+        """(K, 3) lo and hi of each cloud's axis-aligned world box (its bounds' eight corners)."""
+        corners = self.boxes.corners()
+        return corners.min(axis=1), corners.max(axis=1)
 
 
 NO_SPRAY = SprayClouds(np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
@@ -185,8 +190,8 @@ def optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarray, ro
     rows = np.arange(n) if rows is None else np.asarray(rows, np.int64)
     if tiles is None:
         tiles = (np.zeros(len(rows), np.int64), np.array([0, len(clouds)], np.int64), np.arange(len(clouds)))
-    centre = np.einsum("kij,kj->ki", clouds.axes, 0.5 * (clouds.lo + clouds.hi)) + clouds.origin
-    radius = 0.5 * np.linalg.norm(clouds.hi - clouds.lo, axis=1)
+    boxes = clouds.boxes
+    centre, radius = boxes.center, 0.5 * np.linalg.norm(boxes.size, axis=1)
     return _optical_depths(as_input(rays, np.float32), as_input(ends_m, np.float64), as_input(rows, np.int64),
                            *(as_input(a, np.int64) for a in tiles),
                            as_input(clouds.origin, np.float64), as_input(clouds.axes, np.float64),
@@ -237,10 +242,7 @@ def sweep_optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarr
     if not len(clouds) or not len(rows):
         return np.zeros(len(rays), np.float32)
     origin = np.asarray(rays[rows[0], :3], np.float64)
-    bits = np.array([[(c >> k) & 1 for k in range(2)] for c in range(4)], bool)
-    corners = np.where(bits[None], clouds.hi[:, None, :2], clouds.lo[:, None, :2])  # (K, 4, 2) footprint, own frame
-    footprint = np.einsum("kij,kcj->kci", clouds.axes[:, :2, :2], corners) + clouds.origin[:, None, :2]
-    rel = footprint - origin[:2]
+    rel = clouds.boxes.corners()[:, :4, :2] - origin[:2]  # the footprints' corners (the bottom four)
     mid = np.arctan2(rel[:, :, 1].mean(axis=1), rel[:, :, 0].mean(axis=1))
     offset = np.angle(np.exp(1j * (np.arctan2(rel[:, :, 1], rel[:, :, 0]) - mid[:, None])))
     low, high = mid + offset.min(axis=1), mid + offset.max(axis=1)
