@@ -344,7 +344,9 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
     scene = FrameScene(static, actors, meshes, threads=threads, active=active)
     lidar_points = np.zeros(len(scene.actors), np.int64)
     actor_velocity = heading_velocity(others["speed_mps"], others["yaw_rad"])
-    spray = condition.spray(scene.actors, actor_velocity, scene.active)
+    # Every moving vehicle's spray, in reach or not: a vehicle beyond the rays' reach (an oncoming one just passed)
+    # may trail its cloud into view.
+    spray = condition.spray(scene.actors, actor_velocity)
     sweeps, frames, labels = [], [], []
     scans = []
     if radars:  # scanned before the others; each sensor draws from its own generator, so the order changes nothing
