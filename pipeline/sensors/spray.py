@@ -200,6 +200,13 @@ def optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarray, ro
                            as_input(centre, np.float64), as_input(radius, np.float64))
 
 
+def _packed(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tile cloud lists packed for :func:`optical_depths`' ``tiles``: (T + 1,) int64 each tile's first entry and
+    (M,) int64 the entries."""
+    start = np.concatenate([[0], np.cumsum([len(x) for x in lists])]).astype(np.int64)
+    return start, np.array([k for x in lists for k in x], np.int64)
+
+
 TILE_CELLS = 16  # a camera's clouds are listed per tile of this many pixels square
 
 
@@ -214,19 +221,16 @@ def camera_optical_depths(clouds: SprayClouds, camera: Camera, cam_to_world: Tra
     tiles_h, tiles_w = -(-grid_h // TILE_CELLS), -(-grid_w // TILE_CELLS)
     first = np.clip(rect_lo // TILE_CELLS, 0, [tiles_h - 1, tiles_w - 1])
     last = np.clip(rect_hi // TILE_CELLS, 0, [tiles_h - 1, tiles_w - 1])
-    shown = np.all((rect_hi >= 0) & (rect_lo < [grid_h, grid_w]), axis=1)
+    shown = np.flatnonzero(np.all((rect_hi >= 0) & (rect_lo < [grid_h, grid_w]), axis=1))
     lists: list[list[int]] = [[] for _ in range(tiles_h * tiles_w)]
-    shown = np.flatnonzero(shown)
     for k in shown[np.argsort(index[shown], kind="stable")]:  # each tile's clouds in the clouds' order
         for r in range(first[k, 0], last[k, 0] + 1):
             for c in range(first[k, 1], last[k, 1] + 1):
                 lists[r * tiles_w + c].append(int(index[k]))
-    counts = np.array([len(x) for x in lists], np.int64)
-    start = np.concatenate([[0], np.cumsum(counts)])
-    members = np.array([k for x in lists for k in x], np.int64)
+    start, members = _packed(lists)
     cell = np.arange(grid_h * grid_w, dtype=np.int64) if cells is None else cells
     tile = (cell // grid_w) // TILE_CELLS * tiles_w + (cell % grid_w) // TILE_CELLS
-    rows = np.flatnonzero(counts[tile] > 0)
+    rows = np.flatnonzero(np.diff(start)[tile] > 0)
     tau = optical_depths(clouds, rays, ends_m, rows, (tile[rows], start, members))
     return rows, tau[rows]
 
@@ -255,8 +259,7 @@ def sweep_optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarr
             b % AZIMUTH_BINS for b in range(int(np.floor(low[k] * scale)) - 1, int(np.floor(high[k] * scale)) + 2))
         for b in bins:
             lists[b].append(k)
-    start = np.concatenate([[0], np.cumsum([len(x) for x in lists])]).astype(np.int64)
-    members = np.array([k for x in lists for k in x], np.int64)
+    start, members = _packed(lists)
     d = np.asarray(rays[rows, 3:5], np.float64)
     tile = np.floor(np.arctan2(d[:, 1], d[:, 0]) * scale).astype(np.int64) % AZIMUTH_BINS
     return optical_depths(clouds, rays, ends_m, rows, (tile, start, members))
