@@ -17,6 +17,7 @@ import argparse
 import errno
 import importlib
 import logging
+import os
 import re
 import signal
 import sys
@@ -171,5 +172,23 @@ def _main(argv: list[str], command: str | None) -> int:
         return 2
 
 
+def run() -> None:
+    """The ``roadsynth`` program: :func:`main` on the command line's arguments, then exit with its status.
+
+    A connection to a Ray cluster that was given up on (``--ray-timeout``) leaves a thread inside Ray's native
+    code; the interpreter's shutdown can crash in it (SIGABRT instead of the error's status 2) and it prints its own
+    retries after the error. Such a process ends at once, its streams and logs flushed: every output was already
+    closed or removed by then (the stage's claim on them ended with :func:`main`).
+    """
+    status = main()
+    executor = sys.modules.get("pipeline.stages.executor")  # imported only by stages that can use Ray
+    if executor is not None and executor.connection_abandoned():
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    sys.exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

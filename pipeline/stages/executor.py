@@ -185,6 +185,19 @@ def ray_session(spec: ExecutorSpec) -> Iterator[Any]:
         ray.shutdown()
 
 
+_ABANDONED: list[threading.Thread] = []  # connections given up on (--ray-timeout), still inside Ray
+
+
+def connection_abandoned() -> bool:
+    """Whether this process gave up on connecting to a cluster while Ray's code still tries (``--ray-timeout``).
+
+    That thread runs in Ray's native code, which the interpreter's shutdown may crash in (``std::bad_alloc``,
+    SIGABRT, seen once in CI) after the error was printed; it also prints its own retries after it. The
+    command line then ends the process without that shutdown (:func:`pipeline.stages.cli.run`).
+    """
+    return any(thread.is_alive() for thread in _ABANDONED)
+
+
 def _init_within(ray, kwargs: dict[str, Any], timeout_s: float | None) -> None:
     """``ray.init(**kwargs)``, waited for at most ``timeout_s`` (None: as long as it takes).
 
@@ -221,6 +234,7 @@ def _init_within(ray, kwargs: dict[str, Any], timeout_s: float | None) -> None:
     thread.start()
     thread.join(timeout_s)
     if thread.is_alive():
+        _ABANDONED.append(thread)
         raise TimeoutError(f"no answer within {timeout_s:g} s (--ray-timeout)")
     if "error" in outcome:
         raise outcome["error"]
