@@ -93,6 +93,7 @@ CITYSCAPES_OF: dict[SemanticClass, str] = {
     SemanticClass.TRAFFIC_LIGHT: "traffic light",
     SemanticClass.BARRIER: "guard rail",
     SemanticClass.KERB: "sidewalk",
+    SemanticClass.WEATHER: "unlabeled",  # LiDAR points only: no pixel has it
     SemanticClass.CAR: "car",
     SemanticClass.VAN: "car",
     SemanticClass.TRUCK: "truck",

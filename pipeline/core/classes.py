@@ -71,6 +71,7 @@ class SemanticClass(enum.IntEnum):
     TRAFFIC_LIGHT = 9
     BARRIER = 10
     KERB = 11
+    WEATHER = 12  # a LiDAR return from the air: fog, mist or rain droplets (pipeline.sensors.backscatter)
     CAR = 20
     VAN = 21
     TRUCK = 22

@@ -24,9 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.core.classes import SemanticClass
 from pipeline.core.config.sensors import LidarConditionConfig, LidarConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.backscatter import BACKSCATTER_PER_EXTINCTION, LIGHT_M_PER_NS, soft_returns
 from pipeline.sensors.spray import SprayClouds, sweep_optical_depths
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
@@ -167,26 +169,34 @@ def render_lidar(
     n = len(dirs_l)
     rays = make_rays(to_world.translation, dirs_l, to_world.rotation)
     hits = scene.cast_rays(rays, actor_rays=lidar.actor_ray_mask(scene, to_world))
-    noise = rng.standard_normal(n, dtype=np.float32) * np.float32(cfg.range_noise_std_m)
+    normal = rng.standard_normal(n, dtype=np.float32)
+    noise = normal * np.float32(cfg.range_noise_std_m)
     drop = rng.random(n) < cfg.dropout if cfg.dropout else np.zeros(n, bool)
     keep, t, reflected = _returns(as_input(hits.hit, bool), as_input(hits.t_m, np.float32), as_input(hits.normal,
                                   np.float32), as_input(rays, np.float32), as_input(hits.material, np.int32),
                                   as_input(material_arrays()["reflectivity"], np.float32), drop,
                                   np.float32(lidar.range_min_m), np.float32(cfg.range_m))
     intensity = reflected * np.exp(-cfg.attenuation_per_m * t) * np.float32(effects.intensity_factor)
+    beta = 0.0 if condition is None else condition.extinction_per_m(cfg.wavelength_nm)
+    tau = np.zeros(len(keep))
     if spray is not None and len(spray) and len(keep):
         tau = sweep_optical_depths(spray, rays, as_input(hits.t_m, np.float64), keep)[keep].astype(np.float64)
-        beta = 0.0 if condition is None else condition.extinction_per_m(cfg.wavelength_nm)
         seen = np.log(t) + beta * t + tau <= np.log(cfg.range_m) + beta * cfg.range_m
         intensity = intensity * np.exp(-2.0 * tau).astype(np.float32)
-        keep, t, intensity = keep[seen], t[seen], intensity[seen]
+        keep, t, intensity, reflected, tau = keep[seen], t[seen], intensity[seen], reflected[seen], tau[seen]
     if effects.min_intensity > 0:  # returns too weak to detect are lost
         strong = intensity >= effects.min_intensity
-        keep, t, intensity = keep[strong], t[strong], intensity[strong]
+        keep, t, intensity, reflected, tau = keep[strong], t[strong], intensity[strong], reflected[strong], tau[strong]
+    instance_id, semantic_class = as_input(hits.instance_id, np.int32), as_input(hits.semantic, np.uint8)
+    if beta > 0:  # the droplets' own returns near the sensor
+        surface_m = np.where(as_input(hits.hit, bool), as_input(hits.t_m, np.float64), np.inf)
+        surface_power = reflected / np.pi * np.exp(-2.0 * (beta * t + tau)) / np.square(t.astype(np.float64))
+        keep, t, intensity, noise, instance_id, semantic_class = _weather_returns(
+            lidar, cfg, beta, effects.intensity_factor, surface_m, drop, keep, t, intensity, surface_power, normal,
+            noise, instance_id, semantic_class)
     points, ring, column, time_offset, instance, semantic, per_actor = _points(
-        keep, t, noise, as_input(dirs_l, np.float32), as_input(hits.instance_id, np.int32),
-        as_input(hits.semantic, np.uint8), as_input(hits.actor_index, np.int32), cfg.channels,
-        float(lidar.columns * cfg.rotation_hz), len(scene.actors))
+        keep, t, noise, as_input(dirs_l, np.float32), instance_id, semantic_class,
+        as_input(hits.actor_index, np.int32), cfg.channels, float(lidar.columns * cfg.rotation_hz), len(scene.actors))
     return LidarSweep(
         points_m=points,
         intensity=intensity.astype(np.float32),
@@ -198,6 +208,48 @@ def render_lidar(
         points_per_actor=per_actor,
         range_max_m=float(cfg.range_m),
     )
+
+
+def _weather_returns(lidar, cfg, beta, intensity_factor, surface_m, drop, keep, t, intensity, surface_power,
+                     normal, noise, instance_id, semantic_class):
+    """The sweep's returns with the droplets' (:mod:`pipeline.sensors.backscatter`): a beam whose droplets return
+    at least the detection threshold's power, and more than the surface it kept (if any), reports them instead, at
+    their range, labelled WEATHER with track id 0. Their intensity follows the rig's law at that range for the
+    reflectivity that returns the same power in clear air; their range scatters with the rig's noise and the
+    ranging error of a return of rise time tau_H at the peak-to-threshold ratio P / P_th, c tau_H / 2 x P_th / P
+    (Amann et al. 2001's c t_rise / (2 SNR), the threshold taken for the unit of the SNR), from the beam's own
+    normal draw. Returns keep, t, intensity, noise, instance_id and semantic_class for :func:`_points`."""
+    r1, r2 = cfg.overlap_m
+    table = soft_returns(beta, BACKSCATTER_PER_EXTINCTION * beta, cfg.pulse_half_width_ns, r1, r2)
+    power, range_m = table.at(surface_m)
+    threshold = cfg.range_reflectivity / np.pi / lidar.config.range_m ** 2
+    stronger = power.copy()
+    stronger[keep] -= surface_power
+    weather = (power >= threshold) & (stronger > 0) & ~drop & (range_m >= lidar.range_min_m)
+    if not weather.any():
+        return keep, t, intensity, noise, instance_id, semantic_class
+    rays = np.flatnonzero(weather)
+    p, r = power[rays], range_m[rays]
+    n = len(surface_m)
+    t_all = np.zeros(n, np.float32)
+    i_all = np.zeros(n, np.float32)
+    t_all[keep], i_all[keep] = t, intensity
+    t_all[rays] = r
+    equivalent = np.minimum(np.pi * p * r * r * np.exp(2.0 * beta * r), 1.0)  # the reflectivity of that power
+    i_all[rays] = equivalent * np.exp(-cfg.attenuation_per_m * r) * intensity_factor
+    noise = noise.copy()
+    jitter = 0.5 * LIGHT_M_PER_NS * cfg.pulse_half_width_ns * threshold / p
+    noise[rays] = normal[rays] * np.hypot(cfg.range_noise_std_m, jitter)
+    returned = np.zeros(n, bool)
+    returned[keep] = True
+    near = r + noise[rays] < lidar.range_min_m  # the strongest return scattered into the blind zone: no point
+    returned[rays[near]] = False
+    rays = rays[~near]
+    returned[rays] = True
+    instance_id, semantic_class = instance_id.copy(), semantic_class.copy()
+    instance_id[rays], semantic_class[rays] = 0, SemanticClass.WEATHER
+    keep = np.flatnonzero(returned)
+    return keep, t_all[keep], i_all[keep], noise, instance_id, semantic_class
 
 
 @kernel("Tuple((int64[::1], float32[::1], float32[::1]))(bool_[::1], float32[::1], float32[:, ::1], float32[:, ::1], "

@@ -108,6 +108,15 @@ class LidarConfig(_Model):
                                  "depends on it: pipeline.sensors.weather)")
     range_noise_std_m: float = Field(0.02, ge=0.0)
     dropout: float = Field(0.02, ge=0.0, lt=1.0, description="chance that a return is lost")
+    # The droplets' back-scatter in fog and rain (pipeline.sensors.backscatter): the detection threshold is the return
+    # of a surface of range_reflectivity at range_m in clear air (Velodyne HDL-64E: 120 m for 80 %, cars and foliage).
+    range_reflectivity: float = Field(0.8, gt=0.0, le=1.0, description="Lambertian reflectivity of the target "
+                                      "the LiDAR detects at range_m in clear air (its detection threshold)")
+    pulse_half_width_ns: float = Field(20.0, gt=0.0, le=200.0, description="half-power width of the laser pulse, ns")
+    # Rasshofer et al. 2011's Eqs. 11-12 for a biaxial head: 0.1 m between transmitter and receiver, 1 cm apertures,
+    # 2 and 3.5 degree fields of view (the geometry in Hahner et al. 2021's fog simulation).
+    overlap_m: tuple[float, float] = Field((1.67, 7.63), description="ranges r1 <= r2, metres, where the "
+                                           "receiver's field of view starts to overlap the beam and overlaps it wholly")
     mount: MountPose
 
     @model_validator(mode="after")
@@ -117,6 +126,8 @@ class LidarConfig(_Model):
         columns = 360.0 / self.horizontal_resolution_deg
         if abs(columns - round(columns)) > 1e-6:
             raise ValueError(f"horizontal_resolution_deg ({self.horizontal_resolution_deg}) must divide 360")
+        if not 0.0 <= self.overlap_m[0] <= self.overlap_m[1] <= 100.0:
+            raise ValueError(f"overlap_m ({list(self.overlap_m)}): expected 0 <= r1 <= r2 <= 100 metres")
         return self
 
 
