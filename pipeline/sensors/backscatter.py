@@ -25,8 +25,10 @@ power of the detection threshold, that of a surface of the reference reflectivit
 Back-scatter: beta = 0.046 / MOR 1/(m sr) for fog of meteorological optical range MOR = ln 20 / alpha (Hahner et al.,
 after Rasshofer et al.): beta / alpha = 0.046 / ln 20 = 0.0154 1/sr. Mist and rain (the rain's drops are large
 against 905 nm, as the fog's) take the same ratio: no back-scatter-to-extinction ratio measured for rain at 905 nm
-was at hand. Everything is a function of the soft target's range and the surface's range only, so it is tabulated
-once per condition and rig (:func:`soft_returns`) and looked up per ray.
+was at hand. In air of one extinction everything is a function of the soft target's range and the surface's range
+only, so it is tabulated once per condition and rig (:func:`soft_returns`) and looked up per ray; a beam through a
+vehicle's spray, where the droplets' density varies along it, takes its own waveform
+(:func:`pipeline.sensors.spray.sweep_soft_returns`).
 """
 
 from __future__ import annotations

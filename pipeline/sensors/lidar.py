@@ -29,7 +29,7 @@ from pipeline.core.config.sensors import LidarConditionConfig, LidarConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.backscatter import BACKSCATTER_PER_EXTINCTION, LIGHT_M_PER_NS, soft_returns
-from pipeline.sensors.spray import SprayClouds, sweep_optical_depths
+from pipeline.sensors.spray import SprayClouds, sweep_optical_depths, sweep_soft_returns
 from pipeline.world.materials import material_arrays
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
@@ -193,7 +193,7 @@ def render_lidar(
         surface_power = reflected / np.pi * np.exp(-2.0 * (beta * t + tau)) / np.square(t.astype(np.float64))
         keep, t, intensity, noise, instance_id, semantic_class = _weather_returns(
             lidar, cfg, beta, effects.intensity_factor, surface_m, drop, keep, t, intensity, surface_power, normal,
-            noise, instance_id, semantic_class)
+            noise, instance_id, semantic_class, spray=spray, rays=rays)
     points, ring, column, time_offset, instance, semantic, per_actor = _points(
         keep, t, noise, as_input(dirs_l, np.float32), instance_id, semantic_class,
         as_input(hits.actor_index, np.int32), cfg.channels, float(lidar.columns * cfg.rotation_hz), len(scene.actors))
@@ -211,18 +211,28 @@ def render_lidar(
 
 
 def _weather_returns(lidar, cfg, beta, intensity_factor, surface_m, drop, keep, t, intensity, surface_power,
-                     normal, noise, instance_id, semantic_class):
+                     normal, noise, instance_id, semantic_class, *, spray=None, rays=None):
     """The sweep's returns with the droplets' (:mod:`pipeline.sensors.backscatter`): a beam whose droplets return
     at least the detection threshold's power, and more than the surface it kept (if any), reports them instead, at
     their range, labelled WEATHER with track id 0. Their intensity follows the rig's law at that range for the
     reflectivity that returns the same power in clear air; their range scatters with the rig's noise and the
     ranging error of a return of rise time tau_H at the peak-to-threshold ratio P / P_th, c tau_H / 2 x P_th / P
     (Amann et al. 2001's c t_rise / (2 SNR), the threshold taken for the unit of the SNR), from the beam's own
-    normal draw. Returns keep, t, intensity, noise, instance_id and semantic_class for :func:`_points`."""
+    normal draw. A beam through a vehicle's spray (``spray``, the frame's clouds; ``rays`` the sweep's) takes the
+    return of the spray and the air together (:func:`pipeline.sensors.spray.sweep_soft_returns`). Returns keep, t,
+    intensity, noise, instance_id and semantic_class for :func:`_points`."""
     r1, r2 = cfg.overlap_m
+    window_m = LIGHT_M_PER_NS * cfg.pulse_half_width_ns
     table = soft_returns(beta, BACKSCATTER_PER_EXTINCTION * beta, cfg.pulse_half_width_ns, r1, r2)
     power, range_m = table.at(surface_m)
     threshold = cfg.range_reflectivity / np.pi / lidar.config.range_m ** 2
+    if spray is not None and len(spray):
+        # Farther than this, not even the densest cloud's return (~ ratio beta w / 2 / t^2) reaches the threshold.
+        far_m = np.sqrt(BACKSCATTER_PER_EXTINCTION * (spray.peak_per_m.max() + beta) * window_m / threshold)
+        through, spray_power, spray_range = sweep_soft_returns(
+            spray, rays, surface_m, beta, BACKSCATTER_PER_EXTINCTION, window_m, cfg.overlap_m, far_m + window_m,
+            float(table.power[-1]), threshold)
+        power[through], range_m[through] = spray_power, spray_range
     stronger = power.copy()
     stronger[keep] -= surface_power
     weather = (power >= threshold) & (stronger > 0) & ~drop & (range_m >= lidar.range_min_m)
@@ -238,7 +248,7 @@ def _weather_returns(lidar, cfg, beta, intensity_factor, surface_m, drop, keep, 
     equivalent = np.minimum(np.pi * p * r * r * np.exp(2.0 * beta * r), 1.0)  # the reflectivity of that power
     i_all[rays] = equivalent * np.exp(-cfg.attenuation_per_m * r) * intensity_factor
     noise = noise.copy()
-    jitter = 0.5 * LIGHT_M_PER_NS * cfg.pulse_half_width_ns * threshold / p
+    jitter = 0.5 * window_m * threshold / p
     noise[rays] = normal[rays] * np.hypot(cfg.range_noise_std_m, jitter)
     returned = np.zeros(n, bool)
     returned[keep] = True

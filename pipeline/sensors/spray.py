@@ -22,9 +22,13 @@ elsewhere) and before its hit (:func:`optical_depths`). The camera sees L = L0 T
 the airlight of the condition's fog and rain (the droplets scatter the same overcast sky); the LiDAR's pulse loses
 exp(-2 tau) both ways. Ground truth is unchanged: spray hides nothing from the labels (as fog).
 
-Not modelled: the spray's own returns to the LiDAR (a soft target, as fog's back-scatter:
-docs/realism.md), its light from lamps at night (the veil takes the sky's radiance), the ego's own spray, splash,
-and the turbulence that makes a real cloud lumpy and changing from frame to frame.
+The spray's own returns to the LiDAR are a soft target, as the fog's (:mod:`pipeline.sensors.backscatter`): along
+each beam that meets a cloud, the pulse's echo from the spray and the air together (:func:`sweep_soft_returns`). At
+the model's densities they stay below the threshold of the default LiDAR (at most half of it on the highway frames
+docs/realism.md reports); three times as dense, a cloud just ahead of the sensor returns points.
+
+Not modelled: the spray's light from lamps at night (the veil takes the sky's radiance), the ego's own spray,
+splash, and the turbulence that makes a real cloud lumpy and changing from frame to frame.
 """
 
 from __future__ import annotations
@@ -112,6 +116,11 @@ class SprayClouds:
 
     def __len__(self) -> int:
         return len(self.peak_per_m)
+
+    def take(self, index: np.ndarray) -> SprayClouds:
+        """The clouds at ``index`` (an integer or boolean array)."""
+        return SprayClouds(self.origin[index], self.axes[index], self.sigma[index], self.lo[index], self.hi[index],
+                           self.peak_per_m[index], self.actor[index])
 
     @property
     def boxes(self) -> Boxes3D:
@@ -239,12 +248,18 @@ AZIMUTH_BINS = 720  # a sensor's clouds are listed per half degree of azimuth ro
 
 
 def sweep_optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """As :func:`optical_depths` for ``rows`` of rays that share one origin (a LiDAR's sweep): each cloud is listed
-    for the bins of azimuth its footprint spans seen from the origin (a convex footprint's extreme corners bound
-    them; a footprint round the origin spans every bin), and a ray tests only its bin's clouds."""
+    """As :func:`optical_depths` for ``rows`` of rays that share one origin (a LiDAR's sweep): a ray tests only the
+    clouds of its bin of azimuth (:func:`sweep_tiles`)."""
     rows = np.asarray(rows, np.int64)
     if not len(clouds) or not len(rows):
         return np.zeros(len(rays), np.float32)
+    return optical_depths(clouds, rays, ends_m, rows, sweep_tiles(clouds, rays, rows))
+
+
+def sweep_tiles(clouds: SprayClouds, rays: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which clouds each of ``rows`` (rays sharing one origin, a LiDAR's sweep; at least one) may meet, as
+    :func:`optical_depths`' ``tiles``: each cloud is listed for the bins of azimuth its footprint spans seen from the
+    origin (a convex footprint's extreme corners bound them; a footprint round the origin spans every bin)."""
     origin = np.asarray(rays[rows[0], :3], np.float64)
     rel = clouds.boxes.corners()[:, :4, :2] - origin[:2]  # the footprints' corners (the bottom four)
     mid = np.arctan2(rel[:, :, 1].mean(axis=1), rel[:, :, 0].mean(axis=1))
@@ -262,7 +277,7 @@ def sweep_optical_depths(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarr
     start, members = _packed(lists)
     d = np.asarray(rays[rows, 3:5], np.float64)
     tile = np.floor(np.arctan2(d[:, 1], d[:, 0]) * scale).astype(np.int64) % AZIMUTH_BINS
-    return optical_depths(clouds, rays, ends_m, rows, (tile, start, members))
+    return tile, start, members
 
 
 @kernel("float64(float64, float64)")
@@ -275,12 +290,54 @@ def _erf_difference(u0, u1):
     return math.erf(u1) - math.erf(u0)
 
 
+@kernel("UniTuple(float64, 5)(float64, float64, float64, float64, float64, float64, float64, int64, "
+        "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
+        "float64[:, ::1], float64[::1])")
+def _segment(o0, o1, o2, d0, d1, d2, end, k, origin, axes, sigma, lo, hi, peak, centre, radius):
+    """The part [t0, t1] of the ray o + t d (t < ``end``) within cloud k's bounds, and the cloud's extinction along
+    it, amplitude exp(-a (t - tv)^2): returns (t0, t1, tv, a, amplitude); t1 <= t0 where the ray misses the cloud
+    (tested first against the cloud's bounding sphere)."""
+    # The ray's closest approach to the cloud's bounding sphere.
+    c0, c1, c2 = centre[k, 0] - o0, centre[k, 1] - o1, centre[k, 2] - o2
+    along = c0 * d0 + c1 * d1 + c2 * d2
+    if c0 * c0 + c1 * c1 + c2 * c2 - along * along > radius[k] * radius[k]:
+        return 0.0, -1.0, 0.0, 0.0, 0.0
+    if along + radius[k] <= 0.0 or along - radius[k] >= end:
+        return 0.0, -1.0, 0.0, 0.0, 0.0
+    # Origin and direction in the cloud's frame (axes' columns), and the part within its bounds.
+    r0, r1, r2 = o0 - origin[k, 0], o1 - origin[k, 1], o2 - origin[k, 2]
+    t0, t1 = 0.0, end
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    for m in range(3):
+        p = r0 * axes[k, 0, m] + r1 * axes[k, 1, m] + r2 * axes[k, 2, m]
+        e = d0 * axes[k, 0, m] + d1 * axes[k, 1, m] + d2 * axes[k, 2, m]
+        if e != 0.0:
+            ta, tb = (lo[k, m] - p) / e, (hi[k, m] - p) / e
+            if ta > tb:
+                ta, tb = tb, ta
+            t0, t1 = max(t0, ta), min(t1, tb)
+        elif p < lo[k, m] or p > hi[k, m]:
+            t1 = -1.0
+        w = 0.5 / (sigma[k, m] * sigma[k, m])
+        a += w * e * e
+        b += 2.0 * w * p * e
+        c += w * p * p
+    if t1 <= t0:
+        return t0, t1, 0.0, 0.0, 0.0
+    # q(t) = a t^2 + b t + c = a (t - tv)^2 + lowest, with a > 0 (e is a unit vector).
+    tv = -b / (2.0 * a)
+    lowest = max(c - a * tv * tv, 0.0)
+    return t0, t1, tv, a, peak[k] * math.exp(-lowest)
+
+
 @kernel("float32[::1](float32[:, ::1], float64[::1], int64[::1], int64[::1], int64[::1], int64[::1], "
         "float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], "
         "float64[:, ::1], float64[::1])")
 def _optical_depths(rays, ends, rows, row_tile, tile_start, tile_clouds, origin, axes, sigma, lo, hi, peak, centre,
                     radius):
-    """:func:`optical_depths`' loop: per ray, per cloud of its tile whose bounding sphere it passes, the closed
+    """:func:`optical_depths`' loop: per ray, per cloud of its tile that it meets (:func:`_segment`), the closed
     form."""
     out = np.zeros(rays.shape[0], np.float32)
     half_sqrt_pi = 0.5 * math.sqrt(math.pi)
@@ -288,45 +345,153 @@ def _optical_depths(rays, ends, rows, row_tile, tile_start, tile_clouds, origin,
         i = rows[j]
         o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
         d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
-        end = ends[i]
         total = 0.0
         tile = row_tile[j]
         for entry in range(tile_start[tile], tile_start[tile + 1]):
-            k = tile_clouds[entry]
-            # The ray's closest approach to the cloud's bounding sphere.
-            c0, c1, c2 = centre[k, 0] - o0, centre[k, 1] - o1, centre[k, 2] - o2
-            along = c0 * d0 + c1 * d1 + c2 * d2
-            if c0 * c0 + c1 * c1 + c2 * c2 - along * along > radius[k] * radius[k]:
-                continue
-            if along + radius[k] <= 0.0 or along - radius[k] >= end:
-                continue
-            # Origin and direction in the cloud's frame (axes' columns), and the part within its bounds.
-            r0, r1, r2 = o0 - origin[k, 0], o1 - origin[k, 1], o2 - origin[k, 2]
-            t0, t1 = 0.0, end
-            a = 0.0
-            b = 0.0
-            c = 0.0
-            for m in range(3):
-                p = r0 * axes[k, 0, m] + r1 * axes[k, 1, m] + r2 * axes[k, 2, m]
-                e = d0 * axes[k, 0, m] + d1 * axes[k, 1, m] + d2 * axes[k, 2, m]
-                if e != 0.0:
-                    ta, tb = (lo[k, m] - p) / e, (hi[k, m] - p) / e
-                    if ta > tb:
-                        ta, tb = tb, ta
-                    t0, t1 = max(t0, ta), min(t1, tb)
-                elif p < lo[k, m] or p > hi[k, m]:
-                    t1 = -1.0
-                w = 0.5 / (sigma[k, m] * sigma[k, m])
-                a += w * e * e
-                b += 2.0 * w * p * e
-                c += w * p * p
+            t0, t1, tv, a, amplitude = _segment(o0, o1, o2, d0, d1, d2, ends[i], tile_clouds[entry], origin, axes,
+                                                sigma, lo, hi, peak, centre, radius)
             if t1 <= t0:
                 continue
-            # q(t) = a t^2 + b t + c = a (t - tv)^2 + lowest, with a > 0 (e is a unit vector).
-            tv = -b / (2.0 * a)
-            lowest = max(c - a * tv * tv, 0.0)
             root = math.sqrt(a)
-            total += peak[k] * math.exp(-lowest) * half_sqrt_pi / root * _erf_difference(root * (t0 - tv),
-                                                                                         root * (t1 - tv))
+            total += amplitude * half_sqrt_pi / root * _erf_difference(root * (t0 - tv), root * (t1 - tv))
         out[i] = np.float32(total)
     return out
+
+
+def sweep_soft_returns(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarray, extinction_per_m: float,
+                       backscatter_per_extinction: float, window_m: float, overlap_m: tuple[float, float],
+                       far_m: float, air_peak: float, threshold: float,
+                       step_m: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The droplets' strongest return (:mod:`pipeline.sensors.backscatter`'s soft target) along each ray of a sweep
+    that meets a cloud before ``far_m`` and its end, where it can reach ``threshold``: the spray's extinction plus
+    the air's (``extinction_per_m``, fog and rain), back-scattering ``backscatter_per_extinction`` of it, seen through
+    both (the spray's optical depth accumulated along the ray), through the overlap ``overlap_m`` = (r1, r2), with the
+    pulse's window ``window_m``, on cells of ``step_m`` up to the ray's end or ``far_m``. A ray is passed over where
+    the air's peak alone (``air_peak``, an upper bound of the air's share) plus the spray's share summed over the
+    whole ray without the pulse's weight or the loss on the way stays below the threshold. Returns the rays (R,)
+    int64 and their peak power (R,) float64 and reported range (R,) float64 (the peak's window end less half the
+    window)."""
+    if len(clouds) and len(rays):  # the clouds within far_m of the sweep's origin
+        boxes = clouds.boxes
+        gap = np.linalg.norm(boxes.center - np.asarray(rays[0, :3], np.float64), axis=1)
+        clouds = clouds.take(gap - 0.5 * np.linalg.norm(boxes.size, axis=1) < far_m)
+    if not len(clouds) or not len(rays):
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    rows = np.arange(len(rays), dtype=np.int64)
+    ends = np.minimum(ends_m, far_m)
+    cells = int(max(float(ends.max()), 0.0) / step_m) + 1
+    t = (np.arange(cells) + 0.5) * step_m
+    r1, r2 = overlap_m
+    xi = np.clip((t - r1) / (r2 - r1), 0.0, 1.0) if r2 > r1 else (t >= r1).astype(np.float64)
+    weight = xi / (t * t) * step_m * np.exp(-2.0 * extinction_per_m * t)  # per cell, before the spray's loss
+    phase = 2.0 * np.pi * t / window_m
+    edges = 2.0 * np.pi * np.arange(cells + int(window_m / step_m + 0.5) + 1) * step_m / window_m
+    boxes = clouds.boxes
+    centre, radius = boxes.center, 0.5 * np.linalg.norm(boxes.size, axis=1)
+    met, power, reported = _soft_peaks(
+        as_input(rays, np.float32), as_input(ends, np.float64), rows,
+        *(as_input(a, np.int64) for a in sweep_tiles(clouds, rays, rows)), as_input(clouds.origin, np.float64),
+        as_input(clouds.axes, np.float64), as_input(clouds.sigma, np.float64), as_input(clouds.lo, np.float64),
+        as_input(clouds.hi, np.float64), as_input(clouds.peak_per_m, np.float64), as_input(centre, np.float64),
+        as_input(radius, np.float64), float(extinction_per_m), float(backscatter_per_extinction), float(window_m),
+        float(step_m), weight, np.cos(phase), np.sin(phase), np.cos(edges), np.sin(edges), float(air_peak),
+        float(threshold))
+    return np.flatnonzero(met), power[met], reported[met]
+
+
+@kernel("void(int64, int64, int64, float64, float64, float64, float64, float64[::1], float64[::1], float64[::1], "
+        "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], "
+        "float64[::1])")
+def _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc, ss,
+             power, reported):
+    """:func:`_soft_peaks`' power and reported range of ray ``i`` from its ``m`` cells' spray extinction ``beta``
+    (``s0``, ``sc``, ``ss``: scratch for the running sums)."""
+    tau = 0.0
+    for s in range(m):
+        b = beta[s]
+        half = 0.5 * b * step
+        f = ratio * (b + alpha) * weight[s] * math.exp(-2.0 * (tau + half))
+        tau += 2.0 * half
+        s0[s + 1] = s0[s] + f
+        sc[s + 1] = sc[s] + f * cos_cell[s]
+        ss[s + 1] = ss[s] + f * sin_cell[s]
+    best = 0.0
+    best_end = 0
+    for e in range(1, m + window + 1):
+        low, high = max(e - window, 0), min(e, m)
+        p = 0.5 * ((s0[high] - s0[low]) - cos_edge[e] * (sc[high] - sc[low]) - sin_edge[e] * (ss[high] - ss[low]))
+        if p > best:
+            best, best_end = p, e
+    power[i] = best
+    reported[i] = best_end * step - 0.5 * w
+
+
+@kernel("Tuple((bool_[::1], float64[::1], float64[::1]))(float32[:, ::1], float64[::1], int64[::1], int64[::1], "
+        "int64[::1], int64[::1], float64[:, ::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], "
+        "float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], float64, float64, float64, float64, "
+        "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64, float64)")
+def _soft_peaks(rays, ends, rows, row_tile, tile_start, tile_clouds, origin, axes, sigma, lo, hi, peak, centre,
+                radius, alpha, ratio, w, step, weight, cos_cell, sin_cell, cos_edge, sin_edge, air_peak, threshold):
+    """:func:`sweep_soft_returns`' loop. Per ray that meets a cloud: the spray's extinction beta(t_s) on the cells
+    (centres t_s) before its end; the return density f_s = ratio (beta(t_s) + alpha) weight_s exp(-2 tau(t_s))
+    (weight_s = xi / t^2 step exp(-2 alpha t) at the cell's centre, tau the spray's optical depth to it); the power at
+    window end R, sum over t_s in [R - w, R) of f_s sin^2(pi (R - t_s) / w), from three running sums (sin^2 x = (1 -
+    cos 2x) / 2; the cells' and the ends' cosines and sines given); its maximum over R on the cells' edges."""
+    n_rays = rays.shape[0]
+    cells = weight.size
+    met = np.zeros(n_rays, np.bool_)
+    power = np.zeros(n_rays)
+    reported = np.zeros(n_rays)
+    beta = np.zeros(cells)
+    s0 = np.zeros(cells + 1)
+    sc = np.zeros(cells + 1)
+    ss = np.zeros(cells + 1)
+    window = int(w / step + 0.5)
+    half_sqrt_pi = 0.5 * math.sqrt(math.pi)
+    t_top = (np.argmax(weight) + 0.5) * step
+    for j in range(rows.size):
+        i = rows[j]
+        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
+        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
+        end = ends[i]
+        m = min(int(end / step), cells)  # whole cells before the end
+        if m <= 0:
+            continue
+        # A first bound, in closed form: each cloud's optical depth along the ray (at most its peak over one pulse's
+        # window) times the weight's largest cell value over its part (the weight rises to its top at t_top and falls
+        # after), 10 % over for the cells' grain.
+        bound = air_peak
+        tile = row_tile[j]
+        for entry in range(tile_start[tile], tile_start[tile + 1]):
+            t0, t1, tv, a, amplitude = _segment(o0, o1, o2, d0, d1, d2, end, tile_clouds[entry], origin, axes,
+                                                sigma, lo, hi, peak, centre, radius)
+            if t1 <= t0:
+                continue
+            root = math.sqrt(a)
+            tau = min(amplitude * half_sqrt_pi / root * _erf_difference(root * (t0 - tv), root * (t1 - tv)),
+                      amplitude * w)  # one pulse's window holds at most w of it
+            near = min(max(t_top, t0), t1)
+            c = min(int(near / step), cells - 1)
+            top = max(weight[c], weight[max(c - 1, 0)], weight[min(c + 1, cells - 1)]) / step
+            bound += 1.1 * ratio * tau * top
+        if bound < threshold:
+            continue
+        first_cell, last_cell = m, -1
+        for entry in range(tile_start[tile], tile_start[tile + 1]):
+            t0, t1, tv, a, amplitude = _segment(o0, o1, o2, d0, d1, d2, end, tile_clouds[entry], origin, axes,
+                                                sigma, lo, hi, peak, centre, radius)
+            if t1 <= t0:
+                continue
+            for s in range(max(int(t0 / step), 0), min(int(t1 / step) + 1, m)):
+                t = (s + 0.5) * step
+                if t0 <= t < t1:
+                    beta[s] += amplitude * math.exp(-a * (t - tv) * (t - tv))
+                    first_cell, last_cell = min(first_cell, s), max(last_cell, s)
+        if last_cell < 0:
+            continue
+        met[i] = True
+        _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc,
+                 ss, power, reported)
+        for s in range(first_cell, last_cell + 1):  # the cells this ray touched, cleared for the next
+            beta[s] = 0.0
+    return met, power, reported

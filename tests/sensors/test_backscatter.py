@@ -16,9 +16,12 @@ from pipeline.core.geometry import Transform
 from pipeline.sensors.backscatter import BACKSCATTER_PER_EXTINCTION, LIGHT_M_PER_NS, soft_returns
 from pipeline.sensors.conditions import get_condition
 from pipeline.sensors.lidar import Lidar, render_lidar
+from pipeline.sensors.spray import spray_clouds, sweep_soft_returns
 from pipeline.sensors.weather import fog_extinction_per_m
 from pipeline.world.scene import FrameScene, StaticScene
 from tests.sensors.conftest import condition, lidar_config, make_actors
+from tests.sensors.test_night import ground
+from tests.sensors.test_spray import _density
 
 SMALL = dict(channels=8, upper_fov_deg=2.0, lower_fov_deg=-2.0, horizontal_resolution_deg=2.0)
 
@@ -147,3 +150,58 @@ def test_actor_points_replaced_by_droplets_are_not_counted(box_meshes):
 
 def _beams(sweep, mask) -> set[int]:
     return set((sweep.column[mask].astype(np.int64) * 8 + sweep.ring[mask]).tolist())
+
+
+def _spray_waveform_peak(clouds, origin, direction, alpha, ratio, w, overlap, far, dt=0.002):
+    """The soft-target waveform through spray and air written from the definition: beta(t) from the clouds' density
+    (test_spray's), tau by the trapezoid rule, the pulse by direct convolution; its peak and reported range."""
+    r1, r2 = overlap
+    t = np.arange(dt / 2, far, dt)
+    beta = np.array([sum(_density(clouds, k, origin + s * direction) for k in range(len(clouds))) for s in t])
+    tau = np.concatenate([[0.0], np.cumsum(0.5 * (beta[1:] + beta[:-1]) * dt)])
+    xi = np.clip((t - r1) / (r2 - r1), 0.0, 1.0)
+    f = ratio * (beta + alpha) * xi * np.exp(-2.0 * (alpha * t + tau)) / t ** 2 * dt
+    pulse = np.sin(np.pi * np.arange(0.0, w, dt) / w) ** 2
+    waveform = np.convolve(f, pulse)  # index n: window end R = (n + 1) dt
+    n = int(np.argmax(waveform))
+    return waveform[n], (n + 1) * dt - 0.5 * w
+
+
+def test_spray_returns_are_the_quadrature_of_the_definition(actors_factory):
+    actors = actors_factory([[10.0, 0.0, 0.75]], [[4.5, 1.8, 1.5]])
+    clouds = spray_clouds(actors, np.array([[25.0, 0.0, 0.0]]), water_mm=1.0, scale=8.0)  # 0.4 /m at the bumper
+    origin = np.array([0.0, 0.0, 1.0])
+    angles = [(0.0, -4.0), (3.0, -8.0), (0.0, -12.0), (180.0, -6.0), (90.0, -2.0)]
+    direction = np.array([[np.cos(np.radians(e)) * np.cos(np.radians(a)), np.cos(np.radians(e)) * np.sin(np.radians(a)),
+                           np.sin(np.radians(e))] for a, e in angles])
+    rays = np.column_stack([np.broadcast_to(origin, direction.shape), direction]).astype(np.float32)
+    alpha, w, overlap, far = 0.004, LIGHT_M_PER_NS * 20.0, (1.67, 7.63), 30.0
+    ratio = BACKSCATTER_PER_EXTINCTION
+    air = float(soft_returns(alpha, ratio * alpha, 20.0, *overlap).power[-1])
+    met, power, reported = sweep_soft_returns(clouds, rays, np.full(len(rays), np.inf), alpha, ratio, w, overlap,
+                                              far, air, 1e-12)
+    assert len(met) >= 4
+    for j, i in enumerate(met):
+        peak, at = _spray_waveform_peak(clouds, origin, rays[i, 3:].astype(np.float64), alpha, ratio, w, overlap,
+                                        far)
+        assert power[j] == pytest.approx(peak, rel=0.03)
+        assert reported[j] == pytest.approx(at, abs=0.15)
+        assert power[j] > air  # the spray adds to the air's return
+
+
+def test_dense_spray_near_the_sensor_returns_points_inside_its_cloud(actors_factory, box_meshes):
+    scene = FrameScene(StaticScene([ground()]), actors_factory([[9.0, 0.0, 0.75]], [[4.5, 1.8, 1.5]]), box_meshes)
+    velocity = np.array([[30.0, 0.0, 0.0]])
+    lidar = Lidar(lidar_config(channels=16, upper_fov_deg=2.0, lower_fov_deg=-15.0, horizontal_resolution_deg=1.0,
+                               mount={"xyz_m": (0.0, 0.0, 1.8)}))
+    ego = Transform.identity()
+    for spray, expect in ((1.0, False), (10.0, True)):  # the model's spray; ten times as dense
+        rain = condition(rain={"rate_mm_h": 10.0, "spray": spray})
+        clouds = rain.spray(scene.actors, velocity)
+        s = render_lidar(scene, lidar, ego, np.random.default_rng(0), condition=rain, spray=clouds)
+        weather = s.semantic == SemanticClass.WEATHER
+        assert weather.any() == expect, spray
+        if expect:
+            world = lidar.lidar_to_world(ego).apply(s.points_m[weather].astype(np.float64))
+            inside = clouds.boxes.contains(world, margin_m=1.0)[0]  # the ranging error scatters them
+            assert inside.mean() > 0.9 and (s.instance_id[weather] == 0).all()
