@@ -353,6 +353,7 @@ def apply_post(
     flow: np.ndarray | None = None,
     streaks: np.ndarray | None = None,
     streak_radiance: float = 0.0,
+    streak_light: np.ndarray | None = None,
     lens_drops: int = 0,
     gain: float = 1.0,
     psf_sigma_px: float = 0.0,
@@ -362,7 +363,8 @@ def apply_post(
 
     ``flow`` (H, W, 2) float32 is the image motion during the shutter (None: no motion blur); ``streaks`` (H, W)
     float32 the share of each pixel's exposure that falling raindrops cover (:mod:`pipeline.sensors.rain`), whose
-    radiance is ``streak_radiance``; ``lens_drops`` the raindrops on the lens (drawn from ``rng``); ``gain`` scales
+    radiance is ``streak_radiance``, plus (H, W, 3) ``streak_light`` where lamps light them (their coverage
+    included); ``lens_drops`` the raindrops on the lens (drawn from ``rng``); ``gain`` scales
     the image first (the camera's exposure, :mod:`pipeline.sensors.exposure`); ``psf_sigma_px`` the camera's
     point-spread function (:func:`point_spread`), applied with the other optics, before the sensor; ``sensor`` the
     frame's :class:`pipeline.sensors.exposure.Exposure`, whose shot and read noise the sensor adds after the optics
@@ -376,6 +378,8 @@ def apply_post(
     if streaks is not None:  # the drops' own motion is their streak: not blurred again
         cover = per_channel(streaks)
         out = out * (1.0 - cover) + cover * np.float32(streak_radiance * gain)
+        if streak_light is not None:
+            out = out + streak_light * np.float32(gain)
     out = bloom(out, lens.bloom_threshold, lens.bloom_strength, lens.bloom_sigma_px)
     out = lens_flare(out, lens.lens_flare, 2.0 * lens.bloom_threshold)
     if lens_drops and rng is not None:

@@ -12,8 +12,11 @@ overlap: 1 - exp(-sum)), and a drop behind the surface its streak's middle sees 
 
 A drop refracts light from a wide cone of directions (about 165 degrees) towards the camera, so its radiance hardly
 depends on the background behind it (Garg and Nayar 2004): it is taken as the mean of the sky's radiance at the horizon
-and the frame's mean radiance (lamps lighting nearby drops at night are not modelled). Farther and smaller drops are
-not drawn one by one: they dim the air as the rain's extinction (:meth:`pipeline.sensors.conditions.Condition.fog`).
+and the frame's mean radiance. At night the lamps light the drops besides (:func:`drop_radiance`): a drop scatters
+their light towards the camera by its phase function, so streaks glow between the camera and an oncoming car's
+headlamps and under street lamps, and hardly in the ego's own beams (light scattered back). Farther and smaller
+drops are not drawn one by one: they dim the air as the rain's extinction
+(:meth:`pipeline.sensors.conditions.Condition.fog`).
 The lens is focused far away and its aperture is small (f/2 at a focal length of 2 mm), so even drops half a metre away
 blur by about a pixel, which the streaks leave out.
 """
@@ -24,11 +27,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.sensors.beams import PHASE_ASYMMETRY, henyey_greenstein
+from pipeline.sensors.lights import spot_strength
 from pipeline.sensors.weather import drops_per_m3, marshall_palmer_slope_per_mm, terminal_velocity_mps
 
 if TYPE_CHECKING:
     from pipeline.core.geometry import Transform
     from pipeline.sensors.camera import Camera
+    from pipeline.sensors.lights import SpotLights
 
 STREAK_MIN_DIAMETER_MM = 0.5  # smaller drops are drawn only through the extinction
 STREAK_MAX_DIAMETER_MM = 6.0  # larger drops break up as they fall
@@ -63,18 +69,20 @@ def _drops(rate_mm_h: float, camera: Camera, rng: np.random.Generator) -> tuple[
 
 def streak_coverage(rate_mm_h: float, wind_mps: tuple[float, float], exposure_s: float, camera: Camera,
                     cam_to_world: Transform, camera_velocity_mps: np.ndarray, depth_m: np.ndarray,
-                    rng: np.random.Generator) -> np.ndarray:
-    """(H, W) float32 share of each pixel's exposure that falling drops cover, in [0, 1).
+                    rng: np.random.Generator, lights: SpotLights | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(H, W) float32 share of each pixel's exposure that falling drops cover, in [0, 1); and, with ``lights`` (the
+    frame's spot lights, at night), (H, W, 3) float32 the radiance the drops add by scattering them (None without).
 
     ``cam_to_world`` places the camera's optical frame (x right, y down, z forward); ``camera_velocity_mps`` (3,) is its
     world velocity; ``depth_m`` (H, W) the z-depth of what each pixel sees (0: nothing, the sky). Draws from ``rng``:
-    the drop counts per diameter, then the drops' positions and diameters."""
+    the drop counts per diameter, then the drops' positions and diameters (the same with lights or without)."""
     h, w = camera.height, camera.width
     out = np.zeros(h * w, np.float64)
+    lit = None if lights is None or not len(lights) else np.zeros((3, h * w), np.float64)
     start, diameter_mm = _drops(rate_mm_h, camera, rng)
     n, z = len(start), start[:, 2]
     if n == 0 or exposure_s <= 0:
-        return out.reshape(h, w).astype(np.float32)
+        return out.reshape(h, w).astype(np.float32), _image(lit, h, w)
     fall = np.zeros((n, 3))
     fall[:, 0], fall[:, 1] = wind_mps
     fall[:, 2] = -terminal_velocity_mps(diameter_mm)
@@ -94,7 +102,7 @@ def streak_coverage(rate_mm_h: float, wind_mps: tuple[float, float], exposure_s:
     seen = (behind == 0) | (z < behind)
     keep = np.flatnonzero(seen & (alpha >= MIN_ALPHA) & np.isfinite(length_px))
     if not len(keep):
-        return out.reshape(h, w).astype(np.float32)
+        return out.reshape(h, w).astype(np.float32), _image(lit, h, w)
     # Each streak is sampled once per pixel of its length, every sample carrying the streak's coverage.
     steps = np.maximum(np.ceil(length_px[keep]).astype(np.int64), 1)
     which = np.repeat(keep, steps)
@@ -102,7 +110,46 @@ def streak_coverage(rate_mm_h: float, wind_mps: tuple[float, float], exposure_s:
     t = (np.arange(len(which)) - np.repeat(first, steps) + 0.5) / np.repeat(steps, steps)
     p = uv0[which] + (uv1[which] - uv0[which]) * t[:, None] - 0.5  # pixel centres at integers
     _splat(out, p, alpha[which], h, w)
-    return (-np.expm1(-out)).reshape(h, w).astype(np.float32)
+    if lit is not None:  # each drop at its streak's middle, lit by the lamps
+        radiance = np.zeros((n, 3))
+        radiance[keep] = drop_radiance(lights, cam_to_world.apply(0.5 * (start[keep] + end[keep])),
+                                       cam_to_world.translation)
+        for c in range(3):
+            _splat(lit[c], p, alpha[which] * radiance[which, c], h, w)
+    return (-np.expm1(-out)).reshape(h, w).astype(np.float32), _image(lit, h, w)
+
+
+def _image(lit: np.ndarray | None, h: int, w: int) -> np.ndarray | None:
+    return None if lit is None else np.ascontiguousarray(lit.T.reshape(h, w, 3), dtype=np.float32)
+
+
+def drop_radiance(lights: SpotLights, points_m: np.ndarray, camera_m: np.ndarray) -> np.ndarray:
+    """(K, 3) float64 radiance towards the camera at ``camera_m`` of raindrops at (K, 3) world ``points_m`` lit by
+    ``lights``: per light, its irradiance there (:func:`pipeline.sensors.lights.spot_strength` x its rgb; no shadows)
+    times the drop's phase function at the angle between the light's way and the way on to the camera.
+
+    A drop of cross-section A scatters E A p(theta) per steradian (its scattering efficiency outside the narrow
+    diffraction peak is 1) and shows the camera the same area A, so its radiance is E p(theta): a Henyey-Greenstein
+    p with the asymmetry of the fog's droplets (:data:`pipeline.sensors.beams.PHASE_ASYMMETRY`, 0.85; large water
+    spheres' geometric optics give about the same). Lit from behind the camera (the ego's own beams) a drop returns
+    p(180 deg) = 0.0035 /sr of the light; between the camera and a lamp facing it, forward, up to 6.5 /sr."""
+    x = np.asarray(points_m, np.float64)
+    out = np.zeros((len(x), 3))
+    to_camera = np.asarray(camera_m, np.float64) - x
+    to_camera /= np.maximum(np.linalg.norm(to_camera, axis=1, keepdims=True), 1e-9)
+    for k in range(len(lights)):
+        v = (lights.position_m[k] - x).astype(np.float32)  # from each drop to the light
+        axial = -(v @ lights.axis[k].astype(np.float32))
+        ahead = np.flatnonzero(axial > 0)
+        if not len(ahead):
+            continue
+        va = v[ahead]
+        d2 = np.einsum("ij,ij->i", va, va)
+        strength = spot_strength(lights, k, [va[:, 0], va[:, 1], va[:, 2]], d2, axial[ahead])
+        cos_theta = -np.einsum("ij,ij->i", va.astype(np.float64), to_camera[ahead]) / np.sqrt(d2)
+        p = henyey_greenstein(cos_theta.astype(np.float32), PHASE_ASYMMETRY)
+        out[ahead] += (strength * p)[:, None].astype(np.float64) * lights.rgb[k].astype(np.float64)
+    return out
 
 
 def _splat(out: np.ndarray, p: np.ndarray, weight: np.ndarray, h: int, w: int) -> None:

@@ -201,13 +201,15 @@ def render_camera(
         flow = motion_flow(points, shift_cam, camera.fx, camera.fy).reshape(h, w, 2)
         if float(np.abs(flow).max()) < MIN_BLUR_PX:  # a daylight exposure: no pixel moves visibly
             flow = None
-    streaks, streak_radiance, rain = None, 0.0, condition.rain
+    streaks, streak_light, streak_radiance, rain = None, None, 0.0, condition.rain
     if rain is not None and rng is not None:
         # Drops refract light from a wide cone: their radiance is about the mean of the sky's and the scene's.
         streak_radiance = 0.5 * (_sky_level(condition) + float(radiance.mean()))
-        streaks = streak_coverage(rain.rate_mm_h, rain.wind_mps, exposure.time_s, camera, cam_to_world,
-                                  ego_pose.rotation[:, 0] * ego_speed_mps, depth.reshape(h, w), rng)
+        streaks, streak_light = streak_coverage(rain.rate_mm_h, rain.wind_mps, exposure.time_s, camera,
+                                                cam_to_world, ego_pose.rotation[:, 0] * ego_speed_mps,
+                                                depth.reshape(h, w), rng, lights)
     image = apply_post(radiance, condition.lens, rng, flow=flow, streaks=streaks, streak_radiance=streak_radiance,
+                       streak_light=streak_light,
                        lens_drops=0 if rain is None else rain.drops, gain=gain,
                        psf_sigma_px=camera.config.psf_sigma_px, sensor=exposure)
     return CameraFrame(

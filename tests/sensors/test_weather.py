@@ -83,8 +83,10 @@ LEVEL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # optic
 def _streaks(rate=10.0, exposure_s=1 / 1000, depth=None, seed=0, velocity=(0.0, 0.0, 0.0), size=(320, 240)):
     cam = Camera(camera_config(width_px=size[0], height_px=size[1]))
     depth = np.zeros(size[::-1], np.float32) if depth is None else depth
-    return streak_coverage(rate, (0.0, 0.0), exposure_s, cam, Transform(LEVEL, np.zeros(3)), np.asarray(velocity),
-                           depth, np.random.default_rng(seed))
+    cover, lit = streak_coverage(rate, (0.0, 0.0), exposure_s, cam, Transform(LEVEL, np.zeros(3)),
+                                 np.asarray(velocity), depth, np.random.default_rng(seed))
+    assert lit is None  # no lights
+    return cover
 
 
 def test_streaks_are_seeded_and_grow_with_the_rate():
@@ -185,3 +187,47 @@ def test_the_clear_sky_sun_by_elevation():
     from pipeline.sensors.post import luminance
 
     assert float(luminance(np.asarray(dusk.sun_rgb))) == pytest.approx(lux_to_irradiance(clear_sky_sun_lux(3.0)))
+
+
+def _facing_lamp(x_m: float = 20.0):
+    """A wide uniform lamp at (x_m, 0, 0) shining back along -x, 1 unit of irradiance at 1 m (a 45 degree cone with
+    a hard edge)."""
+    from pipeline.sensors.lights import _spots
+
+    return _spots([[x_m, 0.0, 0.0]], [[-1.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]], [1.0, 1.0, 1.0], 1.0, 1.0, 1.0, 0.01,
+                  1e4, False)
+
+
+def test_a_drop_scatters_a_lamp_by_its_phase_function():
+    from pipeline.sensors.beams import PHASE_ASYMMETRY, henyey_greenstein
+    from pipeline.sensors.rain import drop_radiance
+
+    lamp = _facing_lamp()
+    drops = np.array([[10.0, 0.0, 0.0], [-5.0, 0.0, 0.0], [30.0, 0.0, 0.0], [10.0, 3.0, 0.0]])
+    out = drop_radiance(lamp, drops, np.zeros(3))
+    # Between lamp and camera the light goes on forward to the camera (theta 0); behind the camera it must turn back
+    # (theta 180 degrees); behind the lamp nothing; off the line, the angle between the two ways.
+    off = np.array([-10.0, 3.0, 0.0]) / np.hypot(10.0, 3.0)  # the light's way to the last drop (unit)
+    on = -np.array([10.0, 3.0, 0.0]) / np.hypot(10.0, 3.0)  # that drop's way on to the camera
+    expected = np.array([henyey_greenstein(np.float32(1.0), PHASE_ASYMMETRY) / 100.0,
+                         henyey_greenstein(np.float32(-1.0), PHASE_ASYMMETRY) / 625.0, 0.0,
+                         henyey_greenstein(np.float32(off @ on), PHASE_ASYMMETRY) / 109.0])
+    for c in range(3):
+        np.testing.assert_allclose(out[:, c], expected, rtol=1e-4)
+    assert out[0, 0] > 1000 * out[1, 0] * 625 / 100  # forward scattering dwarfs the back-scatter
+
+
+def test_lamps_light_the_streaks_without_changing_them():
+    cam = Camera(camera_config(width_px=320, height_px=240))
+    args = (10.0, (0.0, 0.0), 1 / 1000, cam, Transform(LEVEL, np.zeros(3)), np.zeros(3),
+            np.zeros((240, 320), np.float32))
+    plain, none = streak_coverage(*args, np.random.default_rng(7))
+    cover, lit = streak_coverage(*args, np.random.default_rng(7), _facing_lamp())
+    assert none is None and lit.shape == (240, 320, 3) and lit.dtype == np.float32
+    np.testing.assert_array_equal(plain, cover)  # the same drops, the same coverage
+    assert lit.min() >= 0 and lit.max() > 0
+    assert (lit[..., 0] > 0).sum() <= (cover > 0).sum()  # light only where a streak is
+    # The lamp is straight ahead: streaks near the middle of the image, between it and the camera, glow most.
+    middle = lit[80:160, 120:200, 0].sum() / max((cover[80:160, 120:200] > 0).sum(), 1)
+    edge = lit[:, :40, 0].sum() / max((cover[:, :40] > 0).sum(), 1)
+    assert middle > 3 * edge
