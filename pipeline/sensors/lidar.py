@@ -219,8 +219,9 @@ def _weather_returns(lidar, cfg, beta, intensity_factor, surface_m, drop, keep, 
     ranging error of a return of rise time tau_H at the peak-to-threshold ratio P / P_th, c tau_H / 2 x P_th / P
     (Amann et al. 2001's c t_rise / (2 SNR), the threshold taken for the unit of the SNR), from the beam's own
     normal draw. A beam through a vehicle's spray (``spray``, the frame's clouds; ``rays`` the sweep's) takes the
-    return of the spray and the air together (:func:`pipeline.sensors.spray.sweep_soft_returns`). Returns keep, t,
-    intensity, noise, instance_id and semantic_class for :func:`_points`."""
+    return of the spray and the air together (:func:`pipeline.sensors.spray.sweep_soft_returns`). The condition's
+    ``min_intensity`` (an intensity floor of the surfaces' returns) does not apply: the droplets' detection is the
+    power threshold's. Returns keep, t, intensity, noise, instance_id and semantic_class for :func:`_points`."""
     r1, r2 = cfg.overlap_m
     window_m = LIGHT_M_PER_NS * cfg.pulse_half_width_ns
     table = soft_returns(beta, BACKSCATTER_PER_EXTINCTION * beta, cfg.pulse_half_width_ns, r1, r2)
@@ -238,26 +239,26 @@ def _weather_returns(lidar, cfg, beta, intensity_factor, surface_m, drop, keep, 
     weather = (power >= threshold) & (stronger > 0) & ~drop & (range_m >= lidar.range_min_m)
     if not weather.any():
         return keep, t, intensity, noise, instance_id, semantic_class
-    rays = np.flatnonzero(weather)
-    p, r = power[rays], range_m[rays]
+    beams = np.flatnonzero(weather)
+    p, r = power[beams], range_m[beams]
     n = len(surface_m)
     t_all = np.zeros(n, np.float32)
     i_all = np.zeros(n, np.float32)
     t_all[keep], i_all[keep] = t, intensity
-    t_all[rays] = r
+    t_all[beams] = r
     equivalent = np.minimum(np.pi * p * r * r * np.exp(2.0 * beta * r), 1.0)  # the reflectivity of that power
-    i_all[rays] = equivalent * np.exp(-cfg.attenuation_per_m * r) * intensity_factor
+    i_all[beams] = equivalent * np.exp(-cfg.attenuation_per_m * r) * intensity_factor
     noise = noise.copy()
     jitter = 0.5 * window_m * threshold / p
-    noise[rays] = normal[rays] * np.hypot(cfg.range_noise_std_m, jitter)
+    noise[beams] = normal[beams] * np.hypot(cfg.range_noise_std_m, jitter)
     returned = np.zeros(n, bool)
     returned[keep] = True
-    near = r + noise[rays] < lidar.range_min_m  # the strongest return scattered into the blind zone: no point
-    returned[rays[near]] = False
-    rays = rays[~near]
-    returned[rays] = True
+    near = r + noise[beams] < lidar.range_min_m  # the strongest return scattered into the blind zone: no point
+    returned[beams[near]] = False
+    beams = beams[~near]
+    returned[beams] = True
     instance_id, semantic_class = instance_id.copy(), semantic_class.copy()
-    instance_id[rays], semantic_class[rays] = 0, SemanticClass.WEATHER
+    instance_id[beams], semantic_class[beams] = 0, SemanticClass.WEATHER
     keep = np.flatnonzero(returned)
     return keep, t_all[keep], i_all[keep], noise, instance_id, semantic_class
 
