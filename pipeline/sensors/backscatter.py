@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.core.jit import kernel
+
 LIGHT_M_PER_NS = 0.299792458
 # 1/sr: Hahner et al. 2021's beta = 0.046 / MOR with alpha = ln 20 / MOR.
 BACKSCATTER_PER_EXTINCTION = 0.046 / math.log(20.0)
@@ -70,6 +72,48 @@ class SoftReturns:
         return self.power[index], self.range_m[index]
 
 
+def cell_weights(extinction_per_m: float, overlap_m: tuple[float, float], step_m: float,
+                 cells: int) -> np.ndarray:
+    """(cells,) float64 each range cell's weight in the soft target's echo before its back-scatter: xi(t) exp(-2
+    alpha t) / t^2 x the cell's length, at the centres t of cells of ``step_m`` from the sensor, xi the overlap rising
+    linearly from r1 to r2 (``overlap_m``; a step at r1 where they are equal)."""
+    t = (np.arange(cells) + 0.5) * step_m
+    r1, r2 = overlap_m
+    xi = np.clip((t - r1) / (r2 - r1), 0.0, 1.0) if r2 > r1 else (t >= r1).astype(np.float64)
+    return xi * np.exp(-2.0 * extinction_per_m * t) / (t * t) * step_m
+
+
+def window_phases(window_m: float, step_m: float, cells: int) -> tuple[np.ndarray, ...]:
+    """The cosines and sines of 2 pi x / w at the cells' centres ((cells,) each) and at their edges ((cells + window
+    + 1,) each: the window's ends), for :func:`waveform_peak`."""
+    centres = 2.0 * np.pi * (np.arange(cells) + 0.5) * step_m / window_m
+    edges = 2.0 * np.pi * np.arange(cells + int(window_m / step_m + 0.5) + 1) * step_m / window_m
+    return np.cos(centres), np.sin(centres), np.cos(edges), np.sin(edges)
+
+
+@kernel("UniTuple(float64, 2)(float64[::1], int64, int64, float64[::1], float64[::1], float64[::1], float64[::1], "
+        "float64[::1], float64[::1], float64[::1])")
+def waveform_peak(f, m, window, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc, ss):
+    """The soft target's strongest echo from its first ``m`` cells' densities ``f`` (cells of length h; the pulse
+    ``window`` cells long): over the window ends at the cells' edges e = 1 .. m + window, the sum over the cells s in
+    [e - window, e) of f_s sin^2(pi (e h - t_s) / w), from three running sums (sin^2 x = (1 - cos 2x) / 2, the
+    phases from :func:`window_phases`; ``s0``, ``sc``, ``ss`` (>= m + 1,) scratch). Returns the peak power and the
+    edge index of its window's end (0 and 0 where nothing echoes); the first of equal peaks."""
+    s0[0] = sc[0] = ss[0] = 0.0
+    for s in range(m):
+        s0[s + 1] = s0[s] + f[s]
+        sc[s + 1] = sc[s] + f[s] * cos_cell[s]
+        ss[s + 1] = ss[s] + f[s] * sin_cell[s]
+    best = 0.0
+    best_end = 0
+    for e in range(1, m + window + 1):
+        low, high = max(e - window, 0), min(e, m)
+        p = 0.5 * ((s0[high] - s0[low]) - cos_edge[e] * (sc[high] - sc[low]) - sin_edge[e] * (ss[high] - ss[low]))
+        if p > best:
+            best, best_end = p, e
+    return best, np.float64(best_end)
+
+
 @functools.lru_cache(maxsize=32)
 def soft_returns(extinction_per_m: float, backscatter_per_m_sr: float, pulse_half_width_ns: float,
                  overlap_start_m: float, overlap_full_m: float) -> SoftReturns:
@@ -83,38 +127,15 @@ def soft_returns(extinction_per_m: float, backscatter_per_m_sr: float, pulse_hal
     """
     w = LIGHT_M_PER_NS * pulse_half_width_ns
     h = STEP_M
-    far = FAR_M + overlap_full_m + w
-    r = (np.arange(math.ceil(far / h)) + 0.5) * h  # cell centres
-    if overlap_full_m > overlap_start_m:
-        xi = np.clip((r - overlap_start_m) / (overlap_full_m - overlap_start_m), 0.0, 1.0)
-    else:
-        xi = (r >= overlap_start_m).astype(np.float64)
-    f = xi * np.exp(-2.0 * extinction_per_m * r) / (r * r) * h
-    phase = 2.0 * np.pi * r / w
-    # sin^2(pi (R - r) / w) = (1 - cos(2 pi R / w) cos(2 pi r / w) - sin(2 pi R / w) sin(2 pi r / w)) / 2: the window
-    # sums from three running sums.
-    sums = [np.concatenate([[0.0], np.cumsum(g)]) for g in (f, f * np.cos(phase), f * np.sin(phase))]
+    cells = math.ceil((FAR_M + overlap_full_m + w) / h)
+    f = cell_weights(extinction_per_m, (overlap_start_m, overlap_full_m), h, cells) * backscatter_per_m_sr
+    phases = window_phases(w, h, cells)
     window = round(w / h)
-    ends = np.arange(1, len(r) + 1)  # the window [R - w, R) ends at edge j: R = j h
-    big_r = ends * h
-    cos_r, sin_r = np.cos(2.0 * np.pi * big_r / w), np.sin(2.0 * np.pi * big_r / w)
-
-    def power(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        s0, sc, ss = (s[hi] - s[lo] for s in sums)
-        return np.maximum(0.5 * (s0 - cos_r[: len(hi)] * sc - sin_r[: len(hi)] * ss), 0.0) * backscatter_per_m_sr
-
-    lo = np.maximum(ends - window, 0)
-    free = power(lo, ends)  # no surface in the window
-    peak = int(np.argmax(free))
-    # A surface at R0 cuts every window at R0: tabulate R0 up to the free peak's window end, beyond which the cut
-    # leaves the peak as it is.
-    cuts = np.arange(peak + 2)
-    powers = np.empty(len(cuts) + 1)
-    ranges = np.empty(len(cuts) + 1)
-    span = min(len(ends), peak + window + 2)
-    for i, cut in enumerate(cuts):
-        p = power(lo[:span], np.minimum(ends[:span], cut))
-        j = int(np.argmax(p))
-        powers[i], ranges[i] = p[j], big_r[j] - 0.5 * w
-    powers[-1], ranges[-1] = free[peak], big_r[peak] - 0.5 * w
+    scratch = [np.zeros(cells + 1) for _ in range(3)]
+    free, end = waveform_peak(f, cells, window, *phases, *scratch)  # no surface in any window
+    # A surface at R0 cuts every window at R0 (the cells below it echo): tabulate R0 on the cells' edges up to the
+    # free peak's window end, from which on the cut leaves the peak as it is.
+    peaks = [waveform_peak(f, cut, window, *phases, *scratch) for cut in range(int(end))] + [(free, end)]
+    powers = np.array([p for p, _ in peaks])
+    ranges = np.array([e * h - 0.5 * w for _, e in peaks])
     return SoftReturns(power=powers, range_m=np.maximum(ranges, 0.0), step_m=h)

@@ -42,6 +42,7 @@ import numpy as np
 from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
 from pipeline.core.jit import as_input, kernel
+from pipeline.sensors.backscatter import cell_weights, waveform_peak, window_phases
 
 if TYPE_CHECKING:
     from pipeline.core.geometry import Transform
@@ -371,59 +372,44 @@ def sweep_soft_returns(clouds: SprayClouds, rays: np.ndarray, ends_m: np.ndarray
     whole ray without the pulse's weight or the loss on the way stays below the threshold. Returns the rays (R,)
     int64 and their peak power (R,) float64 and reported range (R,) float64 (the peak's window end less half the
     window)."""
-    if len(clouds) and len(rays):  # the clouds within far_m of the sweep's origin
-        boxes = clouds.boxes
-        gap = np.linalg.norm(boxes.center - np.asarray(rays[0, :3], np.float64), axis=1)
-        clouds = clouds.take(gap - 0.5 * np.linalg.norm(boxes.size, axis=1) < far_m)
     if not len(clouds) or not len(rays):
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    boxes = clouds.boxes
+    centre, radius = boxes.center, 0.5 * np.linalg.norm(boxes.size, axis=1)
+    near = np.linalg.norm(centre - np.asarray(rays[0, :3], np.float64), axis=1) - radius < far_m
+    if not near.any():  # only the clouds within far_m of the sweep's origin can echo enough
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    clouds, centre, radius = clouds.take(near), centre[near], radius[near]
     rows = np.arange(len(rays), dtype=np.int64)
     ends = np.minimum(ends_m, far_m)
     cells = int(max(float(ends.max()), 0.0) / step_m) + 1
-    t = (np.arange(cells) + 0.5) * step_m
-    r1, r2 = overlap_m
-    xi = np.clip((t - r1) / (r2 - r1), 0.0, 1.0) if r2 > r1 else (t >= r1).astype(np.float64)
-    weight = xi / (t * t) * step_m * np.exp(-2.0 * extinction_per_m * t)  # per cell, before the spray's loss
-    phase = 2.0 * np.pi * t / window_m
-    edges = 2.0 * np.pi * np.arange(cells + int(window_m / step_m + 0.5) + 1) * step_m / window_m
-    boxes = clouds.boxes
-    centre, radius = boxes.center, 0.5 * np.linalg.norm(boxes.size, axis=1)
+    weight = cell_weights(extinction_per_m, overlap_m, step_m, cells)  # per cell, before the spray's loss
     met, power, reported = _soft_peaks(
         as_input(rays, np.float32), as_input(ends, np.float64), rows,
         *(as_input(a, np.int64) for a in sweep_tiles(clouds, rays, rows)), as_input(clouds.origin, np.float64),
         as_input(clouds.axes, np.float64), as_input(clouds.sigma, np.float64), as_input(clouds.lo, np.float64),
         as_input(clouds.hi, np.float64), as_input(clouds.peak_per_m, np.float64), as_input(centre, np.float64),
         as_input(radius, np.float64), float(extinction_per_m), float(backscatter_per_extinction), float(window_m),
-        float(step_m), weight, np.cos(phase), np.sin(phase), np.cos(edges), np.sin(edges), float(air_peak),
-        float(threshold))
+        float(step_m), weight, *window_phases(window_m, step_m, cells), float(air_peak), float(threshold))
     return np.flatnonzero(met), power[met], reported[met]
 
 
 @kernel("void(int64, int64, int64, float64, float64, float64, float64, float64[::1], float64[::1], float64[::1], "
         "float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], float64[::1], "
-        "float64[::1])")
-def _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc, ss,
-             power, reported):
-    """:func:`_soft_peaks`' power and reported range of ray ``i`` from its ``m`` cells' spray extinction ``beta``
-    (``s0``, ``sc``, ``ss``: scratch for the running sums)."""
+        "float64[::1], float64[::1])")
+def _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, f, s0, sc,
+             ss, power, reported):
+    """:func:`_soft_peaks`' power and reported range of ray ``i`` from its ``m`` cells' spray extinction ``beta``:
+    the echo densities ``f`` (scratch) of the spray and the air seen through the spray's optical depth to each cell,
+    then :func:`pipeline.sensors.backscatter.waveform_peak` (``s0``, ``sc``, ``ss``: its scratch)."""
     tau = 0.0
     for s in range(m):
-        b = beta[s]
-        half = 0.5 * b * step
-        f = ratio * (b + alpha) * weight[s] * math.exp(-2.0 * (tau + half))
+        half = 0.5 * beta[s] * step
+        f[s] = ratio * (beta[s] + alpha) * weight[s] * math.exp(-2.0 * (tau + half))
         tau += 2.0 * half
-        s0[s + 1] = s0[s] + f
-        sc[s + 1] = sc[s] + f * cos_cell[s]
-        ss[s + 1] = ss[s] + f * sin_cell[s]
-    best = 0.0
-    best_end = 0
-    for e in range(1, m + window + 1):
-        low, high = max(e - window, 0), min(e, m)
-        p = 0.5 * ((s0[high] - s0[low]) - cos_edge[e] * (sc[high] - sc[low]) - sin_edge[e] * (ss[high] - ss[low]))
-        if p > best:
-            best, best_end = p, e
+    best, end = waveform_peak(f, m, window, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc, ss)
     power[i] = best
-    reported[i] = best_end * step - 0.5 * w
+    reported[i] = end * step - 0.5 * w
 
 
 @kernel("Tuple((bool_[::1], float64[::1], float64[::1]))(float32[:, ::1], float64[::1], int64[::1], int64[::1], "
@@ -443,6 +429,7 @@ def _soft_peaks(rays, ends, rows, row_tile, tile_start, tile_clouds, origin, axe
     power = np.zeros(n_rays)
     reported = np.zeros(n_rays)
     beta = np.zeros(cells)
+    f = np.zeros(cells)
     s0 = np.zeros(cells + 1)
     sc = np.zeros(cells + 1)
     ss = np.zeros(cells + 1)
@@ -490,8 +477,8 @@ def _soft_peaks(rays, ends, rows, row_tile, tile_start, tile_clouds, origin, axe
         if last_cell < 0:
             continue
         met[i] = True
-        _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, s0, sc,
-                 ss, power, reported)
+        _peak_of(i, m, window, step, w, ratio, alpha, beta, weight, cos_cell, sin_cell, cos_edge, sin_edge, f, s0,
+                 sc, ss, power, reported)
         for s in range(first_cell, last_cell + 1):  # the cells this ray touched, cleared for the next
             beta[s] = 0.0
     return met, power, reported
