@@ -71,6 +71,7 @@ FORMATION_PAIR_M = 1.0
 FORMATION_RADIUS_M = 0.65
 FORMATION_MARGIN_M = 0.3
 STANDING_LATERAL_M = -0.9
+RUNNERS_TAG = 41  # the random stream that picks the runners among the walkers and draws their speeds
 FORMATION_PARAM = "roadsynth.stand"  # a person's <param>: "dx dy face" (see _formation)
 
 
@@ -220,10 +221,23 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
         "stop_lane": "", "stop_pos_m": np.nan, "stop_s": np.nan, "stand_dx_m": np.nan, "stand_dy_m": np.nan,
         "stand_face_rad": np.nan,
     })
+    walkers["speed_mps"] = _with_runners(config, walkers["speed_mps"].to_numpy(), seed)
     standing = _standing(config, _sidewalks(net_file), walks[n:total], rng, np.random.default_rng([seed, 40]))
     persons = pd.concat([walkers, standing], ignore_index=True)
     persons["color_r"], persons["color_g"], persons["color_b"] = clothes.T
     return persons[list(columns)].astype({c: t for c, t in columns.items() if t is not str})
+
+
+def _with_runners(config: DemandConfig, speed_mps: np.ndarray, seed: int) -> np.ndarray:
+    """The walkers' speeds with a share ``config.runners`` of them (each one independently) running at
+    ``config.runner_speed_mps`` instead, drawn from a random stream of their own (RUNNERS_TAG), so that everyone
+    else's draws stay as they were."""
+    speed_mps = np.array(speed_mps, np.float64)
+    if config.runners > 0.0:
+        rng = np.random.default_rng([seed, RUNNERS_TAG])
+        runs = np.flatnonzero(rng.random(len(speed_mps)) < config.runners)
+        speed_mps[runs] = config.runner_speed_mps.sample(rng, len(runs))
+    return speed_mps
 
 
 def _sidewalks(net_file: Path) -> dict[str, tuple[str, float, float]]:

@@ -1,5 +1,5 @@
-"""Pedestrian body families: people of several ages, builds and outfits, each posed through the walk cycle and
-standing (:mod:`.gait`, :mod:`.figures`).
+"""Pedestrian body families: people of several ages, builds and outfits, each posed through the walk cycle,
+standing and the running cycle (:mod:`.gait`, :mod:`.figures`).
 
 Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, z up, ground at z = 0, metres at
 a stature of :data:`pipeline.world.gait.MODEL_STATURE_M`; normalised to each actor's box later). A family is a
@@ -34,7 +34,7 @@ import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.figures import Outfit, figure
-from pipeline.world.gait import STAND_POSES, WALK_PHASES, person_pose
+from pipeline.world.gait import RUN_PHASES, STAND_POSES, WALK_PHASES, person_pose, run_clearance_m, run_phase
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import merge
 
@@ -53,16 +53,18 @@ class PersonFamily:
     outfit: Outfit
     lean_deg: float = 3.0
 
-    poses = WALK_PHASES + STAND_POSES
+    poses = WALK_PHASES + STAND_POSES + RUN_PHASES
 
     @property
     def __name__(self) -> str:
         return self.name
 
     def __call__(self, pose: int = 0) -> Mesh:
-        """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground."""
+        """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground; in a running pose's
+        float, the lower sole :func:`pipeline.world.gait.run_clearance_m` above it."""
         mesh = merge(figure(person_pose(pose, self.lean_deg), self.outfit), ObjectClass.PEDESTRIAN)
-        lowest = mesh.vertices[:, 2].min()
+        lift = run_clearance_m(run_phase(pose)) if pose >= WALK_PHASES + STAND_POSES else 0.0
+        lowest = mesh.vertices[:, 2].min() - lift
         return Mesh(mesh.vertices - [0.0, 0.0, lowest], mesh.triangles, mesh.material, mesh.semantic)
 
 

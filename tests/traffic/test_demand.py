@@ -108,6 +108,26 @@ def test_color_shares_set_the_colour_frequencies():
             ClassSpec(**base, color_shares=bad)
 
 
+def test_a_share_of_the_walkers_run_from_a_stream_of_their_own():
+    """``runners`` of the walkers (binomial) get a runner's speed (``runner_speed_mps``), the others keep theirs; no
+    runners leaves every speed; the same seed draws the same runners, another seed others."""
+    from pipeline.traffic.demand import _with_runners
+
+    config = load_config(ScenarioConfig, "urban", "scenarios")[0].demand
+    assert config.runners == pytest.approx(0.04)
+    walk = config.pedestrian_speed_mps.sample(np.random.default_rng(2), N)
+    speed = _with_runners(config, walk, seed=9)
+    runs = speed != walk
+    k = int(runs.sum())
+    assert stats.binomtest(k, N, config.runners).pvalue > 1e-3
+    assert (speed[runs] >= 2.3).all() and (speed[runs] <= 4.0).all() and 2.7 < speed[runs].mean() < 3.1
+    assert (walk <= 2.2).all()
+    np.testing.assert_array_equal(_with_runners(config, walk, seed=9), speed)
+    assert not np.array_equal(_with_runners(config, walk, seed=10) != walk, runs)
+    none = config.model_copy(update={"runners": 0.0})
+    np.testing.assert_array_equal(_with_runners(none, walk, seed=9), walk)
+
+
 def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
     """Standing pedestrians come in groups of 1-3 (shares STANDING_GROUP_SHARES), side by side STANDING_SPACING_M
     apart on the sidewalk of their walk's first edge, inside it, departing, standing and walking on together; a walk

@@ -23,6 +23,7 @@ from pipeline.world.actors import (
 )
 from pipeline.world.materials import MATERIAL_NAMES, material_index
 from pipeline.world.mesh import Mesh
+from pipeline.world.people import FAMILIES as PEOPLE
 
 ALL_FAMILIES = [pytest.param(c, f, id=f.__name__) for c, families in FAMILIES.items() for f in families]
 
@@ -276,11 +277,13 @@ def test_poses_pick_the_models_of_a_family():
     variant = actor_variants(np.arange(1, n + 1), 3)
     base = Actors(np.arange(1, n + 1), ["pedestrian"] * n, boxes, np.zeros((n, 3)), variant=variant)
     family = meshes.family_codes(base)
-    for pose in (0, 5, 10, 11):
+    poses = PEOPLE[0].poses  # walking, standing and running: 19
+    assert poses == 19
+    for pose in (0, 5, 10, 11, 18, 19):
         posed = Actors(base.track_id, base.object_class, boxes, base.color_rgb, variant=variant, pose=np.full(n, pose))
         np.testing.assert_array_equal(meshes.family_codes(posed), family)
         codes = meshes.model_codes(posed)
-        assert [meshes.model_pose[c] for c in codes] == [pose % 11] * n
+        assert [meshes.model_pose[c] for c in codes] == [pose % poses] * n
         assert [meshes.model_names[c] for c in codes] == [meshes.families[f].__name__ for f in family]
 
 

@@ -11,10 +11,17 @@ from pipeline.core.geometry import Boxes3D
 from pipeline.world.actors import ActorMeshes, Actors, actor_variants, place_actors
 from pipeline.world.gait import (
     MODEL_STATURE_M,
+    RUN_ABOVE_MPS,
+    RUN_PHASES,
     STAND_POSES,
     STANDING_BELOW_MPS,
+    WALK_BELOW_MPS,
     WALK_PHASES,
     gait_poses,
+    run_clearance_m,
+    run_phase,
+    running_pose,
+    running_rows,
     stride_m,
     walking_pose,
 )
@@ -68,6 +75,59 @@ def test_the_torso_bobs_and_the_arms_swing_against_the_legs():
     assert strike.wrists[0, 0] < strike.wrists[1, 0] - 0.1
 
 
+RUNNING = range(WALK_PHASES + STAND_POSES, WALK_PHASES + STAND_POSES + RUN_PHASES)
+
+
+def test_a_runner_starts_above_the_threshold_and_walks_again_below_the_lower_one():
+    """The gait changes with a hysteresis: a walker runs from the first row faster than RUN_ABOVE_MPS, a runner walks
+    again from the first one slower than WALK_BELOW_MPS, in between the gait stays; each track starts walking; the
+    rows' order does not matter."""
+    lo, hi, mid = WALK_BELOW_MPS, RUN_ABOVE_MPS, 0.5 * (WALK_BELOW_MPS + RUN_ABOVE_MPS)
+    v = np.array([1.4, mid, hi + 0.1, mid, mid, lo - 0.1, mid, hi + 0.5, 0.0])
+    expected = np.array([0, 0, 1, 1, 1, 0, 0, 1, 0], bool)
+    t = 0.1 * np.arange(len(v))
+    np.testing.assert_array_equal(running_rows(np.full(len(v), 3), t, v), expected)
+    # Two tracks, the second starting in between (walks), rows shuffled.
+    tid = np.r_[np.full(len(v), 3), np.full(3, 4)]
+    tt, vv = np.r_[t, 0.1 * np.arange(3)], np.r_[v, mid, hi + 0.1, mid]
+    both = np.r_[expected, [False, True, True]]
+    order = np.random.default_rng(1).permutation(len(tid))
+    np.testing.assert_array_equal(running_rows(tid[order], tt[order], vv[order]), both[order])
+    # At a runner's speed the poses are the running ones, at the same phase rate as walking.
+    t = np.arange(0.0, 3.0, 0.05)
+    pose = gait_poses(np.full(len(t), 7), t, np.full(len(t), 3.0), np.full(len(t), 1.75), np.full(len(t), 0.25))
+    assert set(pose.tolist()) == set(RUNNING)
+    cycles_per_s = 3.0 / stride_m(np.array([3.0]), np.array([1.75]))[0]
+    expected = RUNNING[0] + np.floor(np.mod(0.25 + cycles_per_s * t, 1.0) * RUN_PHASES) % RUN_PHASES
+    assert np.mean(pose == expected) > 0.95
+
+
+def test_a_runner_floats_between_steps_with_bent_arms_and_knees():
+    """Running (Novacheck 1998): a foot is on the ground until 39 % of its cycle, so two of the eight sampled poses are
+    in the float, both soles off the ground; the mesh's lowest sole is where the pose puts it; the pelvis rises and
+    falls 5-12 cm; the elbows stay bent near 90 deg and the swinging knee bends beyond 90 deg (walking: ~60)."""
+    phases = [run_phase(i) for i in RUNNING]
+    clearance = np.array([run_clearance_m(p) for p in phases])
+    assert (clearance > 0.02).sum() == 2 and (clearance[clearance <= 0.02] == 0.0).all()
+    family = FAMILIES[0]
+    for i, c in zip(RUNNING, clearance, strict=True):
+        assert family(i).vertices[:, 2].min() == pytest.approx(c, abs=1e-9)
+    poses = [running_pose(k / 32) for k in range(32)]
+    hip_z = np.array([p.pelvis[2] for p in poses])
+    assert 0.05 < hip_z.max() - hip_z.min() < 0.12
+
+    def angle(a, b, c):
+        u, w = a - b, c - b
+        return np.degrees(np.arccos(u @ w / np.linalg.norm(u) / np.linalg.norm(w)))
+
+    elbows = [180.0 - angle(p.shoulders[i], p.elbows[i], p.wrists[i]) for p in poses for i in range(2)]
+    knees = [180.0 - angle(p.hips[i], p.knees[i], p.ankles[i]) for p in poses for i in range(2)]
+    walk_knees = [180.0 - angle(p.hips[i], p.knees[i], p.ankles[i]) for p in map(walking_pose, np.arange(32) / 32)
+                  for i in range(2)]
+    assert min(elbows) > 70.0 and max(elbows) < 110.0
+    assert max(knees) > 95.0 > max(walk_knees) + 20.0
+
+
 def test_statures_follow_their_group():
     n = 2000
     track = np.arange(1, n + 1)
@@ -97,29 +157,32 @@ def _person_rows(n_frames: int = 40, speed_mps: float = 1.3, people: int = 24):
     return actors, row_actor, t, np.full(len(x), speed_mps), rows
 
 
-@pytest.mark.parametrize("speed_mps", [1.3, 0.0])
+@pytest.mark.parametrize("speed_mps", [1.3, 0.0, 3.0])
 def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps):
     """Each row's box holds its posed, placed mesh exactly (it touches all six faces): the 3D label encloses the body
-    in every phase of the gait and standing; the feet are on the ground, the pelvis over the trajectory point, and the
-    body as tall as its stature in the pose."""
+    in every phase of the gait, standing and running; the feet are on the ground (a runner's lower sole its
+    clearance above it in the float), the pelvis over the trajectory point, and the body as tall as its stature in
+    the pose."""
     actors, row_actor, t, v, rows = _person_rows(speed_mps=speed_mps)
     boxes, pose = posed_boxes(MESHES, actors, row_actor, t, v, rows, seed=5)
-    assert set(pose.tolist()) == (set(range(WALK_PHASES)) if speed_mps else
-                                  set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)))
+    assert set(pose.tolist()) == {1.3: set(range(WALK_PHASES)), 0.0: set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)),
+                                  3.0: set(RUNNING)}[speed_mps]
     per_row = Actors(np.arange(1, len(pose) + 1), ["pedestrian"] * len(pose), boxes, np.zeros((len(pose), 3)),
                      variant=actors.variant[row_actor], pose=pose)
     geo = place_actors(per_row, MESHES)
     family = MESHES.family_codes(actors)
     stature = person_statures(np.array([MESHES.families[f].group for f in family]), actors.track_id, 5)
-    for k in range(0, len(pose), 7):
+    for k in range(0, len(pose), 3 if speed_mps == 3.0 else 7):
         v_world = geo.vertices[geo.vertex_actor == k] - boxes.center[k]
         c, s = np.cos(boxes.yaw_rad[k]), np.sin(boxes.yaw_rad[k])
         local = np.column_stack([c * v_world[:, 0] + s * v_world[:, 1], -s * v_world[:, 0] + c * v_world[:, 1],
                                  v_world[:, 2]])
         np.testing.assert_allclose(local.min(axis=0), -0.5 * boxes.size[k], atol=1e-6)
         np.testing.assert_allclose(local.max(axis=0), 0.5 * boxes.size[k], atol=1e-6)
-        assert boxes.center[k, 2] - 0.5 * boxes.size[k, 2] == pytest.approx(2.0, abs=0.01)  # soles on the ground
         a = row_actor[k]
+        lift = run_clearance_m(run_phase(pose[k])) if pose[k] in RUNNING else 0.0
+        assert boxes.center[k, 2] - 0.5 * boxes.size[k, 2] == pytest.approx(2.0 + lift * stature[a] / MODEL_STATURE_M,
+                                                                             abs=0.01)  # soles on the ground
         model = MESHES.family_models(family[a:a + 1], pose[k:k + 1])[0]
         scale = stature[a] / MODEL_STATURE_M
         pelvis_unit = -(MESHES.model_low[model][:2] + 0.5 * MESHES.model_extent[model][:2]) / MESHES.model_extent[

@@ -182,6 +182,10 @@ class DemandConfig(_Model):
     driver: DriverModel
     pedestrians: int = Field(0, ge=0, description="pedestrians walking sidewalks and crossings (urban/osm)")
     pedestrian_speed_mps: Distribution = TruncNormal(mean=1.34, std=0.26, low=0.6, high=2.2)
+    runners: float = Field(0.0, ge=0.0, le=1.0, description="the share of the walking pedestrians who run instead "
+                           "(joggers, people hurrying), at runner_speed_mps")
+    runner_speed_mps: Distribution = Field(TruncNormal(mean=2.9, std=0.35, low=2.3, high=4.0),
+                                           description="a runner's speed, m/s (recreational paces of 4-7 min/km)")
     standing_pedestrians: int = Field(0, ge=0, description="more pedestrians who first stand on a sidewalk, alone or "
                                       "in a small group (waiting, talking, at a shop front), then walk on")
     standing_s: Distribution = Field(Uniform(low=60.0, high=300.0),
