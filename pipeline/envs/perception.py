@@ -4,7 +4,14 @@
 :class:`pipeline.detect.onnx.OnnxDetector` and our baseline :class:`pipeline.detect.infer.Detector` have) on the
 camera frame, and gives each detection a range and a bearing from the LiDAR points that project into its box: the
 median of their positions in the ego frame (x forward, y left, origin at the ego's box centre), NaN where no point
-falls in the box. The tracker gets each object's centre: the surfaces the LiDAR sees lie in front of it, so the
+falls in the box. Only points at a depth the box's height allows count (a range gate): a vehicle of its class's
+typical height (:data:`TYPICAL_HEIGHT_M`) filling the box's height lies at the depth d = f_y H / h; points nearer than
+``range_gate[0]`` d or farther than ``range_gate[1]`` d are another object's, the road's or the air's: in fog the
+LiDAR's strongest return on a beam towards a car beyond its fog range is the droplets' echo a few metres ahead
+(:mod:`pipeline.sensors.backscatter`), and without the gate such a box was ranged at 4 m. A box that touches the
+image's top or bottom edge may show a nearer object cut by the frame, so it keeps the points nearer than its gate.
+The gate is wide (0.4-2.5 d by default): it allows for boxes cut by occlusion and classes of other heights; ``None``
+turns it off. The tracker gets each object's centre: the surfaces the LiDAR sees lie in front of it, so the
 median is moved half the class's typical length further along the line of sight (:func:`centre_from_surface`).
 :class:`PerceivedFeatures` wraps an environment rendering ``sensors=["camera", "lidar"]``: it adds
 the detections to the observation and replaces the ground-truth neighbour slots with those of the
@@ -31,6 +38,9 @@ from pipeline.envs.tracker import Detections, Tracker, TrackerParams, track_neig
 ROAD_USER_CATEGORIES = (2, 3, 4, 6, 8)  # COCO: bicycle, car, motorcycle, bus, truck
 # Typical (length, width) by COCO category, for tracks whose size the camera does not measure.
 TYPICAL_SIZE_M = {2: (1.8, 0.6), 3: (4.5, 1.8), 4: (2.1, 0.8), 6: (12.0, 2.55), 8: (8.0, 2.5)}
+# Typical height (m) by COCO category, riders included, for the range gate (a box's height -> its depth).
+TYPICAL_HEIGHT_M = {2: 1.7, 3: 1.5, 4: 1.4, 6: 3.0, 8: 3.0}
+RANGE_GATE = (0.4, 2.5)  # the LiDAR points that range a box lie at this share of the depth its height implies
 
 
 @dataclass(frozen=True)
@@ -42,7 +52,7 @@ class PerceivedFrame:
         scores: (K,) float64.
         category_ids: (K,) int64.
         position_m: (K, 2) float64 median (x, y) of the LiDAR points in the box, ego frame; NaN where none.
-        points: (K,) int64 how many LiDAR points fell in each box.
+        points: (K,) int64 how many LiDAR points fell in each box (and its range gate).
     """
 
     boxes_px: np.ndarray
@@ -69,13 +79,18 @@ class Perception:
         camera: the rig's :class:`pipeline.sensors.camera.Camera` the frames come from.
         lidar_mount: the LiDAR's pose in the ego frame (:attr:`pipeline.sensors.lidar.Lidar.mount`).
         categories: the COCO category ids kept (others are dropped, counted in :attr:`dropped`).
+        range_gate: (near, far) shares of the depth a box's height implies between which its LiDAR points count, or
+            None to count every point in the box (see the module docstring).
     """
 
-    def __init__(self, detector, camera, lidar_mount, categories=ROAD_USER_CATEGORIES) -> None:
+    def __init__(self, detector, camera, lidar_mount, categories=ROAD_USER_CATEGORIES,
+                 range_gate: tuple[float, float] | None = RANGE_GATE) -> None:
         from pipeline.core.geometry import Transform
 
+        if range_gate is not None and not 0.0 <= range_gate[0] < range_gate[1]:
+            raise ValueError(f"range_gate: expected (near, far) with 0 <= near < far, got {range_gate!r}")
         self.detector, self.camera = detector, camera
-        self.lidar_mount = lidar_mount
+        self.lidar_mount, self.range_gate = lidar_mount, range_gate
         self.ego_to_camera = camera.camera_to_world(Transform.identity()).inverse()
         self.categories = np.array(sorted(categories), np.int64)
         self.dropped = 0
@@ -92,15 +107,30 @@ class Perception:
         order = np.argsort(-scores[keep], kind="stable")
         boxes, scores, cats = boxes[keep][order], scores[keep][order], cats[keep][order]
         points_ego = self.lidar_mount.apply(np.asarray(lidar_xyz, np.float64)[np.asarray(lidar_mask) > 0])
-        uv, in_front = self.camera.project(self.ego_to_camera.apply(points_ego))
+        points_cam = self.ego_to_camera.apply(points_ego)
+        uv, in_front = self.camera.project(points_cam)
         position = np.full((len(boxes), 2), np.nan)
         counts = np.zeros(len(boxes), np.int64)
+        near, far = self.gates(boxes, cats)
         for k, (x1, y1, x2, y2) in enumerate(boxes):  # one vectorised test per detection (tens of them)
             inside = in_front & (uv[:, 0] >= x1) & (uv[:, 0] < x2) & (uv[:, 1] >= y1) & (uv[:, 1] < y2)
+            inside &= (points_cam[:, 2] >= near[k]) & (points_cam[:, 2] <= far[k])
             counts[k] = int(inside.sum())
             if counts[k]:
                 position[k] = np.median(points_ego[inside, :2], axis=0)
         return PerceivedFrame(boxes, scores, cats, position, counts)
+
+    def gates(self, boxes: np.ndarray, category_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) nearest and farthest camera depth (m) of the LiDAR points that range each of the (K, 4) boxes: the
+        range gate around f_y x typical height / box height (0 and inf without a gate; 0 near a box that touches
+        the image's top or bottom edge)."""
+        k = len(boxes)
+        if self.range_gate is None:
+            return np.zeros(k), np.full(k, np.inf)
+        height = np.array([TYPICAL_HEIGHT_M.get(int(c), 1.5) for c in category_ids], np.float64)
+        depth = self.camera.fy * height / np.maximum(boxes[:, 3] - boxes[:, 1], 1.0)
+        cut = (boxes[:, 1] <= 0.5) | (boxes[:, 3] >= self.camera.height - 0.5)
+        return np.where(cut, 0.0, self.range_gate[0] * depth), self.range_gate[1] * depth
 
 
 def centre_from_surface(position_m: np.ndarray, length_m: np.ndarray) -> np.ndarray:
@@ -128,6 +158,7 @@ class PerceivedFeatures(gym.Wrapper):
         detector: as :class:`Perception`'s.
         tracker: the tracker's parameters (``dt_s`` is set to the env's step).
         max_detections: K, the rows of the ``detections`` observation.
+        range_gate: as :class:`Perception`'s (None: every LiDAR point in a box ranges it).
 
     ``observed_slots``: the neighbour slots this perception can fill at all. One front camera sees the leaders of
     the three lanes, never the followers: their slots stay empty whatever is behind, and an agent must not read
@@ -138,7 +169,7 @@ class PerceivedFeatures(gym.Wrapper):
     observed_slots = ("left_leader", "leader", "right_leader")
 
     def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
-                 max_detections: int = 32) -> None:
+                 max_detections: int = 32, range_gate: tuple[float, float] | None = RANGE_GATE) -> None:
         super().__init__(env)
         inner = env.unwrapped
         live = getattr(inner, "sensors", None)
@@ -146,7 +177,7 @@ class PerceivedFeatures(gym.Wrapper):
             raise ValueError('PerceivedFeatures needs an env made with sensors=["camera", "lidar"]')
         if not isinstance(max_detections, int) or max_detections < 1:
             raise ValueError(f"max_detections: expected an integer >= 1, got {max_detections!r}")
-        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount)
+        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount, range_gate=range_gate)
         params = tracker if tracker is not None else TrackerParams()
         self.tracker = Tracker(TrackerParams(**{**params.__dict__, "dt_s": inner.sim.step_length_s}))
         self.k = max_detections
@@ -221,7 +252,7 @@ def detector_from(spec):
 
 
 def make_env(scenario=None, *, perception=None, max_detections: int = 32, tracker: TrackerParams | None = None,
-             sensors=None, **kwargs) -> gym.Env:
+             range_gate: tuple[float, float] | None = RANGE_GATE, sensors=None, **kwargs) -> gym.Env:
     """The registered envs' entry point: a :class:`pipeline.envs.RoadsynthEnv`, wrapped in
     :class:`PerceivedFeatures` when ``perception`` names a detector (see :func:`detector_from`; the camera and LiDAR
     are then rendered whatever ``sensors`` says)."""
@@ -234,4 +265,4 @@ def make_env(scenario=None, *, perception=None, max_detections: int = 32, tracke
     detector = detector_from(perception)
     sensors = tuple(dict.fromkeys([*(sensors or ()), "camera", "lidar"]))
     return PerceivedFeatures(RoadsynthEnv(scenario, sensors=sensors, **kwargs), detector, tracker=tracker,
-                             max_detections=max_detections)
+                             max_detections=max_detections, range_gate=range_gate)

@@ -92,6 +92,52 @@ def test_a_box_is_ranged_by_the_median_of_the_lidar_points_inside_it(rig_path):
     assert frame.bearing_rad[1] == pytest.approx(math.atan2(1.0, 20.0), abs=1e-9)
 
 
+def test_a_range_gate_from_the_box_height_keeps_fog_echoes_out(rig_path):
+    """The droplets' echoes a few metres ahead (the LiDAR in fog) that project into a car's box do not range it: only
+    points at 0.4-2.5 x f_y H / h deep count (H = 1.5 m for a car); without the gate their median wins; a box cut by
+    the image's bottom edge keeps the near points; a box as tall as a near object's is ranged by the echoes, one as
+    short as a far object's is left unranged by the car's points."""
+    rig = load_config(RigConfig, rig_path, "rigs")[0]
+    cameras, lidars = build_sensors(rig)
+    camera, lidar = cameras[0], lidars[0]
+    ys, zs = np.meshgrid(np.linspace(0.6, 1.4, 9), np.linspace(0.5, 1.5, 5))
+    car = np.column_stack([np.full(ys.size, 20.0), ys.ravel(), zs.ravel()])  # 45 points, 20 m ahead
+    to_cam = camera.camera_to_world(Transform.identity()).inverse()
+    eye = camera.camera_to_world(Transform.identity()).apply(np.zeros((1, 3)))[0]
+    share = np.random.default_rng(3).uniform(0.15, 0.25, 60)[:, None]
+    echoes = eye + share * (car[np.arange(60) % len(car)] - eye)  # on the car's rays, 3-5 m ahead
+    uv, _ = camera.project(to_cam.apply(car))
+    (x1, y1), (x2, y2) = uv.min(axis=0) - 1, uv.max(axis=0) + 1
+    h = y2 - y1
+    points = lidar.mount.inverse().apply(np.vstack([car, echoes])).astype(np.float32)
+    mask = np.ones(len(points), np.int8)
+    image = np.zeros((240, 320, 3), np.uint8)
+
+    def ranged(box, gate=(0.4, 2.5), category=3):
+        perception = Perception(FixedBoxes([box], [0.9], [category]), camera, lidar.mount, range_gate=gate)
+        return perception(image, points, mask)
+
+    frame = ranged([x1, y1, x2, y2])
+    assert frame.points.tolist() == [len(car)]
+    assert frame.position_m[0] == pytest.approx([20.0, 1.0], abs=1e-6)
+    near, far = Perception(FixedBoxes([], [], []), camera, lidar.mount).gates(np.array([[x1, y1, x2, y2]]),
+                                                                               np.array([3]))
+    assert near[0] == pytest.approx(0.4 * camera.fy * 1.5 / h) and far[0] == pytest.approx(2.5 * camera.fy * 1.5 / h)
+    ungated = ranged([x1, y1, x2, y2], gate=None)
+    assert ungated.points.tolist() == [len(car) + len(echoes)] and ungated.position_m[0, 0] < 6.0
+    # Boxes cut by the image's top or bottom edge keep the near points; their far limit is the formula's.
+    near, far = Perception(FixedBoxes([], [], []), camera, lidar.mount).gates(
+        np.array([[x1, 0.0, x2, 40.0], [x1, 200.0, x2, 240.0], [x1, 100.0, x2, 140.0]]), np.array([3, 8, 3]))
+    assert near.tolist() == [0.0, 0.0, pytest.approx(0.4 * camera.fy * 1.5 / 40.0)]
+    assert far == pytest.approx(2.5 * camera.fy * np.array([1.5, 3.0, 1.5]) / 40.0)
+    tall = ranged([x1, y1 - 5 * h, x2, y2])  # six times as tall: a depth of ~5 m, the car beyond 2.5 x that
+    assert tall.points.tolist() == [len(echoes)] and tall.position_m[0, 0] < 6.0
+    short = ranged([x1, y1, x2, y1 + 0.25 * h])  # a quarter as tall: ~120 m deep, the car nearer than 0.4 x that
+    assert short.points.tolist() == [0] and np.isnan(short.position_m).all()
+    with pytest.raises(ValueError, match="range_gate"):
+        Perception(FixedBoxes([], [], []), camera, lidar.mount, range_gate=(2.0, 1.0))
+
+
 class GroundTruthBoxes:
     """A detector that sees exactly the frame's labelled vehicles (tight boxes of >= 50 visible pixels)."""
 
