@@ -114,7 +114,8 @@ class LiveSensors:
     def render(self, trajectories: pd.DataFrame, frame: int,
                tls_states: dict[str, str]) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         """The observation entries and ground truth of ``frame`` from its trajectory rows (simulate's columns)."""
-        ego, others = Trajectories(body_sized_trajectories(trajectories, self.meshes, self.seed)).frame(frame)
+        ego, others = Trajectories(body_sized_trajectories(trajectories, self.meshes, self.seed,
+                                                           self.condition.umbrellas)).frame(frame)
         self.signals.apply_states(tls_states)
         out = render_frame(self.world, self.static, self.cameras, self.lidars, self.condition, self.meshes, self.seed,
                            frame, ego, others, radars=self.radars)

@@ -158,6 +158,11 @@ class Condition:
         return self.config.rain.rate_mm_h if self.config.rain is not None else 0.0
 
     @property
+    def umbrellas(self) -> float:
+        """The share of people under an open umbrella (the rain's ``umbrellas``); 0 without rain."""
+        return self.config.rain.umbrellas if self.config.rain is not None else 0.0
+
+    @property
     def wetness(self) -> float:
         """0 dry .. 1 drowned road-like surfaces: the rain's ``wetness``, or the share of the road's texture its water
         fills at its rate (:func:`pipeline.sensors.weather.road_wetness`); 0 without rain."""

@@ -112,16 +112,17 @@ class Trajectories:
         return {c: v[ego] for c, v in self.columns.items()}, {c: self.columns[c][others] for c in ACTOR_COLUMNS}
 
 
-def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
+def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
+                            umbrellas: float = 0.0) -> pd.DataFrame:
     """The trajectories with every actor's box as its body fills it, and a ``pose`` column
     (:func:`pipeline.world.posed_people.posed_boxes`: a person's box is its posed body's at its stature, in each
-    row; the others keep theirs, but for a pedestrian model's depth); the camera, the LiDAR, the label rows and so
-    the exports all see that box."""
+    row, with an umbrella for a share ``umbrellas`` of them; the others keep theirs, but for a pedestrian model's
+    depth); the camera, the LiDAR, the label rows and so the exports all see that box."""
     _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
     cols = {c: table[c].to_numpy()[first] for c in SIMULATED_COLUMNS}  # an actor's class and size hold for its track
     rows = {c: table[c].to_numpy() for c in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")}
     boxes, pose = posed_boxes(meshes, _actors(cols, seed), inverse.reshape(-1), table["time_s"].to_numpy(),
-                              table["speed_mps"].to_numpy(), actor_boxes(rows), seed)
+                              table["speed_mps"].to_numpy(), actor_boxes(rows), seed, umbrellas)
     posed = {"x_m": boxes.center[:, 0], "y_m": boxes.center[:, 1], "z_m": boxes.center[:, 2],
              "length_m": boxes.size[:, 0], "width_m": boxes.size[:, 1], "height_m": boxes.size[:, 2]}
     changed = {c: v for c, v in posed.items() if not np.array_equal(v, rows[c])}
@@ -245,9 +246,10 @@ def _shared(job: ShardJob) -> _Shared:
     for camera in cameras:
         camera.sample_directions  # noqa: B018 -- computed and kept now (a cached property)
     meshes = rig_actor_meshes(job.rig)
+    condition = conditions.Condition(job.condition)
     trajectories = Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"), meshes,
-                                                        job.seed))
-    return _Shared(world, cameras, lidars, conditions.Condition(job.condition), trajectories, meshes)
+                                                        job.seed, condition.umbrellas))
+    return _Shared(world, cameras, lidars, condition, trajectories, meshes)
 
 
 def _worker_state(job: ShardJob) -> _WorkerState:

@@ -94,7 +94,9 @@ class Outfit:
         material; hood: a hood lying on the back of the neck, in ``top``; skirt_m: a skirt (in ``trousers``) from the
         waist down to this height above the pelvis (negative), or ``None``; backpack, shoulder_bag, hand_bag: a
         backpack, a bag at the right hip on a strap, a bag carried in the right hand, in these materials;
-        head_scale: the head's size relative to an adult's (children's heads are larger for their stature).
+        head_scale: the head's size relative to an adult's (children's heads are larger for their stature);
+        umbrella: an open umbrella held up in the left hand (pose the arm with
+        :func:`pipeline.world.gait.umbrella_pose`), its canopy in this material.
     """
 
     top: str = "paint"
@@ -115,6 +117,7 @@ class Outfit:
     shoulder_bag: str | None = None
     hand_bag: str | None = None
     head_scale: float = 1.0
+    umbrella: str | None = None
 
 
 def figure(p: Pose, outfit: Outfit = Outfit()) -> list[Part]:
@@ -156,7 +159,8 @@ def figure(p: Pose, outfit: Outfit = Outfit()) -> list[Part]:
 
 
 def _carried(p: Pose, outfit: Outfit, axis: np.ndarray) -> list[Part]:
-    """A backpack on the upper back, a bag on a strap at the right hip, a bag hanging from the right hand."""
+    """A backpack on the upper back, a bag on a strap at the right hip, a bag hanging from the right hand, an
+    umbrella held up in the left."""
     parts = []
     g = outfit.girth
     if outfit.backpack is not None:
@@ -173,7 +177,25 @@ def _carried(p: Pose, outfit: Outfit, axis: np.ndarray) -> list[Part]:
         parts.append(sweep([bottom, top], [[0.17, 0.055], [0.17, 0.055]], outfit.hand_bag, n=16, ref=(1.0, 0.0, 0.0)))
         parts += [capsule(grip, top + [dx, 0.0, 0.0], 0.008, 0.008, outfit.hand_bag, n=6, rings=1)
                   for dx in (-0.08, 0.08)]
+    if outfit.umbrella is not None:
+        parts += _umbrella(p, outfit)
     return parts
+
+
+# An open umbrella's canopy (8 panels): (height above its rim, radius) from the rim up, metres; a standard umbrella
+# of ~1.0 m across, its rim just above the head.
+_CANOPY = ((0.0, 0.0), (0.006, 0.5), (0.09, 0.44), (0.17, 0.31), (0.225, 0.15), (0.25, 0.0))
+UMBRELLA_RIM_ABOVE_HEAD_M = 0.16  # above the head's centre: 4 cm above its top
+
+
+def _umbrella(p: Pose, outfit: Outfit) -> list[Part]:
+    """The umbrella: a shaft up from the left fist to a dome of 8 panels (flat beneath) over the head."""
+    grip = p.wrists[0] + 0.07 * p.hands[0]
+    rim = np.array([grip[0], grip[1], p.head[2] + UMBRELLA_RIM_ABOVE_HEAD_M * outfit.head_scale])
+    dz, radius = (np.array(col) for col in zip(*_CANOPY, strict=True))
+    canopy = sweep(rim + dz[:, None] * [0.0, 0.0, 1.0], radius, outfit.umbrella, n=8, ref=(1.0, 0.0, 0.0))
+    shaft = capsule(grip - [0.0, 0.0, 0.12], rim + [0.0, 0.0, 0.27], 0.009, 0.007, "trim", n=6, rings=1)
+    return [canopy, shaft]
 
 
 def _head(centre: np.ndarray, outfit: Outfit) -> list[Part]:

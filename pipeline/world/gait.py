@@ -34,16 +34,20 @@ so that two of the eight show the float.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from pipeline.world.figures import FOREARM_M, SHIN_M, THIGH_M, UPPER_ARM_M, Pose, pose
+from pipeline.world.figures import FOREARM_M, SHIN_M, THIGH_M, UPPER_ARM_M, Pose, bend, pose
 
 MODEL_STATURE_M = 1.75  # the figures' stature as modelled (a standing figure's top of the head)
 WALK_PHASES = 8  # poses sampled per walk cycle (phase k / WALK_PHASES)
 STAND_POSES = 3  # standing: on both feet, weight on the left, weight on the right
 RUN_PHASES = 8  # poses sampled per running cycle (phase (k + 0.5) / RUN_PHASES), after the standing ones
+UMBRELLA_POSES = 11  # the walking and standing poses again with an umbrella held up, after the running ones
 RUN_ABOVE_MPS = 2.3  # a walker faster than this starts running (see the module docstring)
 WALK_BELOW_MPS = 1.9  # a runner slower than this walks again
+UMBRELLA_FIRST = WALK_PHASES + STAND_POSES + RUN_PHASES  # the first umbrella pose's index
 LEG_LENGTH_RATIO = 0.53  # hip height / stature (adults; Winter 1991, Fig. 3.1 segment proportions)
 STANDING_BELOW_MPS = 0.25  # slower than this a person stands (SUMO's waiting pedestrians have speed 0)
 WEIGHT_SHIFT_S = 6.0  # a standing person changes the leg that carries the weight about this often
@@ -198,6 +202,16 @@ def standing_pose(weight: int = 0, lean_deg: float = 0.0) -> Pose:
                 elbow_dir=(-1.0, 0.3, 0.0))
 
 
+def umbrella_pose(p: Pose) -> Pose:
+    """``p`` with the left arm holding an umbrella's shaft up: the fist in front of the left chest, a little below the
+    shoulders, the hand pointing up, the elbow down and out (the arm no longer swings)."""
+    chest = p.chest
+    wrist = chest + [0.24, 0.06, -0.2]
+    elbow = bend(p.shoulders[0], wrist, UPPER_ARM_M, FOREARM_M, (-0.3, 0.6, -1.0))
+    return replace(p, wrists=np.array([wrist, p.wrists[1]]), elbows=np.array([elbow, p.elbows[1]]),
+                   hands=np.array([[0.0, 0.0, 1.0], p.hands[1]]))
+
+
 def run_phase(index: int) -> float:
     """The running phase of person pose ``index`` (>= WALK_PHASES + STAND_POSES)."""
     return (index - WALK_PHASES - STAND_POSES + 0.5) / RUN_PHASES
@@ -206,7 +220,10 @@ def run_phase(index: int) -> float:
 def person_pose(index: int, lean_deg: float = 3.0) -> Pose:
     """Pose ``index`` of a person family: 0 .. WALK_PHASES - 1 the walk cycle at phase index / WALK_PHASES, then the
     STAND_POSES standing ones, then the RUN_PHASES running ones (:func:`run_phase`; the trunk leans 5 deg more than
-    walking)."""
+    walking), then the UMBRELLA_POSES: the walking and standing ones again with an umbrella held up
+    (:func:`umbrella_pose`)."""
+    if index >= UMBRELLA_FIRST:
+        return umbrella_pose(person_pose(index - UMBRELLA_FIRST, lean_deg))
     if index < WALK_PHASES:
         return walking_pose(index / WALK_PHASES, lean_deg)
     if index < WALK_PHASES + STAND_POSES:
@@ -261,18 +278,19 @@ def running_rows(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray
 
 
 def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, stature_m: np.ndarray,
-               offset: np.ndarray) -> np.ndarray:
+               offset: np.ndarray, umbrella: np.ndarray | None = None) -> np.ndarray:
     """(N,) int64 each row's pose index (:func:`person_pose`) for N trajectory rows of any number of people.
 
     A walking person's gait phase is the integral of speed / stride over time since the first row of their track
     (:func:`cycle_phase`), plus their own ``offset`` in [0, 1); a person slower than STANDING_BELOW_MPS stands, the
     weight shifting every WEIGHT_SHIFT_S from one leg to the other; where :func:`running_rows` says so a person runs
-    (the running poses, at the same phase: the cycle goes on through a change of gait). A function of the whole
-    trajectory, so each frame's pose is the same however the frames are split among shards.
+    (the running poses, at the same phase: the cycle goes on through a change of gait). A person with ``umbrella``
+    walks and stands under it (the umbrella poses; a runner runs without). A function of the whole trajectory, so
+    each frame's pose is the same however the frames are split among shards.
 
     Args:
         track_id, time_s, speed_mps, stature_m, offset: (N,) per row (``offset`` and ``stature_m`` constant over
-            a track).
+            a track); umbrella: (N,) bool per row (constant over a track), None for nobody.
     """
     speed, stature, offset = (np.asarray(a, float) for a in (speed_mps, stature_m, offset))
     rate = np.zeros(len(speed))
@@ -284,7 +302,10 @@ def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, 
     run = WALK_PHASES + STAND_POSES + np.floor(phase * RUN_PHASES).astype(np.int64) % RUN_PHASES
     shift = np.floor(np.asarray(time_s, float) / WEIGHT_SHIFT_S + 3.0 * offset).astype(np.int64)
     running = running_rows(track_id, time_s, speed)
-    return np.where(running, run, np.where(walking, walk, WALK_PHASES + np.mod(shift, STAND_POSES)))
+    out = np.where(running, run, np.where(walking, walk, WALK_PHASES + np.mod(shift, STAND_POSES)))
+    if umbrella is not None:
+        out = np.where(np.asarray(umbrella, bool) & ~running, UMBRELLA_FIRST + out, out)
+    return out
 
 
 def crank_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, development_m: float, phases: int,

@@ -28,13 +28,22 @@ long hair 8, a knitted hat 2; a backpack 6, a shoulder bag 3, a bag in the hand 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.figures import Outfit, figure
-from pipeline.world.gait import RUN_PHASES, STAND_POSES, WALK_PHASES, person_pose, run_clearance_m, run_phase
+from pipeline.world.gait import (
+    RUN_PHASES,
+    STAND_POSES,
+    UMBRELLA_FIRST,
+    UMBRELLA_POSES,
+    WALK_PHASES,
+    person_pose,
+    run_clearance_m,
+    run_phase,
+)
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import merge
 
@@ -45,15 +54,17 @@ class PersonFamily:
 
     Attributes:
         name: the family's name; group: "man", "woman", "teen" or "child" (its stature's distribution,
-            :data:`STATURE_M`); outfit: what the figure wears and carries; lean_deg: the trunk's forward lean walking.
+            :data:`STATURE_M`); outfit: what the figure wears and carries; lean_deg: the trunk's forward lean walking;
+            umbrella: the canopy's material in the umbrella poses (walking and standing in the rain).
     """
 
     name: str
     group: str
     outfit: Outfit
     lean_deg: float = 3.0
+    umbrella: str = "fabric_black"
 
-    poses = WALK_PHASES + STAND_POSES + RUN_PHASES
+    poses = WALK_PHASES + STAND_POSES + RUN_PHASES + UMBRELLA_POSES
 
     @property
     def __name__(self) -> str:
@@ -62,8 +73,9 @@ class PersonFamily:
     def __call__(self, pose: int = 0) -> Mesh:
         """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground; in a running pose's
         float, the lower sole :func:`pipeline.world.gait.run_clearance_m` above it."""
-        mesh = merge(figure(person_pose(pose, self.lean_deg), self.outfit), ObjectClass.PEDESTRIAN)
-        lift = run_clearance_m(run_phase(pose)) if pose >= WALK_PHASES + STAND_POSES else 0.0
+        outfit = replace(self.outfit, umbrella=self.umbrella) if pose >= UMBRELLA_FIRST else self.outfit
+        mesh = merge(figure(person_pose(pose, self.lean_deg), outfit), ObjectClass.PEDESTRIAN)
+        lift = run_clearance_m(run_phase(pose)) if WALK_PHASES + STAND_POSES <= pose < UMBRELLA_FIRST else 0.0
         lowest = mesh.vertices[:, 2].min() - lift
         return Mesh(mesh.vertices - [0.0, 0.0, lowest], mesh.triangles, mesh.material, mesh.semantic)
 
@@ -119,6 +131,13 @@ FAMILIES = (
     PersonFamily("child_skirt", "child", _o("fabric_navy", "fabric_grey", skirt_m=-0.33, long_hair=True,
                                             hair="hair_brown", skin="skin_medium", girth=0.85, head_scale=1.18), 2.0),
 )
+# The canopy's colour per family in the rain (in FAMILIES' order): black 12, navy 4, grey 3, red 2, beige, white,
+# brown 1 each (our estimate: most umbrellas on a city street are black or dark; no survey).
+UMBRELLAS = ("fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabric_black", "fabric_red",
+             "fabric_black", "fabric_navy", "fabric_black", "fabric_beige", "fabric_black", "fabric_grey",
+             "fabric_black", "fabric_navy", "fabric_black", "fabric_red", "fabric_black", "fabric_white",
+             "fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabric_black", "fabric_brown")
+FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True))
 PEDESTRIANS = FAMILIES
 
 

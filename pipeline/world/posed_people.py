@@ -7,10 +7,13 @@ stature (:func:`pipeline.world.people.person_statures`): size = the posed mesh's
 MODEL_STATURE_M, and the centre where the mesh's centre lies when its pelvis is over the trajectory point and its feet
 on the ground. Since a placed actor is its model's unit-box mesh mapped onto its box (:mod:`pipeline.world.actors`),
 the mesh fills the box exactly in every frame: the 3D label, the 2D boxes, masks, depth and occlusion all come from
-the posed body. Other actors of the body-sized classes (users' pedestrian models) keep SUMO's height and take their
-model's depth (:meth:`pipeline.world.actors.ActorMeshes.body_lengths`). A bicycle
-(:class:`pipeline.world.two_wheelers.BicycleFamily`) keeps its simulated box and gets the crank pose of the distance
-it rode (:func:`pipeline.world.gait.crank_poses`): its rider pedals in phase with its speed.
+the posed body. In rain a share of the people walk and stand under an open umbrella (the condition's
+``rain.umbrellas``): their poses are the umbrella ones and their boxes enclose the umbrella too, as nuScenes'
+annotators include what a pedestrian carries ("bags, umbrellas, tools") in the pedestrian's box. Other actors of the
+body-sized classes (users' pedestrian models) keep SUMO's height and take their model's depth
+(:meth:`pipeline.world.actors.ActorMeshes.body_lengths`). A bicycle (:class:`pipeline.world.two_wheelers.BicycleFamily`)
+keeps its simulated box and gets the crank pose of the distance it rode (:func:`pipeline.world.gait.crank_poses`): its
+rider pedals in phase with its speed.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from pipeline.world.people import person_statures
 
 
 def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time_s: np.ndarray,
-                speed_mps: np.ndarray, boxes: Boxes3D, seed: int) -> tuple[Boxes3D, np.ndarray]:
+                speed_mps: np.ndarray, boxes: Boxes3D, seed: int, umbrellas: float = 0.0) -> tuple[Boxes3D, np.ndarray]:
     """The boxes and poses of R trajectory rows.
 
     Args:
@@ -32,7 +35,9 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
         row_actor: (R,) int64 each row's actor (position in ``actors``).
         time_s, speed_mps: (R,) float64 each row's time and speed.
         boxes: (R) the rows' boxes as simulated (SUMO's: centre at half the box height above the ground).
-        seed: the run seed (statures are drawn from it).
+        seed: the run seed (statures and umbrellas are drawn from it).
+        umbrellas: the share of people who walk and stand under an open umbrella (the condition's rain; each person
+            drawn once, :func:`umbrella_carriers`).
 
     Returns:
         (R) boxes: people's posed, others' with the length of :meth:`ActorMeshes.body_lengths`; (R,) int64 pose
@@ -61,7 +66,9 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
     stature = np.zeros(len(actors))
     stature[people] = person_statures(group[people], actors.track_id[people], seed)
     a = row_actor[rows]
-    pose[rows] = gait_poses(actors.track_id[a], time_s[rows], speed_mps[rows], stature[a], offset[a])
+    carries = np.zeros(len(actors), bool)
+    carries[people] = umbrella_carriers(actors.track_id[people], seed, umbrellas)
+    pose[rows] = gait_poses(actors.track_id[a], time_s[rows], speed_mps[rows], stature[a], offset[a], carries[a])
     model = meshes.family_models(family[a], pose[rows])
     scale = stature[a] / MODEL_STATURE_M
     extent = np.array(meshes.model_extent, np.float64)[model] * scale[:, None]
@@ -74,3 +81,15 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
     center[rows, 2] = ground_z + middle[:, 2]
     size[rows] = extent
     return Boxes3D(center, size, yaw), pose
+
+
+def umbrella_carriers(track_id: np.ndarray, seed: int, share: float) -> np.ndarray:
+    """(N,) bool: which of N people carry an open umbrella, each with probability ``share``, one draw per person
+    from ``numpy.random.default_rng([seed, UMBRELLA_TAG, track id])`` (the same in every frame and shard)."""
+    if share <= 0.0:
+        return np.zeros(len(track_id), bool)
+    return np.array([np.random.default_rng([int(seed), UMBRELLA_TAG, int(t)]).random() < share
+                     for t in np.asarray(track_id).tolist()], bool)
+
+
+UMBRELLA_TAG = 0x0B7E

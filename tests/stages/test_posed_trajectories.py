@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from pipeline.core.config import ConditionConfig, load_config
+from pipeline.sensors.conditions import Condition
 from pipeline.stages.render_frames import ACTOR_COLUMNS, Trajectories, body_sized_trajectories
 from pipeline.world.actors import DEFAULT_MESHES
-from pipeline.world.gait import WALK_PHASES
+from pipeline.world.gait import UMBRELLA_FIRST, WALK_PHASES
 
 
 def _table(frames: int = 20) -> pd.DataFrame:
@@ -42,3 +44,22 @@ def test_people_are_posed_per_row_and_the_rest_kept():
         person.loc[person["frame"] == 7, "pose"].iloc[0]
     shuffled = body_sized_trajectories(table.sample(frac=1.0, random_state=1), DEFAULT_MESHES, seed=4)
     pd.testing.assert_frame_equal(shuffled.sort_index(), out)
+
+
+def test_in_the_rain_the_person_walks_under_an_umbrella_that_the_box_encloses():
+    """The rain's ``umbrellas`` (0.6 in the shipped rain conditions, none by day) reaches the posed trajectories: with
+    a share of 1 the walker takes the umbrella poses, taller by the canopy (~1.18 x), soles on the
+    ground; with 0 the same table poses as without rain."""
+    assert Condition(load_config(ConditionConfig, "rain", "conditions")[0]).umbrellas == 0.6
+    assert Condition(load_config(ConditionConfig, "night-rain", "conditions")[0]).umbrellas == 0.6
+    assert Condition(load_config(ConditionConfig, "morning", "conditions")[0]).umbrellas == 0.0
+    table = _table()
+    dry = body_sized_trajectories(table, DEFAULT_MESHES, seed=4)
+    pd.testing.assert_frame_equal(body_sized_trajectories(table, DEFAULT_MESHES, seed=4, umbrellas=0.0), dry)
+    wet = body_sized_trajectories(table, DEFAULT_MESHES, seed=4, umbrellas=1.0)
+    person, before = wet[wet["cls"] == "pedestrian"], dry[dry["cls"] == "pedestrian"]
+    np.testing.assert_array_equal(person["pose"], before["pose"] + UMBRELLA_FIRST)
+    ratio = person["height_m"].to_numpy() / before["height_m"].to_numpy()
+    assert (ratio > 1.12).all() and (ratio < 1.25).all()
+    np.testing.assert_allclose(person["z_m"] - person["height_m"] / 2, 0.0, atol=1e-9)
+    pd.testing.assert_frame_equal(wet[wet["cls"] != "pedestrian"], dry[dry["cls"] != "pedestrian"])

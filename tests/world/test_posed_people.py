@@ -15,6 +15,8 @@ from pipeline.world.gait import (
     RUN_PHASES,
     STAND_POSES,
     STANDING_BELOW_MPS,
+    UMBRELLA_FIRST,
+    UMBRELLA_POSES,
     WALK_BELOW_MPS,
     WALK_PHASES,
     gait_poses,
@@ -26,7 +28,7 @@ from pipeline.world.gait import (
     walking_pose,
 )
 from pipeline.world.people import FAMILIES, STATURE_M, person_statures
-from pipeline.world.posed_people import posed_boxes
+from pipeline.world.posed_people import posed_boxes, umbrella_carriers
 
 MESHES = ActorMeshes()
 
@@ -157,22 +159,41 @@ def _person_rows(n_frames: int = 40, speed_mps: float = 1.3, people: int = 24):
     return actors, row_actor, t, np.full(len(x), speed_mps), rows
 
 
-@pytest.mark.parametrize("speed_mps", [1.3, 0.0, 3.0])
-def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps):
+UMBRELLA = range(UMBRELLA_FIRST, UMBRELLA_FIRST + UMBRELLA_POSES)
+
+
+def test_umbrellas_are_drawn_once_per_person():
+    """Each person carries one with probability ``share`` (binomial over 4000), the same draw for a track in any
+    order and call; share 0 nobody, 1 everybody; another seed draws others."""
+    track = np.arange(1, 4001)
+    carries = umbrella_carriers(track, 5, 0.6)
+    assert abs(carries.mean() - 0.6) < 4 * np.sqrt(0.24 / 4000)
+    order = np.random.default_rng(2).permutation(len(track))
+    np.testing.assert_array_equal(umbrella_carriers(track[order], 5, 0.6), carries[order])
+    assert not umbrella_carriers(track, 5, 0.0).any() and umbrella_carriers(track, 5, 1.0).all()
+    assert (umbrella_carriers(track, 6, 0.6) != carries).mean() > 0.3
+
+
+@pytest.mark.parametrize(("speed_mps", "umbrellas"), [(1.3, 0.0), (0.0, 0.0), (3.0, 0.0), (1.3, 1.0), (0.0, 1.0),
+                                                      (3.0, 1.0)])
+def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps, umbrellas):
     """Each row's box holds its posed, placed mesh exactly (it touches all six faces): the 3D label encloses the body
-    in every phase of the gait, standing and running; the feet are on the ground (a runner's lower sole its
-    clearance above it in the float), the pelvis over the trajectory point, and the body as tall as its stature in
-    the pose."""
+    in every phase of the gait, standing and running, and the umbrella over it in the rain (runners carry none); the
+    feet are on the ground (a runner's lower sole its clearance above it in the float), the pelvis over the
+    trajectory point, and the body as tall as its stature in the pose (with the umbrella's canopy, ~1.18 x)."""
     actors, row_actor, t, v, rows = _person_rows(speed_mps=speed_mps)
-    boxes, pose = posed_boxes(MESHES, actors, row_actor, t, v, rows, seed=5)
-    assert set(pose.tolist()) == {1.3: set(range(WALK_PHASES)), 0.0: set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)),
-                                  3.0: set(RUNNING)}[speed_mps]
+    boxes, pose = posed_boxes(MESHES, actors, row_actor, t, v, rows, seed=5, umbrellas=umbrellas)
+    expected = {1.3: set(range(WALK_PHASES)), 0.0: set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)),
+                3.0: set(RUNNING)}[speed_mps]
+    if umbrellas and speed_mps != 3.0:
+        expected = {UMBRELLA_FIRST + p for p in expected}
+    assert set(pose.tolist()) == expected
     per_row = Actors(np.arange(1, len(pose) + 1), ["pedestrian"] * len(pose), boxes, np.zeros((len(pose), 3)),
                      variant=actors.variant[row_actor], pose=pose)
     geo = place_actors(per_row, MESHES)
     family = MESHES.family_codes(actors)
     stature = person_statures(np.array([MESHES.families[f].group for f in family]), actors.track_id, 5)
-    for k in range(0, len(pose), 3 if speed_mps == 3.0 else 7):
+    for k in range(0, len(pose), 3 if speed_mps == 3.0 or umbrellas else 7):
         v_world = geo.vertices[geo.vertex_actor == k] - boxes.center[k]
         c, s = np.cos(boxes.yaw_rad[k]), np.sin(boxes.yaw_rad[k])
         local = np.column_stack([c * v_world[:, 0] + s * v_world[:, 1], -s * v_world[:, 0] + c * v_world[:, 1],
@@ -191,7 +212,8 @@ def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps):
                                         s * pelvis_unit[0] * boxes.size[k, 0] + c * pelvis_unit[1] * boxes.size[k, 1]]
         np.testing.assert_allclose(pelvis, rows.center[k, :2], atol=1e-9)
         assert boxes.size[k, 2] == pytest.approx(MESHES.model_extent[model][2] * scale)
-        assert 0.9 * stature[a] < boxes.size[k, 2] < 1.05 * stature[a]
+        low, high = (1.12, 1.25) if pose[k] in UMBRELLA else (0.9, 1.05)
+        assert low * stature[a] < boxes.size[k, 2] < high * stature[a]
 
 
 def test_every_family_is_picked_and_others_keep_their_boxes():
