@@ -96,6 +96,16 @@ def _arm(shoulder: np.ndarray, swing_deg: float, elbow_deg: float, side: float) 
     return shoulder + UPPER_ARM_M * upper + FOREARM_M * fore, fore
 
 
+def _trunk(hip_z: float, sway: float, lean_deg: float, head_forward: float) -> tuple[np.ndarray, ...]:
+    """Pelvis, chest (the shoulders' midpoint) and head centre of a trunk leaning ``lean_deg`` forward, the pelvis
+    ``sway`` to the left at ``hip_z``, the head ``head_forward`` ahead of the trunk's line."""
+    lean = np.radians(lean_deg)
+    pelvis = np.array([0.0, sway, hip_z])
+    chest = pelvis + [0.52 * np.sin(lean), 0.0, 0.52 * np.cos(lean)]
+    head = pelvis + [0.715 * np.sin(lean) + head_forward, 0.0, 0.715 * np.cos(lean)]
+    return pelvis, chest, head
+
+
 def walking_pose(phase: float, lean_deg: float = 3.0, arm_swing_deg: float = 15.0) -> Pose:
     """The pose at gait ``phase`` in [0, 1) (0: the left heel strikes), trunk leaning ``lean_deg`` forward."""
     phases = np.array([phase, phase + 0.5]) % 1.0
@@ -103,10 +113,7 @@ def walking_pose(phase: float, lean_deg: float = 3.0, arm_swing_deg: float = 15.
     roll = np.interp(phases, _ROLL_AT, _ROLL_M)
     hip_z = float(np.max(0.085 + roll - ankles_hip[:, 1]))  # the lower foot on the ground
     sway = 0.018 * np.cos(2.0 * np.pi * phase)  # the pelvis over the stance foot: left near phase 0, right near 0.5
-    lean = np.radians(lean_deg)
-    pelvis = np.array([0.0, sway, hip_z])
-    chest = pelvis + [0.52 * np.sin(lean), 0.0, 0.52 * np.cos(lean)]
-    head = pelvis + [0.715 * np.sin(lean) + 0.02, 0.0, 0.715 * np.cos(lean)]
+    pelvis, chest, head = _trunk(hip_z, sway, lean_deg, 0.02)
     side = np.array([1.0, -1.0])
     ankles = np.column_stack([ankles_hip[:, 0], sway + 0.085 * side, hip_z + ankles_hip[:, 1]])
     pitch = np.radians(np.interp(phases, _FOOT_AT, _FOOT_DEG))
@@ -166,10 +173,7 @@ def running_pose(phase: float, lean_deg: float = 8.0, arm_swing_deg: float = 30.
     ankles_hip = np.array([_ankle(float(run_thigh_deg(p)), float(run_knee_deg(p))) for p in phases])
     hip_z = _run_hip(phase)
     sway = 0.012 * np.cos(2.0 * np.pi * phase)
-    lean = np.radians(lean_deg)
-    pelvis = np.array([0.0, sway, hip_z])
-    chest = pelvis + [0.52 * np.sin(lean), 0.0, 0.52 * np.cos(lean)]
-    head = pelvis + [0.715 * np.sin(lean) + 0.03, 0.0, 0.715 * np.cos(lean)]
+    pelvis, chest, head = _trunk(hip_z, sway, lean_deg, 0.03)
     side = np.array([1.0, -1.0])
     ankles = np.column_stack([ankles_hip[:, 0], sway + 0.08 * side, hip_z + ankles_hip[:, 1]])
     pitch = np.radians(np.interp(phases, _RUN_FOOT_AT, _RUN_FOOT_DEG))
