@@ -72,6 +72,14 @@ FORMATION_RADIUS_M = 0.65
 FORMATION_MARGIN_M = 0.3
 STANDING_LATERAL_M = -0.9
 RUNNERS_TAG = 41  # the random stream that picks the runners among the walkers and draws their speeds
+# Which way a person standing alone faces, from the sidewalk's direction towards its right (radians), and its share:
+# the street (waiting to cross, for someone, a bus), the shop fronts and walls, and along the sidewalk either way
+# (waiting, on the phone), each turned by up to LONE_TURN_RAD either way. Our estimate, no survey; before, everyone
+# standing alone faced along the sidewalk (SUMO's angle of a waiting person).
+LONE_FACING_RAD = (-0.5 * np.pi, 0.5 * np.pi, 0.0, np.pi)
+LONE_FACING_SHARES = (0.4, 0.25, 0.175, 0.175)
+LONE_TURN_RAD = np.pi / 6
+LONE_FACING_TAG = 42  # their random stream (the rest of the demand draws as before)
 FORMATION_PARAM = "roadsynth.stand"  # a person's <param>: "dx dy face" (see _formation)
 
 
@@ -222,7 +230,8 @@ def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,
         "stand_face_rad": np.nan,
     })
     walkers["speed_mps"] = _with_runners(config, walkers["speed_mps"].to_numpy(), seed)
-    standing = _standing(config, _sidewalks(net_file), walks[n:total], rng, np.random.default_rng([seed, 40]))
+    standing = _standing(config, _sidewalks(net_file), walks[n:total], rng, np.random.default_rng([seed, 40]),
+                         np.random.default_rng([seed, LONE_FACING_TAG]))
     persons = pd.concat([walkers, standing], ignore_index=True)
     persons["color_r"], persons["color_g"], persons["color_b"] = clothes.T
     return persons[list(columns)].astype({c: t for c, t in columns.items() if t is not str})
@@ -256,15 +265,18 @@ def _sidewalks(net_file: Path) -> dict[str, tuple[str, float, float]]:
 
 def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float, float]],
               walks: list[tuple[str, list[str]]], rng: np.random.Generator,
-              formation_rng: np.random.Generator | None = None) -> pd.DataFrame:
+              formation_rng: np.random.Generator | None = None,
+              facing_rng: np.random.Generator | None = None) -> pd.DataFrame:
     """The standing pedestrians, in groups (STANDING_GROUPS): each group's stops lie STANDING_SPACING_M apart at a
     random place on the sidewalk of its first walk's first edge, from a common departure for a common time, then it
     walks that route together at the slowest member's speed. The members of a group of two or three stand in a
     formation (:func:`_formation`, drawn from ``formation_rng``; a stream of its own, so the rest of the demand is
-    the same with or without it): stand_dx_m, stand_dy_m, stand_face_rad (NaN for one standing alone)."""
+    the same with or without it): stand_dx_m, stand_dy_m, stand_face_rad. One standing alone stands STANDING_LATERAL_M
+    right of the centre line facing a way drawn from ``facing_rng`` (:func:`_lone_facing`)."""
     rows = []
     k = 0
     formation_rng = formation_rng or np.random.default_rng(0)
+    facing_rng = facing_rng or np.random.default_rng(1)
     while k < config.standing_pedestrians:
         size = min(int(rng.choice(STANDING_GROUPS, p=STANDING_GROUP_SHARES)), config.standing_pedestrians - k)
         _, edges = walks[k]
@@ -277,7 +289,10 @@ def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float, float
         depart = round(float(rng.uniform(0.0, config.depart_window_s)), 2)
         stand = float(config.standing_s.sample(rng, 1)[0]) if lane else np.nan
         speed = float(config.pedestrian_speed_mps.sample(rng, size).min())
-        places = _formation(size, pos, width_m, formation_rng) if lane and size > 1 else np.full((size, 3), np.nan)
+        places = np.full((size, 3), np.nan)
+        if lane:
+            places = _formation(size, pos, width_m, formation_rng) if size > 1 else \
+                np.array([[0.0, STANDING_LATERAL_M, _lone_facing(facing_rng)]])
         for j in range(size):
             rows.append({"person_id": f"ped{config.pedestrians + k + j:04d}", "depart_s": depart,
                          "route": " ".join(edges), "speed_mps": speed, "stop_lane": lane,
@@ -287,6 +302,13 @@ def _standing(config: DemandConfig, sidewalks: dict[str, tuple[str, float, float
         k += size
     return pd.DataFrame(rows, columns=["person_id", "depart_s", "route", "speed_mps", "stop_lane", "stop_pos_m",
                                        "stop_s", "stand_dx_m", "stand_dy_m", "stand_face_rad"])
+
+
+def _lone_facing(rng: np.random.Generator) -> float:
+    """The way a person standing alone faces (radians from the sidewalk's direction towards its right): one of
+    LONE_FACING_RAD with LONE_FACING_SHARES, turned uniformly by up to LONE_TURN_RAD either way."""
+    base = LONE_FACING_RAD[int(rng.choice(len(LONE_FACING_RAD), p=LONE_FACING_SHARES))]
+    return float(base + rng.uniform(-LONE_TURN_RAD, LONE_TURN_RAD))
 
 
 def _formation(size: int, stops_m: np.ndarray, width_m: float, rng: np.random.Generator) -> np.ndarray:
@@ -344,7 +366,7 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, dep
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}", departPos=_g(row.stop_pos_m))
             ET.SubElement(person, "stop", lane=row.stop_lane, endPos=_g(row.stop_pos_m), duration=_g(row.stop_s))
             ET.SubElement(person, "walk", edges=row.route, speed=_g(row.speed_mps))
-            if np.isfinite(row.stand_face_rad):  # a member of a standing group: its place in the formation
+            if np.isfinite(row.stand_face_rad):  # where it stands and faces: its formation's place, or alone
                 ET.SubElement(person, "param", key=FORMATION_PARAM, value=f"{_g(row.stand_dx_m)} {_g(row.stand_dy_m)} "
                                                                          f"{_g(row.stand_face_rad)}")
         else:

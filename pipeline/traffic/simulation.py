@@ -349,10 +349,11 @@ class RunRecorder:
 class StandingPlaces:
     """Where the standing persons of a running libsumo simulation stand: :meth:`place` moves each standing person
     from where SUMO draws it (see SUMO_ROADSIDE_OFFSET_M) onto its sidewalk, STANDING_LATERAL_M right of the centre
-    line, or, for a member of a standing group, to its place in the group's formation (the person's FORMATION_PARAM:
-    dx along the sidewalk, dy right of its centre line, the way it faces from the lane's direction), facing the
-    others; and a member who starts to walk from its place onto SUMO's line over STEP_OFF_S (no jump in its track).
-    Only persons at rest on a normal edge are asked for their stage (one libsumo call each), each person's
+    line, or to the place the person's FORMATION_PARAM gives (dx along the sidewalk, dy right of its centre line, the
+    way it faces from the lane's direction): a member of a standing group in the group's formation, facing the
+    others; one standing alone, facing the way drawn for it (:func:`pipeline.traffic.demand._lone_facing`); and one
+    with such a place who starts to walk moves from it onto SUMO's line over STEP_OFF_S (no jump in its track). Only
+    persons at rest on a normal edge are asked for their stage (one libsumo call each), each person's
     parameter once."""
 
     def __init__(self, sumo) -> None:

@@ -134,7 +134,7 @@ def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
     whose first edge is too short for the group gets no stop."""
     import pandas as pd
 
-    from pipeline.traffic.demand import STANDING_SPACING_M, _standing
+    from pipeline.traffic.demand import STANDING_LATERAL_M, STANDING_SPACING_M, _standing
 
     config = load_config(ScenarioConfig, "urban", "scenarios")[0].demand.model_copy(
         update={"pedestrians": 0, "standing_pedestrians": 300})
@@ -153,8 +153,22 @@ def test_standing_pedestrians_stand_in_groups_on_their_first_sidewalk():
         np.testing.assert_allclose(np.diff(group["stop_pos_m"]), STANDING_SPACING_M, atol=0.011)
         assert group["speed_mps"].nunique() == 1 and group["route"].nunique() == 1
     assert pd.isna(rows.loc[rows["stop_lane"] == "", "stop_pos_m"]).all()
-    alone = sizes[sizes == 1].index
-    assert stops.set_index(["depart_s", "stop_s"]).loc[alone, "stand_face_rad"].isna().all()
+    alone = stops.set_index(["depart_s", "stop_s"]).loc[sizes[sizes == 1].index]
+    assert (alone["stand_dx_m"] == 0.0).all() and (alone["stand_dy_m"] == STANDING_LATERAL_M).all()
+    assert alone["stand_face_rad"].notna().all()
+
+
+def test_a_person_standing_alone_faces_the_street_the_shops_or_along_the_sidewalk():
+    """LONE_FACING_RAD with their shares (binomial bounds over 4000 draws), each within LONE_TURN_RAD of its way."""
+    from pipeline.traffic.demand import LONE_FACING_RAD, LONE_FACING_SHARES, LONE_TURN_RAD, _lone_facing
+
+    rng = np.random.default_rng(7)
+    face = np.array([_lone_facing(rng) for _ in range(N)])
+    off = np.angle(np.exp(1j * (face[:, None] - np.array(LONE_FACING_RAD)[None, :])))
+    nearest = np.argmin(np.abs(off), axis=1)
+    assert (np.abs(off[np.arange(N), nearest]) <= LONE_TURN_RAD + 1e-12).all()
+    for k, share in enumerate(LONE_FACING_SHARES):
+        assert abs(np.mean(nearest == k) - share) < 4 * np.sqrt(share * (1 - share) / N)
 
 
 def test_a_standing_group_stands_in_a_formation_facing_each_other():

@@ -130,6 +130,23 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
             assert heading @ towards / np.linalg.norm(towards) > 0.999
         pairs += 1
     assert pairs > 0
+    # One standing alone faces the way drawn for it (its parameter's face: radians from the sidewalk's direction
+    # towards its right), not along the sidewalk as SUMO has a waiting person.
+    alone = 0
+    for (_, lane), ids in groups.items():
+        pid = ids[0]
+        if len(ids) != 1 or pid not in frame0.index or frame0.loc[pid, "speed_mps"] != 0.0:
+            continue
+        person = next(p for p in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person")
+                      if p.get("id") == pid)
+        face = float(person.find("param").get("value").split()[2])
+        row, shape = frame0.loc[pid], shapes[lane]
+        xy = (row["x_m"], row["y_m"])
+        seg = np.argmin([_distance_to_polyline(xy, shape[i:i + 2]) for i in range(len(shape) - 1)])
+        along = np.arctan2(*(shape[seg + 1] - shape[seg])[::-1])
+        assert np.cos(row["yaw_rad"] - (along - face)) > 0.999
+        alone += 1
+    assert alone > 0
     last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
     assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")
