@@ -387,8 +387,9 @@ class RainConfig(_Model):
     drops: int = Field(0, ge=0, le=200, description="blurry raindrops on the lens (0 = none)")
     spray: float = Field(1.0, ge=0.0, le=10.0, description="the spray vehicles throw up from the wet road, times the "
                          "model's density (pipeline.sensors.spray; 0 = none)")
-    umbrellas: float = Field(0.6, ge=0.0, le=1.0, description="the share of people who walk and stand under an open "
-                             "umbrella (runners carry none; our estimate for rain, no survey)")
+    umbrellas: float = Field(0.0, ge=0.0, le=1.0, description="the share of people who walk and stand under an open "
+                             "umbrella (runners carry none); their labels include it (nuScenes' rule for carried "
+                             "objects, not COCO's), so it is off unless asked for (docs/realism.md)")
 
 
 class LensConfig(_Model):
