@@ -21,15 +21,14 @@ People change between walking and running at about 2.0 m/s (the preferred transi
 "Preferred and energetically optimal gait transition speeds in human locomotion", Med. Sci. Sports Exerc. 25(10),
 1993); SUMO's walkers' speeds scatter by about 0.2 m/s from step to step, so a walker starts running above
 RUN_ABOVE_MPS and a runner walks again below WALK_BELOW_MPS (a hysteresis around that speed, so that a fast walker
-does not flicker). The running cycle follows the shape of the curves of running at about 3-4 m/s in Novacheck, "The
-biomechanics of running", Gait & Posture 7, 77-95 (1998): a foot is on the ground for the first 39 % of its cycle
-(toe-off), so each step ends in a float in which neither foot touches the ground (the pelvis ~3 cm above the line
-from take-off to landing); the thigh swings from about 17 deg back at toe-off to about 42 deg forward late in the
-swing; the knee flexes about 40 deg at mid-stance (the body at its lowest) and 105 deg in the swing (the heel comes
-up behind; the upper end of running's, short of sprinting's); the trunk leans 5 deg more than walking and the arms
-swing 30 deg each way with the elbows bent 85-93 deg. Alexander's relation gives the running stride too (2.1 m at
-2.9 m/s for a 1.75 m person: 167 steps a minute). The running poses are sampled half a sample off the walk's phases,
-so that two of the eight show the float.
+does not flicker). The running cycle is ours, shaped after the curves of running in Novacheck, "The biomechanics of
+running", Gait & Posture 7, 77-95 (1998): a foot is on the ground for the first 39 % of its cycle (toe-off), so each
+step ends in a float in which neither foot touches the ground (the pelvis ~3 cm above the line from take-off to
+landing); the thigh swings from about 17 deg back at toe-off to about 42 deg forward late in the swing; the knee flexes
+about 40 deg at mid-stance (the body at its lowest) and 105 deg in the swing (the heel comes up behind); the trunk
+leans 5 deg more than walking and the arms swing 30 deg each way with the elbows bent 85-93 deg. Alexander's relation
+gives the running stride too (2.1 m at 2.9 m/s for a 1.75 m person: 167 steps a minute). The running poses are
+sampled half a sample off the walk's phases, so that two of the eight show the float.
 """
 
 from __future__ import annotations
