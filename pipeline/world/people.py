@@ -1,5 +1,5 @@
 """Pedestrian body families: people of several ages, builds and outfits, each posed through the walk cycle,
-standing and the running cycle (:mod:`.gait`, :mod:`.figures`).
+standing, the running cycle, and walking and standing under an umbrella (:mod:`.gait`, :mod:`.figures`).
 
 Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, z up, ground at z = 0, metres at
 a stature of :data:`pipeline.world.gait.MODEL_STATURE_M`; normalised to each actor's box later). A family is a

@@ -7,10 +7,10 @@ stature (:func:`pipeline.world.people.person_statures`): size = the posed mesh's
 MODEL_STATURE_M, and the centre where the mesh's centre lies when its pelvis is over the trajectory point and its feet
 on the ground. Since a placed actor is its model's unit-box mesh mapped onto its box (:mod:`pipeline.world.actors`),
 the mesh fills the box exactly in every frame: the 3D label, the 2D boxes, masks, depth and occlusion all come from
-the posed body. In rain a share of the people walk and stand under an open umbrella (the condition's
-``rain.umbrellas``): their poses are the umbrella ones and their boxes enclose the umbrella too, as nuScenes'
-annotators include what a pedestrian carries ("bags, umbrellas, tools") in the pedestrian's box. Other actors of the
-body-sized classes (users' pedestrian models) keep SUMO's height and take their model's depth
+the posed body. Where a rain asks for it (the condition's ``rain.umbrellas``, 0 unless set) a share of the people
+walk and stand under an open umbrella: their poses are the umbrella ones and their boxes enclose the umbrella too,
+as nuScenes' annotators include what a pedestrian carries ("bags, umbrellas, tools") in the pedestrian's box. Other
+actors of the body-sized classes (users' pedestrian models) keep SUMO's height and take their model's depth
 (:meth:`pipeline.world.actors.ActorMeshes.body_lengths`). A bicycle (:class:`pipeline.world.two_wheelers.BicycleFamily`)
 keeps its simulated box and gets the crank pose of the distance it rode (:func:`pipeline.world.gait.crank_poses`): its
 rider pedals in phase with its speed.
