@@ -242,37 +242,44 @@ def stride_m(speed_mps: np.ndarray, stature_m: np.ndarray) -> np.ndarray:
     return 2.3 * leg * (v * v / (G_MPS2 * leg)) ** 0.3
 
 
-def cycle_phase(track_id: np.ndarray, time_s: np.ndarray, rate_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def cycle_phase(track_id: np.ndarray, time_s: np.ndarray, rate_hz: np.ndarray,
+                runs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cycles completed since each track's first row: the integral of ``rate_hz`` (N,) cycles per second over
     ``time_s`` (trapezoids between a track's rows in time order). Returns (N,) float64 cycles and the (N,) int64 order
-    that sorts the rows by (track, time)."""
-    track_id, t, rate = np.asarray(track_id), np.asarray(time_s, float), np.asarray(rate_hz, float)
-    n = len(track_id)
-    order = np.lexsort((t, track_id))
-    tid, t, rate = track_id[order], t[order], rate[order]
-    first = np.ones(n, bool)
-    first[1:] = tid[1:] != tid[:-1]
+    that sorts the rows by (track, time). ``runs``: :func:`_track_runs` of the same rows, if already known."""
+    t, rate = np.asarray(time_s, float), np.asarray(rate_hz, float)
+    order, first, start = runs if runs is not None else _track_runs(track_id, t)
+    t, rate = t[order], rate[order]
+    n = len(t)
     step = np.zeros(n)
     step[1:] = 0.5 * (rate[1:] + rate[:-1]) * (t[1:] - t[:-1])
     step[first] = 0.0
     total = np.cumsum(step)
-    start = np.maximum.accumulate(np.where(first, np.arange(n), 0))
     cycles = np.empty(n)
     cycles[order] = total - total[start]
     return cycles, order
 
 
-def running_rows(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
-    """(N,) bool: the rows in which the person runs. Along each track in time order a person starts running on a row
-    faster than RUN_ABOVE_MPS and walks again on one slower than WALK_BELOW_MPS (in between the gait stays as it
-    was; a track starts walking)."""
-    track_id, t, speed = np.asarray(track_id), np.asarray(time_s, float), np.asarray(speed_mps, float)
+def _track_runs(track_id: np.ndarray, time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (N,) order that sorts N rows by (track, time), and in that order (N,) bool: the track's first row, and
+    (N,) int64: the position of the track's first row."""
+    track_id = np.asarray(track_id)
     n = len(track_id)
-    order = np.lexsort((t, track_id))
-    tid, v = track_id[order], speed[order]
+    order = np.lexsort((time_s, track_id))
+    tid = track_id[order]
     first = np.ones(n, bool)
     first[1:] = tid[1:] != tid[:-1]
-    start = np.maximum.accumulate(np.where(first, np.arange(n), 0))
+    return order, first, np.maximum.accumulate(np.where(first, np.arange(n), 0))
+
+
+def running_rows(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray,
+                 runs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(N,) bool: the rows in which the person runs. Along each track in time order a person starts running on a row
+    faster than RUN_ABOVE_MPS and walks again on one slower than WALK_BELOW_MPS (in between the gait stays as it
+    was; a track starts walking). ``runs``: :func:`_track_runs` of the same rows, if already known."""
+    order, _, start = runs if runs is not None else _track_runs(track_id, np.asarray(time_s, float))
+    v = np.asarray(speed_mps, float)[order]
+    n = len(v)
     decided = (v > RUN_ABOVE_MPS) | (v < WALK_BELOW_MPS)
     last = np.maximum.accumulate(np.where(decided, np.arange(n), -1))  # the latest row that decided the gait
     out = np.zeros(n, bool)
@@ -299,12 +306,13 @@ def gait_poses(track_id: np.ndarray, time_s: np.ndarray, speed_mps: np.ndarray, 
     rate = np.zeros(len(speed))
     walking = speed >= STANDING_BELOW_MPS
     rate[walking] = speed[walking] / stride_m(speed[walking], stature[walking])  # cycles per second
-    cycles, _ = cycle_phase(track_id, time_s, rate)
+    runs = _track_runs(track_id, np.asarray(time_s, float))
+    cycles, _ = cycle_phase(track_id, time_s, rate, runs)
     phase = np.mod(cycles + offset, 1.0)
     walk = np.floor(phase * WALK_PHASES).astype(np.int64) % WALK_PHASES
     run = WALK_PHASES + STAND_POSES + np.floor(phase * RUN_PHASES).astype(np.int64) % RUN_PHASES
     shift = np.floor(np.asarray(time_s, float) / WEIGHT_SHIFT_S + 3.0 * offset).astype(np.int64)
-    running = running_rows(track_id, time_s, speed)
+    running = running_rows(track_id, time_s, speed, runs)
     out = np.where(running, run, np.where(walking, walk, WALK_PHASES + np.mod(shift, STAND_POSES)))
     if umbrella is not None:
         out = np.where(np.asarray(umbrella, bool) & ~running, UMBRELLA_FIRST + out, out)
