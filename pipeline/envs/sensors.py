@@ -75,7 +75,7 @@ class LiveSensors:
         condition_config, _ = load_config(ConditionConfig, condition, "conditions")
         self.condition = Condition(condition_config)
         self.cameras, self.lidars = build_sensors(self.rig)
-        self.meshes = rig_actor_meshes(self.rig)
+        self.meshes = rig_actor_meshes(self.rig, self.condition.umbrellas > 0.0)
         self._world_key: tuple[str, int] | None = None
 
     def spaces(self) -> dict[str, spaces.Space]:

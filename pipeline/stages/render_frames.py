@@ -200,15 +200,15 @@ class _Shared:
 
 _STATE = ProcessCache()  # the _WorkerState of the render this process serves
 _SHARED = ProcessCache()  # its part without Embree, built before the workers fork (prepared_state)
-_MESHES = ProcessCache()  # the actor models of the last rig (its JSON) this process built them for
+_MESHES = ProcessCache()  # the actor models of the last rig (its JSON, with or without umbrellas) this process built
 _WORLDS = ProcessCache()  # the static world this process built, by the path it was pickled to
 
 
-def rig_actor_meshes(rig: RigConfig) -> ActorMeshes:
-    """The rig's actor models (:func:`pipeline.stages.rig.build_actor_meshes`), read once per process and rig:
-    the render stage reads them before it starts its workers (bad files fail early), and workers forked from it
-    find them here."""
-    return _MESHES.get(rig.model_dump_json(), lambda: build_actor_meshes(rig))
+def rig_actor_meshes(rig: RigConfig, umbrellas: bool = False) -> ActorMeshes:
+    """The rig's actor models (:func:`pipeline.stages.rig.build_actor_meshes`; ``umbrellas``: with the people's
+    umbrella poses), read once per process and rig: the render stage reads them before it starts its workers (bad
+    files fail early), and workers forked from it find them here."""
+    return _MESHES.get((rig.model_dump_json(), umbrellas), lambda: build_actor_meshes(rig, umbrellas))
 
 
 def remembered_world(path: Path, world: StaticWorld | None) -> contextlib.AbstractContextManager[None]:
@@ -245,8 +245,8 @@ def _shared(job: ShardJob) -> _Shared:
     cameras, lidars = build_sensors(job.rig)
     for camera in cameras:
         camera.sample_directions  # noqa: B018 -- computed and kept now (a cached property)
-    meshes = rig_actor_meshes(job.rig)
     condition = conditions.Condition(job.condition)
+    meshes = rig_actor_meshes(job.rig, condition.umbrellas > 0.0)
     trajectories = Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"), meshes,
                                                         job.seed, condition.umbrellas))
     return _Shared(world, cameras, lidars, condition, trajectories, meshes)

@@ -191,6 +191,8 @@ class ActorMeshes:
         overrides: class -> one mesh, or named models, in the unit box frame that replace all of the class's
             families.
         extra: class -> named models that join the class's families (after them), picked like them.
+        families: class -> built-in families that replace FAMILIES' for the class (e.g. the people with their
+            umbrella poses, :func:`umbrella_meshes`).
         Every mesh must span exactly [-0.5, 0.5] on every axis (use :func:`normalise_to_unit_box`), so that placed
         meshes fill their 3D boxes.
 
@@ -207,7 +209,8 @@ class ActorMeshes:
     """
 
     def __init__(self, overrides: Mapping[ObjectClass, Mesh | Sequence[Model]] | None = None,
-                 extra: Mapping[ObjectClass, Sequence[Model]] | None = None) -> None:
+                 extra: Mapping[ObjectClass, Sequence[Model]] | None = None,
+                 families: Mapping[ObjectClass, Sequence] | None = None) -> None:
         replaced = {ObjectClass(c): [Model(ObjectClass(c).value, m)] if isinstance(m, Mesh) else list(m)
                     for c, m in (overrides or {}).items()}
         added = {ObjectClass(c): list(m) for c, m in (extra or {}).items()}
@@ -233,7 +236,7 @@ class ActorMeshes:
         first_model, poses = [], []  # per family slot
         for code, object_class in enumerate(ObjectClass):
             self._first[code] = len(self.families)
-            builtin = () if object_class in replaced else FAMILIES[object_class]
+            builtin = () if object_class in replaced else (families or {}).get(object_class, FAMILIES[object_class])
             suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in builtin]
             for family in builtin:
                 first_model.append(len(self.models))
@@ -359,6 +362,22 @@ BODY_SIZED_CLASSES = (ObjectClass.PEDESTRIAN,)
 # Built once per installation and code version, with every model's hull and corner normals, then loaded (~50 ms
 # instead of ~3.3 s of CPU per process: pipeline.core.build_cache).
 DEFAULT_MESHES: ActorMeshes = cached("actor-meshes", lambda: ActorMeshes().complete())
+
+
+def umbrella_meshes() -> ActorMeshes:
+    """The built-in models with the people's umbrella poses too (:data:`pipeline.world.people.UMBRELLA_FAMILIES`),
+    for a rain that asks for umbrellas: built (and kept in the build cache under a name of its own, so that neither
+    set's file evicts the other's) only when asked for, so that a run without them holds none of those 264 meshes."""
+    global _UMBRELLA_MESHES
+    if _UMBRELLA_MESHES is None:
+        from pipeline.world.people import UMBRELLA_FAMILIES
+
+        _UMBRELLA_MESHES = cached("umbrella-actor-meshes", lambda: ActorMeshes(
+            families={ObjectClass.PEDESTRIAN: UMBRELLA_FAMILIES}).complete())
+    return _UMBRELLA_MESHES
+
+
+_UMBRELLA_MESHES: ActorMeshes | None = None
 
 
 def unit_to_world(boxes: Boxes3D) -> np.ndarray:

@@ -55,16 +55,20 @@ class PersonFamily:
     Attributes:
         name: the family's name; group: "man", "woman", "teen" or "child" (its stature's distribution,
             :data:`STATURE_M`); outfit: what the figure wears and carries; lean_deg: the trunk's forward lean walking;
-            umbrella: the canopy's material in the umbrella poses (walking and standing in the rain).
+            umbrella: the canopy's material of its umbrella poses (walking and standing in the rain), or None: no
+            umbrella poses (:data:`FAMILIES`; :data:`UMBRELLA_FAMILIES` have them).
     """
 
     name: str
     group: str
     outfit: Outfit
     lean_deg: float = 3.0
-    umbrella: str = "fabric_black"
+    umbrella: str | None = None
 
-    poses = WALK_PHASES + STAND_POSES + RUN_PHASES + UMBRELLA_POSES
+    @property
+    def poses(self) -> int:
+        """Walking, standing and running; and under the umbrella, for a family with one."""
+        return WALK_PHASES + STAND_POSES + RUN_PHASES + (UMBRELLA_POSES if self.umbrella is not None else 0)
 
     @property
     def __name__(self) -> str:
@@ -73,6 +77,8 @@ class PersonFamily:
     def __call__(self, pose: int = 0) -> Mesh:
         """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground; in a running pose's
         float, the lower sole :func:`pipeline.world.gait.run_clearance_m` above it."""
+        if not 0 <= pose < self.poses:
+            raise ValueError(f"{self.name}: pose {pose} outside 0 .. {self.poses - 1}")
         outfit = replace(self.outfit, umbrella=self.umbrella) if pose >= UMBRELLA_FIRST else self.outfit
         mesh = merge(figure(person_pose(pose, self.lean_deg), outfit), ObjectClass.PEDESTRIAN)
         lift = run_clearance_m(run_phase(pose)) if WALK_PHASES + STAND_POSES <= pose < UMBRELLA_FIRST else 0.0
@@ -137,8 +143,10 @@ UMBRELLAS = ("fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabr
              "fabric_black", "fabric_navy", "fabric_black", "fabric_beige", "fabric_black", "fabric_grey",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_red", "fabric_black", "fabric_white",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabric_black", "fabric_brown")
-FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True))
 PEDESTRIANS = FAMILIES
+# The same families with their umbrella poses: the meshes of a rain that asks for umbrellas
+# (pipeline.world.actors.umbrella_meshes); the others carry none, so that their meshes cost no memory.
+UMBRELLA_FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True))
 
 
 def person_statures(group: np.ndarray, track_id: np.ndarray, seed: int) -> np.ndarray:

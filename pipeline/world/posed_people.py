@@ -37,7 +37,8 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
         boxes: (R) the rows' boxes as simulated (SUMO's: centre at half the box height above the ground).
         seed: the run seed (statures and umbrellas are drawn from it).
         umbrellas: the share of people who walk and stand under an open umbrella (the condition's rain; each person
-            drawn once, :func:`umbrella_carriers`).
+            drawn once, :func:`umbrella_carriers`); ``meshes`` must then have the umbrella poses
+            (:func:`pipeline.world.actors.umbrella_meshes`), or a ValueError says so.
 
     Returns:
         (R) boxes: people's posed, others' with the length of :meth:`ActorMeshes.body_lengths`; (R,) int64 pose
@@ -68,6 +69,11 @@ def posed_boxes(meshes: ActorMeshes, actors: Actors, row_actor: np.ndarray, time
     a = row_actor[rows]
     carries = np.zeros(len(actors), bool)
     carries[people] = umbrella_carriers(actors.track_id[people], seed, umbrellas)
+    bare = sorted({meshes.families[f].__name__ for f in family[people[carries[people]]]
+                   if getattr(meshes.families[f], "umbrella", None) is None})
+    if bare:
+        raise ValueError(f"umbrellas {umbrellas}: the actor models of {', '.join(bare[:3])} have no umbrella poses "
+                         "(pipeline.world.actors.umbrella_meshes has them)")
     pose[rows] = gait_poses(actors.track_id[a], time_s[rows], speed_mps[rows], stature[a], offset[a], carries[a])
     model = meshes.family_models(family[a], pose[rows])
     scale = stature[a] / MODEL_STATURE_M

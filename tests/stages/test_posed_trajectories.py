@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from pipeline.core.config import ConditionConfig, load_config
 from pipeline.sensors.conditions import Condition
 from pipeline.stages.render_frames import ACTOR_COLUMNS, Trajectories, body_sized_trajectories
-from pipeline.world.actors import DEFAULT_MESHES
+from pipeline.world.actors import DEFAULT_MESHES, umbrella_meshes
 from pipeline.world.gait import UMBRELLA_FIRST, WALK_PHASES
 
 
@@ -48,8 +49,9 @@ def test_people_are_posed_per_row_and_the_rest_kept():
 
 def test_in_the_rain_the_person_walks_under_an_umbrella_that_the_box_encloses():
     """The rain's ``umbrellas`` (off unless asked for: the shipped conditions have none) reaches the posed
-    trajectories: with a share of 1 the walker takes the umbrella poses, taller by the canopy (~1.18 x), soles on the
-    ground; with 0 the same table poses as without rain."""
+    trajectories: with a share of 1 the walker takes the umbrella poses of the umbrella models (the default models
+    have none, and are refused), taller by the canopy (~1.18 x), soles on the ground; with 0 the same table poses as
+    without rain."""
     rain = load_config(ConditionConfig, "rain", "conditions")[0]
     assert Condition(rain).umbrellas == 0.0
     asked = rain.model_copy(update={"rain": rain.rain.model_copy(update={"umbrellas": 0.6})})
@@ -58,7 +60,10 @@ def test_in_the_rain_the_person_walks_under_an_umbrella_that_the_box_encloses():
     table = _table()
     dry = body_sized_trajectories(table, DEFAULT_MESHES, seed=4)
     pd.testing.assert_frame_equal(body_sized_trajectories(table, DEFAULT_MESHES, seed=4, umbrellas=0.0), dry)
-    wet = body_sized_trajectories(table, DEFAULT_MESHES, seed=4, umbrellas=1.0)
+    with pytest.raises(ValueError, match="no umbrella poses"):  # the default models carry none: no memory for them
+        body_sized_trajectories(table, DEFAULT_MESHES, seed=4, umbrellas=1.0)
+    assert all(getattr(f, "umbrella", None) is None for f in DEFAULT_MESHES.families)
+    wet = body_sized_trajectories(table, umbrella_meshes(), seed=4, umbrellas=1.0)
     person, before = wet[wet["cls"] == "pedestrian"], dry[dry["cls"] == "pedestrian"]
     np.testing.assert_array_equal(person["pose"], before["pose"] + UMBRELLA_FIRST)
     ratio = person["height_m"].to_numpy() / before["height_m"].to_numpy()

@@ -8,7 +8,7 @@ import pytest
 
 from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
-from pipeline.world.actors import ActorMeshes, Actors, actor_variants, place_actors
+from pipeline.world.actors import ActorMeshes, Actors, actor_variants, place_actors, umbrella_meshes
 from pipeline.world.gait import (
     MODEL_STATURE_M,
     RUN_ABOVE_MPS,
@@ -182,7 +182,8 @@ def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps, umbrellas):
     feet are on the ground (a runner's lower sole its clearance above it in the float), the pelvis over the
     trajectory point, and the body as tall as its stature in the pose (with the umbrella's canopy, ~1.18 x)."""
     actors, row_actor, t, v, rows = _person_rows(speed_mps=speed_mps)
-    boxes, pose = posed_boxes(MESHES, actors, row_actor, t, v, rows, seed=5, umbrellas=umbrellas)
+    meshes = umbrella_meshes() if umbrellas else MESHES
+    boxes, pose = posed_boxes(meshes, actors, row_actor, t, v, rows, seed=5, umbrellas=umbrellas)
     expected = {1.3: set(range(WALK_PHASES)), 0.0: set(range(WALK_PHASES, WALK_PHASES + STAND_POSES)),
                 3.0: set(RUNNING)}[speed_mps]
     if umbrellas and speed_mps != 3.0:
@@ -190,9 +191,9 @@ def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps, umbrellas):
     assert set(pose.tolist()) == expected
     per_row = Actors(np.arange(1, len(pose) + 1), ["pedestrian"] * len(pose), boxes, np.zeros((len(pose), 3)),
                      variant=actors.variant[row_actor], pose=pose)
-    geo = place_actors(per_row, MESHES)
-    family = MESHES.family_codes(actors)
-    stature = person_statures(np.array([MESHES.families[f].group for f in family]), actors.track_id, 5)
+    geo = place_actors(per_row, meshes)
+    family = meshes.family_codes(actors)
+    stature = person_statures(np.array([meshes.families[f].group for f in family]), actors.track_id, 5)
     for k in range(0, len(pose), 3 if speed_mps == 3.0 or umbrellas else 7):
         v_world = geo.vertices[geo.vertex_actor == k] - boxes.center[k]
         c, s = np.cos(boxes.yaw_rad[k]), np.sin(boxes.yaw_rad[k])
@@ -204,14 +205,14 @@ def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps, umbrellas):
         lift = run_clearance_m(run_phase(pose[k])) if pose[k] in RUNNING else 0.0
         assert boxes.center[k, 2] - 0.5 * boxes.size[k, 2] == pytest.approx(2.0 + lift * stature[a] / MODEL_STATURE_M,
                                                                              abs=0.01)  # soles on the ground
-        model = MESHES.family_models(family[a:a + 1], pose[k:k + 1])[0]
+        model = meshes.family_models(family[a:a + 1], pose[k:k + 1])[0]
         scale = stature[a] / MODEL_STATURE_M
-        pelvis_unit = -(MESHES.model_low[model][:2] + 0.5 * MESHES.model_extent[model][:2]) / MESHES.model_extent[
+        pelvis_unit = -(meshes.model_low[model][:2] + 0.5 * meshes.model_extent[model][:2]) / meshes.model_extent[
             model][:2]  # the pelvis (x = y = 0 as modelled) in the unit box
         pelvis = boxes.center[k, :2] + [c * pelvis_unit[0] * boxes.size[k, 0] - s * pelvis_unit[1] * boxes.size[k, 1],
                                         s * pelvis_unit[0] * boxes.size[k, 0] + c * pelvis_unit[1] * boxes.size[k, 1]]
         np.testing.assert_allclose(pelvis, rows.center[k, :2], atol=1e-9)
-        assert boxes.size[k, 2] == pytest.approx(MESHES.model_extent[model][2] * scale)
+        assert boxes.size[k, 2] == pytest.approx(meshes.model_extent[model][2] * scale)
         low, high = (1.12, 1.25) if pose[k] in UMBRELLA else (0.9, 1.05)
         assert low * stature[a] < boxes.size[k, 2] < high * stature[a]
 
