@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.core.classes import ObjectClass
 from pipeline.core.config import RigConfig
 from pipeline.core.digests import path_sha256
 from pipeline.sensors.camera import Camera
 from pipeline.sensors.lidar import Lidar
-from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Model, umbrella_meshes
+from pipeline.world.actors import DEFAULT_MESHES, ActorMeshes, Model, umbrella_families, umbrella_meshes
 
 
 def build_sensors(rig: RigConfig) -> tuple[list[Camera], list[Lidar]]:
@@ -34,9 +33,4 @@ def build_actor_meshes(rig: RigConfig, umbrellas: bool = False) -> ActorMeshes:
         mesh = load_user_mesh(entry.file, entry.cls, forward_axis=entry.forward_axis, up_axis=entry.up_axis,
                               material=entry.material, where=f"actor_meshes[{i}]")
         (replace if entry.replace else extra).setdefault(entry.cls, []).append(Model(Path(entry.path).stem, mesh))
-    families = None
-    if umbrellas:
-        from pipeline.world.people import UMBRELLA_FAMILIES
-
-        families = {ObjectClass.PEDESTRIAN: UMBRELLA_FAMILIES}
-    return ActorMeshes(replace, extra, families)
+    return ActorMeshes(replace, extra, umbrella_families() if umbrellas else None)

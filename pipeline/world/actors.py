@@ -370,11 +370,16 @@ def umbrella_meshes() -> ActorMeshes:
     set's file evicts the other's) only when asked for, so that a run without them holds none of those 264 meshes."""
     global _UMBRELLA_MESHES
     if _UMBRELLA_MESHES is None:
-        from pipeline.world.people import UMBRELLA_FAMILIES
-
-        _UMBRELLA_MESHES = cached("umbrella-actor-meshes", lambda: ActorMeshes(
-            families={ObjectClass.PEDESTRIAN: UMBRELLA_FAMILIES}).complete())
+        _UMBRELLA_MESHES = cached("umbrella-actor-meshes",
+                                  lambda: ActorMeshes(families=umbrella_families()).complete())
     return _UMBRELLA_MESHES
+
+
+def umbrella_families() -> dict[ObjectClass, tuple]:
+    """The ``families`` argument of :class:`ActorMeshes` that gives the people their umbrella poses."""
+    from pipeline.world.people import UMBRELLA_FAMILIES
+
+    return {ObjectClass.PEDESTRIAN: UMBRELLA_FAMILIES}
 
 
 _UMBRELLA_MESHES: ActorMeshes | None = None
