@@ -127,7 +127,7 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
             lid, gap, closing = _leader(env, truth) if not (terminated or truncated) else ("", np.nan, np.nan)
             columns = [_COL["present"], _COL["ds_m"], _COL["dv_mps"]]
             episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
-                        holds_leader(truth[_LEADER, columns], obs["neighbours"][_LEADER, columns]))
+                        holds_leader(truth[_LEADER], obs["neighbours"][_LEADER]))
             episode.add_slots(truth[_AHEAD][:, columns], obs["neighbours"][_AHEAD][:, columns])
             if terminated or truncated:
                 episode.collided = info.get("reason") == "collision"

@@ -12,8 +12,9 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
 - ``hard_brakes``: events of deceleration beyond 4 m/s^2 (``HARD_BRAKE_MPS2``; one event per run of steps);
 - ``first_tracked_range_m``: the median over leaders of the ground-truth gap at which the agent's observation
   first held each new leader (perceived runs; with ground truth, the range it appears in the observation). The
-  observation holds the leader when its leader slot is filled within LEADER_MATCH_SHARE of the true leader's offset
-  along the road (at least LEADER_MATCH_M; :func:`holds_leader`): a false track in the slot is not the leader;
+  observation holds the leader when its leader slot is filled and the slot's near face (ds less half its length)
+  and lateral offset lie within the tracker's own association gate of the true leader's (:func:`holds_leader`): a
+  false track in the slot, or one ranged on something else at about the leader's distance, is not the leader;
 - ``steady_tracked_range_m``: the same for the start of the first stretch of at least STEADY_S in which the
   observation holds the leader at every step: a single lucky hold far off (a track born from three hits, then lost)
   counts in the first tracked range, not here;
@@ -41,11 +42,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from pipeline.envs.features import NEIGHBOUR_FIELDS
+from pipeline.envs.tracker import TrackerParams
+
 HARD_BRAKE_MPS2 = -4.0
-# The observed leader is the true one when its offset along the road is within this share of the true one's, or
-# this many metres (a track's position error grows with range: the LiDAR median sits on the visible surfaces).
-LEADER_MATCH_SHARE = 0.2
-LEADER_MATCH_M = 5.0
+# The observed leader is the true one when it lies where the tracker would take the true one's position for a
+# measurement of it: the tracker's measurement noise and gate (its defaults, those of the closed loop).
+LEADER_GATE = TrackerParams()
+_PRESENT, _DS, _DD, _LENGTH = (NEIGHBOUR_FIELDS.index(f) for f in ("present", "ds_m", "dd_m", "length_m"))
 TTC_CRITICAL_S = 1.5
 STEADY_S = 1.0  # a leader is tracked steadily once held this long without a gap
 # Gap bins of the leader's recall by range (m; the last closes at the features' default range, 100 m).
@@ -90,13 +94,20 @@ class EpisodeLog:
         self.leader_seen.append(bool(leader_seen))
 
 
-def holds_leader(truth: np.ndarray, observed: np.ndarray) -> bool:
-    """Whether an observation's leader slot holds the true leader: both (present, ds, ...) rows filled and the
-    observed centre offset within max(LEADER_MATCH_M, LEADER_MATCH_SHARE x the true one) of the true one."""
-    if not (truth[0] > 0.5 and observed[0] > 0.5):
+def holds_leader(truth: np.ndarray, observed: np.ndarray, gate: TrackerParams = LEADER_GATE) -> bool:
+    """Whether an observation's leader slot holds the true leader. ``truth``, ``observed``: the leader slot's rows
+    in NEIGHBOUR_FIELDS order. Both filled, and the observed near face (ds - length / 2: the surface a LiDAR ranges,
+    so that a track's assumed length does not count as an error) and lateral offset within the tracker's gate of the
+    true ones: squared distance / sigma^2 <= ``gate.gate`` (chi-square, 2 dof), sigma = ``gate.sigma_m`` +
+    ``gate.sigma_per_m`` x the true leader's range, the standard deviation the tracker gives a LiDAR-ranged position
+    there (0.9 m at 30 m, 2.1 m at 90 m by default; the gate is ~3 sigma)."""
+    truth, observed = np.asarray(truth, np.float64), np.asarray(observed, np.float64)
+    if not (truth[_PRESENT] > 0.5 and observed[_PRESENT] > 0.5):
         return False
-    tolerance = max(LEADER_MATCH_M, LEADER_MATCH_SHARE * abs(float(truth[1])))
-    return bool(abs(float(observed[1]) - float(truth[1])) <= tolerance)
+    sigma = gate.sigma_m + gate.sigma_per_m * math.hypot(truth[_DS], truth[_DD])
+    along = (observed[_DS] - 0.5 * observed[_LENGTH]) - (truth[_DS] - 0.5 * truth[_LENGTH])
+    across = observed[_DD] - truth[_DD]
+    return bool((along * along + across * across) / (sigma * sigma) <= gate.gate)
 
 
 def _events(flags: np.ndarray) -> int:

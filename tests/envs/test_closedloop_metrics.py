@@ -40,15 +40,29 @@ def test_hard_brakes_count_events_not_steps():
     assert episode_metrics(_log([10.0] * 8, accels))["hard_brakes"] == 3.0
 
 
-def test_the_leader_is_held_only_by_a_track_where_it_is():
+def test_the_leader_is_held_only_by_a_track_where_the_tracker_would_take_it_for_the_leader():
+    """Rows (present, ds, dd, dv, length, width). The gate is chi-square(2 dof, 0.99) = 9.21 sigma^2, sigma = 0.3 +
+    0.02 x range: at 40 m sigma 1.1 m, a radius of 3.34 m around the true near face."""
     from pipeline.envs.closedloop_metrics import holds_leader
+    from pipeline.envs.tracker import TrackerParams
 
-    truth = np.array([1.0, 40.0, -2.0])
-    assert holds_leader(truth, np.array([1.0, 47.0, 0.0]))  # within 20 % of 40 m
-    assert not holds_leader(truth, np.array([1.0, 49.0, -2.0]))  # a false track further on
-    assert holds_leader(np.array([1.0, 10.0, 0.0]), np.array([1.0, 14.5, 0.0]))  # within 5 m near by
-    assert not holds_leader(truth, np.array([0.0, 40.0, -2.0]))  # nothing observed
-    assert not holds_leader(np.array([0.0, 0.0, 0.0]), np.array([1.0, 20.0, 0.0]))  # no leader to hold
+    radius = math.sqrt(-2 * math.log(0.01)) * (0.3 + 0.02 * 40.0)
+    truth = np.array([1.0, 40.0, 0.0, -2.0, 4.5, 1.8])
+    assert holds_leader(truth, np.array([1.0, 40.0 + 0.98 * radius, 0.0, 0.0, 4.5, 1.8]))
+    assert not holds_leader(truth, np.array([1.0, 40.0 + 1.02 * radius, 0.0, 0.0, 4.5, 1.8]))
+    assert holds_leader(truth, np.array([1.0, 40.0, -0.98 * radius, 0.0, 4.5, 1.8]))  # across the lane as along
+    assert not holds_leader(truth, np.array([1.0, 40.0 + 0.75 * radius, 0.75 * radius, 0.0, 4.5, 1.8]))  # 1.06 r
+    # A truck 12 m long taken for a car (a track's typical length, 4.5 m): the same rear, 3.75 m nearer centres.
+    truck = np.array([1.0, 46.0, 0.0, 0.0, 12.0, 2.5])
+    assert holds_leader(truck, np.array([1.0, 42.25, 0.1, 0.0, 4.5, 1.8]))
+    assert not holds_leader(truck, np.array([1.0, 46.0, 0.0, 0.0, 4.5, 1.8]))  # its centre, but the rear 3.75 m off
+    # Far off the gate widens with the range: 10 m beyond a leader at 90 m is not it (the 20 % window took it).
+    far = np.array([1.0, 90.0, 0.0, 0.0, 4.5, 1.8])
+    assert holds_leader(far, np.array([1.0, 95.0, 0.5, 0.0, 4.5, 1.8]))
+    assert not holds_leader(far, np.array([1.0, 100.0, 0.0, 0.0, 4.5, 1.8]))
+    assert holds_leader(far, np.array([1.0, 100.0, 0.0, 0.0, 4.5, 1.8]), TrackerParams(sigma_per_m=0.05))
+    assert not holds_leader(truth, np.array([0.0, 40.0, 0.0, -2.0, 4.5, 1.8]))  # nothing observed
+    assert not holds_leader(np.zeros(6), np.array([1.0, 20.0, 0.0, 0.0, 4.5, 1.8]))  # no leader to hold
 
 
 def test_first_tracked_range_is_the_gap_when_each_leader_is_first_seen():
