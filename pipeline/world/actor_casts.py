@@ -401,6 +401,136 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
     return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
 
 
+ORIGIN_BIN_RAD = float(np.deg2rad(0.5))  # the directions' bins of origin_lists: 0.5 deg (a camera pixel ~0.1 deg)
+
+
+@kernel("Tuple((int64[::1], int64[::1]))(float64, float64, float64, int64[::1], float64[:, ::1], float64[::1], "
+        "float64, int64, int64)")
+def origin_lists(o0, o1, o2, actors, centre, radius, step, n_el, n_az):
+    """For rays that share the origin o (a camera's, a LiDAR's): which actors each bin of directions may meet, as
+    compressed rows like :func:`cell_lists`' (cell_start (n_el * n_az + 1,), cell_item: positions in ``actors``,
+    ascending). A direction's bin is (elevation, azimuth) in steps of ``step`` radians from (-pi/2, -pi)
+    (:func:`_direction_bin`). A ray that meets the sphere (``centre``, ``radius``) of an actor at distance D > 1.5 r
+    from o leaves o within asin(r / D) of the centre's direction (:func:`_off_sphere` accepts no other: a ray it
+    keeps with the centre behind the origin needs D <= sqrt(2) r), so within that of its elevation and within
+    asin(sin a / cos(|elevation| + a)) of its azimuth; the actor is listed for the bins of that range grown by a
+    bin on every side (far beyond rounding), for every azimuth near the poles, and for every bin when D <= 1.5 r."""
+    n_cells = n_el * n_az
+    span = np.empty((actors.size, 4), np.int64)  # elevation bins [e0, e1), azimuth bins a0, a0 + 1, ... (n of them)
+    half_pi = 0.5 * np.pi
+    for b in range(actors.size):
+        a = actors[b]
+        v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
+        dist = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        r = radius[a]
+        if not dist > 1.5 * r:
+            span[b, 0], span[b, 1], span[b, 2], span[b, 3] = 0, n_el, 0, n_az
+            continue
+        cone = np.arcsin(r / dist)
+        elevation = np.arctan2(v2, np.sqrt(v0 * v0 + v1 * v1))
+        span[b, 0] = max(np.int64(np.floor((elevation - cone + half_pi) / step)) - 1, 0)
+        span[b, 1] = min(np.int64(np.floor((elevation + cone + half_pi) / step)) + 2, n_el)
+        if abs(elevation) + cone >= half_pi - 2.0 * step:
+            span[b, 2], span[b, 3] = 0, n_az
+            continue
+        half = np.arcsin(min(1.0, np.sin(cone) / np.cos(abs(elevation) + cone)))
+        azimuth = np.arctan2(v1, v0)
+        first = np.int64(np.floor((azimuth - half + np.pi) / step)) - 1
+        count = np.int64(np.floor((azimuth + half + np.pi) / step)) + 2 - first
+        if count >= n_az:
+            span[b, 2], span[b, 3] = 0, n_az
+        else:
+            span[b, 2], span[b, 3] = first % n_az, count
+    start = np.zeros(n_cells + 1, np.int64)
+    for b in range(actors.size):
+        for e in range(span[b, 0], span[b, 1]):
+            for k in range(span[b, 3]):
+                start[e * n_az + (span[b, 2] + k) % n_az + 1] += 1
+    for c in range(n_cells):
+        start[c + 1] += start[c]
+    item = np.empty(start[n_cells], np.int64)
+    fill = start[:-1].copy()
+    for b in range(actors.size):
+        for e in range(span[b, 0], span[b, 1]):
+            for k in range(span[b, 3]):
+                c = e * n_az + (span[b, 2] + k) % n_az
+                item[fill[c]] = b
+                fill[c] += 1
+    return start, item
+
+
+@kernel("int64(float64, float64, float64, float64, int64, int64)")
+def _direction_bin(d0, d1, d2, step, n_el, n_az):
+    """:func:`origin_lists`' bin of the direction d: elevation row times ``n_az`` plus azimuth column."""
+    elevation = np.arctan2(d2, np.sqrt(d0 * d0 + d1 * d1))
+    e = min(max(np.int64(np.floor((elevation + 0.5 * np.pi) / step)), 0), n_el - 1)
+    k = np.int64(np.floor((np.arctan2(d1, d0) + np.pi) / step)) % n_az
+    return e * n_az + k
+
+
+@kernel("boolean(float32[:, ::1], int64[::1])")
+def shared_origin(rays, rows):
+    """Whether the rays ``rows`` of the (N, 6) float32 ``rays`` all leave the same origin (none: False)."""
+    if rows.size == 0:
+        return False
+    i = rows[0]
+    for j in range(1, rows.size):
+        k = rows[j]
+        if rays[k, 0] != rays[i, 0] or rays[k, 1] != rays[i, 1] or rays[k, 2] != rays[i, 2]:
+            return False
+    return True
+
+
+def origin_bins(step: float = ORIGIN_BIN_RAD) -> tuple[int, int]:
+    """(n_el, n_az): how many elevation and azimuth bins of ``step`` radians :func:`origin_lists` uses."""
+    return int(np.ceil(np.pi / step)) + 1, int(np.ceil(2 * np.pi / step))
+
+
+@kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
+        "float64[:, :, ::1], float64[:, ::1], float64[::1], float64[::1], float64, int64, int64, int64[::1], "
+        "int64[::1])")
+def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, step, n_el, n_az, cell_start,
+                       cell_item):
+    """:func:`grid_actor_pairs` (without ``near_m``) of rays ``rows`` that all leave one origin, each ray tested
+    against the actors :func:`origin_lists` (``cell_start``, ``cell_item``, built for that origin) lists for its
+    direction's bin instead of those of the grid cells it crosses: the same tests in the same arithmetic, the
+    candidates in the same order (ascending in ``actors``), so the same pairs, in the same order, as both lists
+    hold every actor whose sphere the ray meets (tested against grid_actor_pairs). A camera's or a LiDAR's ray
+    crosses a cell of the grid every 2 m of its way; it has one bin."""
+    local = np.empty(6, np.float32)
+    count = 0
+    pair_row = np.empty(rows.size, np.int64)
+    pair_actor = np.empty(rows.size, np.int64)
+    pair_rays = np.empty((rows.size, 6), np.float32)
+    half = 0.5 + BOX_MARGIN
+    for j in range(rows.size):
+        i = rows[j]
+        o0, o1, o2 = np.float64(rays[i, 0]), np.float64(rays[i, 1]), np.float64(rays[i, 2])
+        d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
+        dd = d0 * d0 + d1 * d1 + d2 * d2
+        limit = np.float64(t_limit[j]) * 1.001 + 0.01
+        c = _direction_bin(d0, d1, d2, step, n_el, n_az)
+        for m in range(cell_start[c], cell_start[c + 1]):
+            a = actors[cell_item[m]]
+            v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
+            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
+                continue
+            _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
+            t_in = _unit_box_entry(local, half)
+            if not t_in <= limit:  # a miss (NaN) or beyond the limit
+                continue
+            if count == pair_row.size:
+                size = max(2 * count, 16)
+                pair_row, pair_actor, pair_rays = (_grown(pair_row, size), _grown(pair_actor, size),
+                                                   _grown_rows(pair_rays, size))
+            pair_row[count] = j
+            pair_actor[count] = a
+            for k in range(6):
+                pair_rays[count, k] = local[k]
+            count += 1
+    return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
+
+
 GRID_CELL_M = 2.0  # cells of actor_grid at least this wide ...
 GRID_MAX_CELLS = 250_000  # ... and at most about this many
 

@@ -45,9 +45,14 @@ from pipeline.core.jit import as_input, as_view_input, fma32, kernel
 from pipeline.world import smooth_normals
 from pipeline.world.actor_casts import (
     BOX_MARGIN,
+    ORIGIN_BIN_RAD,
     actor_grid,
     grid_actor_pairs,
     nearest_actor_hits,
+    origin_actor_pairs,
+    origin_bins,
+    origin_lists,
+    shared_origin,
     unit_frame_rays,
 )
 from pipeline.world.actors import (
@@ -393,6 +398,9 @@ class StaticScene:
         return self._sun_maps[key].candidates(x, y, z, rows)
 
 
+ORIGIN_MIN_RAYS = 1000  # rays from one origin worth a frame's lists of directions (a few ms to build)
+
+
 class FrameScene:
     """The world of one frame: a :class:`StaticScene` (shared) plus the frame's actors (one merged geometry).
 
@@ -438,6 +446,7 @@ class FrameScene:
         self._top_z = float(self.hull_vertices[:, 2].max()) if len(self.hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
         self._grid: tuple | None = None  # see _pairs
+        self._origin_lists: dict[tuple[float, float, float], tuple[np.ndarray, np.ndarray]] = {}  # see _pairs
 
     @functools.cached_property
     def geometry(self) -> ActorGeometry:
@@ -548,12 +557,24 @@ class FrameScene:
         the placed actors, less the pairs that cannot be hit at t <= ``t_limit`` ((K,) float64, inf: no limit), each
         ray tested only against the actors of the grid cells it crosses (:func:`grid_actor_pairs`; the grid is
         built once per frame). With ``near`` (occlusion tests only: it may keep a pair entered just beyond the
-        limit), a ray that reaches no farther than a cell takes the actors within its reach of its origin."""
+        limit), a ray that reaches no farther than a cell takes the actors within its reach of its origin. Many
+        rays from one origin (a camera's, a LiDAR's) take instead the actors listed for their direction's bin
+        (:func:`origin_actor_pairs`; the lists built once per frame and origin): the same pairs, without walking
+        the grid."""
         if not len(self._placed) or not len(sub):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 6), np.float32)
+        sub = as_input(sub, np.int64)
+        if not near and len(sub) >= ORIGIN_MIN_RAYS and shared_origin(rays, sub):
+            origin = tuple(float(v) for v in rays[sub[0], :3])
+            lists = self._origin_lists.get(origin)
+            if lists is None:
+                lists = self._origin_lists[origin] = origin_lists(*origin, self._placed, self._center, self._radius,
+                                                                   ORIGIN_BIN_RAD, *origin_bins())
+            return origin_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center, self._radius,
+                                      as_input(t_limit, np.float64), ORIGIN_BIN_RAD, *origin_bins(), *lists)
         if self._grid is None:
             self._grid = actor_grid(self._center, self._radius, self._placed)
-        return grid_actor_pairs(rays, as_input(sub, np.int64), self._placed, self._inv_linear, self._center,
+        return grid_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,
                                 self._radius, as_input(t_limit, np.float64), *self._grid,
                                 self._grid[2] if near else 0.0)
 

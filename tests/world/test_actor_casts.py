@@ -15,6 +15,10 @@ from pipeline.world.actor_casts import (
     cell_lists,
     grid_actor_pairs,
     nearest_actor_hits,
+    origin_actor_pairs,
+    origin_bins,
+    origin_lists,
+    shared_origin,
 )
 from pipeline.world.actors import Actors, unit_to_world
 from pipeline.world.scene import FrameScene, StaticScene
@@ -141,6 +145,74 @@ def test_grid_pairs_are_actor_pairs(spread_m, near_m):
     assert {(int(r), int(a)) for r, a in zip(full[0][within], full[1][within], strict=True)} <= got
     assert got <= {(int(r), int(a)) for r, a in zip(full[0][within | kept], full[1][within | kept], strict=True)}
     assert np.all(np.diff(pair_row) >= 0)
+
+
+@pytest.mark.parametrize("step_deg", [0.5, 4.0])
+def test_rays_from_one_origin_take_the_pairs_of_the_grid_from_their_direction_bin(step_deg):
+    """origin_actor_pairs (the actors listed for a ray's direction bin) against grid_actor_pairs (the actors of the
+    grid cells it crosses): the same arrays, with and without a limit per ray, for rays from one origin in every
+    direction (straight up and down, along the azimuth's seam at +-180 deg), of unit and other lengths, among
+    actors all around, above the origin, at the seam, and about the origin itself."""
+    rng = np.random.default_rng(int(step_deg * 10))
+    n = 300
+    centre = np.column_stack([rng.uniform(-150.0, 150.0, (n, 2)), rng.uniform(0.0, 3.0, n)])
+    centre[:4] = [[0.5, 0.2, 1.0], [0.0, 0.0, 9.0], [0.0, 0.0, -8.0], [-30.0, 0.0, 1.0]]  # about, above, below, seam
+    size = rng.uniform(0.5, 12.0, (n, 3))
+    size[:4] = [[4.5, 1.8, 1.5], [2.0, 2.0, 1.0], [2.0, 2.0, 1.0], [4.5, 1.8, 1.5]]
+    boxes = Boxes3D(centre, size, rng.uniform(-np.pi, np.pi, n))
+    affine = unit_to_world(boxes)
+    inv, c = np.ascontiguousarray(np.linalg.inv(affine[:, :, :3])), np.ascontiguousarray(affine[:, :, 3])
+    radius = 0.5 * np.linalg.norm(boxes.size, axis=1) * (1 + 2 * BOX_MARGIN) + 1e-6
+    d = rng.normal(size=(20000, 3))
+    d[:5000, 2] *= 0.05  # near the horizon, as a camera's and a LiDAR's
+    d[5000:5100, :2] = 0.0  # straight up or down
+    d[5100:5600, 1] *= 1e-4  # along the seam, on both sides
+    d[5100:5600, 0] = -np.abs(d[5100:5600, 0])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[10000:] *= rng.uniform(0.2, 5.0, (10000, 1))  # segments
+    rays = np.column_stack([np.tile([0.2, -0.1, 1.3], (len(d), 1)), d]).astype(np.float32)
+    rows, actors = np.arange(0, len(d), 2), np.sort(rng.choice(n, 250, replace=False))
+    actors[:4] = np.arange(4)
+    actors = np.sort(np.unique(actors))
+    grid = actor_grid(c, radius, actors)
+    step = float(np.deg2rad(step_deg))
+    lists = origin_lists(0.2, -0.1, 1.3, actors, c, radius, step, *origin_bins(step))
+    for limit in (np.full(len(rows), np.inf), rng.uniform(0.0, 60.0, len(rows))):
+        walked = grid_actor_pairs(rays, rows, actors, inv, c, radius, limit, *grid, 0.0)
+        binned = origin_actor_pairs(rays, rows, actors, inv, c, radius, limit, step, *origin_bins(step), *lists)
+        assert len(walked[0]) > 2000 and {0, 1, 2, 3} <= set(walked[1].tolist())
+        for a, b in zip(walked, binned, strict=True):
+            np.testing.assert_array_equal(a, b)
+    start, item = lists
+    assert np.count_nonzero(item == 0) == len(start) - 1  # the actor about the origin: every bin
+    _, n_az = origin_bins(step)
+    above, cone = np.count_nonzero(item == 1), np.arcsin(radius[1] / np.linalg.norm(c[1] - [0.2, -0.1, 1.3]))
+    assert above % n_az == 0 and above // n_az <= 2 * cone / step + 3  # the one above: every azimuth, its rows
+    assert shared_origin(rays, rows) and not shared_origin(rays, np.zeros(0, np.int64))
+    moved = rays.copy()
+    moved[rows[-1], 2] += np.float32(1e-3)
+    assert not shared_origin(moved, rows)
+
+
+def test_a_frame_scene_gives_rays_from_one_origin_the_grid_pairs():
+    """FrameScene._pairs takes the direction bins for many rays from one origin (a camera's): the same pairs."""
+    rng = np.random.default_rng(5)
+    n = 40
+    boxes = Boxes3D(np.column_stack([rng.uniform(-60, 60, n), rng.uniform(-8, 8, n), np.full(n, 0.75)]),
+                    np.tile([[4.5, 1.8, 1.5]], (n, 1)), rng.uniform(-np.pi, np.pi, n))
+    scene = FrameScene(StaticScene([]), Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, boxes,
+                                                np.full((n, 3), 0.5)), threads=1)
+    d = rng.normal(size=(5000, 3)) * [1.0, 1.0, 0.1]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rays = np.column_stack([np.tile([0.0, 0.0, 1.2], (len(d), 1)), d]).astype(np.float32)
+    sub, limit = np.arange(len(d)), rng.uniform(0.0, 80.0, len(d))
+    got = scene._pairs(rays, sub, limit)
+    assert len(scene._origin_lists) == 1
+    expected = grid_actor_pairs(rays, sub, scene._placed, scene._inv_linear, scene._center, scene._radius, limit,
+                                *actor_grid(scene._center, scene._radius, scene._placed), 0.0)
+    assert len(expected[0]) > 200
+    for a, b in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_cell_lists_clip_spans_and_keep_items_ascending():
