@@ -401,7 +401,7 @@ def grid_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, lo
     return pair_row[:count].copy(), pair_actor[:count].copy(), pair_rays[:count].copy()
 
 
-ORIGIN_BIN_RAD = float(np.deg2rad(0.5))  # the directions' bins of origin_lists: 0.5 deg (a camera pixel ~0.1 deg)
+ORIGIN_BIN_RAD = float(np.deg2rad(1.0))  # origin_lists' bins of directions (a camera pixel is ~0.1 deg)
 
 
 @kernel("Tuple((int64[::1], int64[::1]))(float64, float64, float64, int64[::1], float64[:, ::1], float64[::1], "
@@ -496,7 +496,9 @@ def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, 
     direction's bin instead of those of the grid cells it crosses: the same tests in the same arithmetic, the
     candidates in the same order (ascending in ``actors``), so the same pairs, in the same order, as both lists
     hold every actor whose sphere the ray meets (tested against grid_actor_pairs). A camera's or a LiDAR's ray
-    crosses a cell of the grid every 2 m of its way; it has one bin."""
+    crosses a cell of the grid every 2 m of its way; it has one bin. A bin lists the actors behind the ray's limit
+    too (where the walk stops at it): those whose sphere begins beyond the grown limit are dropped first, by one
+    comparison (the box test would drop them: the box lies in the sphere)."""
     local = np.empty(6, np.float32)
     count = 0
     pair_row = np.empty(rows.size, np.int64)
@@ -509,11 +511,16 @@ def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, 
         d0, d1, d2 = np.float64(rays[i, 3]), np.float64(rays[i, 4]), np.float64(rays[i, 5])
         dd = d0 * d0 + d1 * d1 + d2 * d2
         limit = np.float64(t_limit[j]) * 1.001 + 0.01
+        reach = limit * np.sqrt(dd)  # the farthest a pair's box may begin (inf without a limit)
         c = _direction_bin(d0, d1, d2, step, n_el, n_az)
         for m in range(cell_start[c], cell_start[c + 1]):
             a = actors[cell_item[m]]
             v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2
-            if _off_sphere(v0, v1, v2, v0 * v0 + v1 * v1 + v2 * v2, d0, d1, d2, dd, radius[a]):
+            v3 = v0 * v0 + v1 * v1 + v2 * v2
+            far = (reach + radius[a]) * 1.001 + 0.01
+            if v3 > far * far:  # its sphere, so its box, begins beyond the limit: the box test would drop it
+                continue
+            if _off_sphere(v0, v1, v2, v3, d0, d1, d2, dd, radius[a]):
                 continue
             _unit_ray(inv_linear[a], v0, v1, v2, d0, d1, d2, local)
             t_in = _unit_box_entry(local, half)

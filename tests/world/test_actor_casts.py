@@ -147,7 +147,7 @@ def test_grid_pairs_are_actor_pairs(spread_m, near_m):
     assert np.all(np.diff(pair_row) >= 0)
 
 
-@pytest.mark.parametrize("step_deg", [0.5, 4.0])
+@pytest.mark.parametrize("step_deg", [0.5, 1.0, 4.0])
 def test_rays_from_one_origin_take_the_pairs_of_the_grid_from_their_direction_bin(step_deg):
     """origin_actor_pairs (the actors listed for a ray's direction bin) against grid_actor_pairs (the actors of the
     grid cells it crosses): the same arrays, with and without a limit per ray, for rays from one origin in every
