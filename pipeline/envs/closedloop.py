@@ -107,6 +107,7 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
     import pipeline.envs  # noqa: F401  (registers the envs)
     from pipeline.envs.driver import ReferenceAgent
     from pipeline.envs.perception import PerceivedFeatures
+    from pipeline.envs.tracker import TrackerParams
 
     kwargs = {"scenario": scenario, "time_limit_s": config.episode_s, "vehicles": config.vehicles,
               "warmup_s": config.warmup_s, "record": record}
@@ -115,7 +116,8 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
     else:
         env = PerceivedFeatures(gym.make("roadsynth/Scenario-v0", sensors=["camera", "lidar"], rig=config.rig,
                                          condition=condition, **kwargs), detector,
-                                max_detections=config.max_detections)
+                                max_detections=config.max_detections,
+                                tracker=TrackerParams(birth_score=config.birth_score))
     try:
         obs, info = env.reset(seed=seed)
         agent = ReferenceAgent(env)

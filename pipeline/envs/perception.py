@@ -208,8 +208,8 @@ class PerceivedFeatures(gym.Wrapper):
         sizes = np.array([TYPICAL_SIZE_M.get(int(c), (4.5, 1.8)) for c in frame.category_ids[ranged]],
                          np.float64).reshape(-1, 2)
         centres = centre_from_surface(frame.position_m[ranged], sizes[:, 0])
-        tracks = self.tracker.update(Detections(lane_frame(centres, heading),
-                                                frame.boxes_px[ranged], frame.category_ids[ranged], sizes))
+        tracks = self.tracker.update(Detections(lane_frame(centres, heading), frame.boxes_px[ranged],
+                                                frame.category_ids[ranged], sizes, frame.scores[ranged]))
         inner = self.env.unwrapped
         space = inner.observation_space["neighbours"]
         rows = track_neighbour_rows(tracks, float(obs["ego"][3]), inner.lane_width_m(), float(space.high[0, 1]))

@@ -14,10 +14,16 @@ agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.
   (:func:`scipy.optimize.linear_sum_assignment`) on a cost that is the smaller of 1 - IoU of the image boxes (where
   both have one) and the squared Mahalanobis distance of the position over the gate (chi-square, 2 degrees of
   freedom, ``gate_probability``); a pair inside neither gate cannot be matched.
-- **Births and deaths**: an unmatched detection starts a tentative track (velocity 0, with the uncertainty of
-  ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at its first miss
-  before that; a confirmed track coasts on its prediction through up to ``max_misses`` consecutive misses and is
-  dropped at the next. Only confirmed tracks are reported, so a detection that appears once never becomes one.
+- **Confident and weak detections** (``birth_score``, 0 by default: every detection is confident), as ByteTrack
+  does (Zhang et al., "ByteTrack: Multi-Object Tracking by Associating Every Detection Box", ECCV 2022): the tracks
+  are first associated with the detections scoring at least ``birth_score``, then the tracks left over with the
+  weaker ones; only a confident detection left over starts a track. A weak detection can keep a track alive (a car
+  that fades into the dark or the fog) but never start one (glare, a far lamp, a shadow).
+- **Births and deaths**: an unmatched confident detection starts a tentative track (velocity 0, with the
+  uncertainty of ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at
+  its first miss before that; a confirmed track coasts on its prediction through up to ``max_misses`` consecutive
+  misses and is dropped at the next. Only confirmed tracks are reported, so a detection that appears once never
+  becomes one.
 
 Deterministic: track ids count up from 1 in the order tracks are born (detections in input order), and ties in
 the assignment resolve as scipy's solver does for a given matrix.
@@ -49,6 +55,7 @@ class TrackerParams:
     iou_gate: float = 0.1
     confirm_hits: int = 3
     max_misses: int = 5
+    birth_score: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "accel_psd", "sigma_m", "birth_speed_std_mps"):
@@ -56,6 +63,7 @@ class TrackerParams:
         check_number("TrackerParams", "sigma_per_m", self.sigma_per_m, allow_low=True)
         check_number("TrackerParams", "gate_probability", self.gate_probability, high=1.0, allow_high=False)
         check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
+        check_number("TrackerParams", "birth_score", self.birth_score, high=1.0, allow_low=True)
         for name, least in (("confirm_hits", 1), ("max_misses", 0)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < least:
@@ -76,12 +84,14 @@ class Detections:
         box_px: (K, 4) float64 image boxes x1, y1, x2, y2; NaN rows where a detection has none.
         class_id: (K,) int64 category ids.
         size_m: (K, 2) float64 (length, width) of each object (its class's typical size when not measured).
+        score: (K,) float64 the detector's scores, or None (every detection confident; see ``birth_score``).
     """
 
     position_m: np.ndarray
     box_px: np.ndarray
     class_id: np.ndarray
     size_m: np.ndarray
+    score: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> Detections:
@@ -89,7 +99,8 @@ class Detections:
 
     def __post_init__(self) -> None:
         k = len(self.position_m)
-        for name, shape in (("position_m", (k, 2)), ("box_px", (k, 4)), ("class_id", (k,)), ("size_m", (k, 2))):
+        shapes = [("position_m", (k, 2)), ("box_px", (k, 4)), ("class_id", (k,)), ("size_m", (k, 2))]
+        for name, shape in shapes + ([("score", (k,))] if self.score is not None else []):
             if np.shape(getattr(self, name)) != shape:
                 raise ValueError(f"Detections.{name}: expected shape {shape}, got {np.shape(getattr(self, name))}")
         if not np.isfinite(self.position_m).all():
@@ -178,19 +189,20 @@ class Tracker:
         return costs
 
     def update(self, det: Detections) -> list[Track]:
-        """Predict, associate, correct, and manage births and deaths; returns the confirmed tracks (by id)."""
-        from scipy.optimize import linear_sum_assignment
-
+        """Predict, associate (confident detections first, then the weak ones with the tracks left over), correct,
+        and manage births and deaths; returns the confirmed tracks (by id)."""
         self.predict()
         costs = self._costs(det)
+        k = len(det.position_m)
+        confident = (np.ones(k, bool) if det.score is None
+                     else np.asarray(det.score, np.float64) >= self.params.birth_score)
         matched_tracks, matched_dets = set(), set()
-        if costs.size:
-            rows, cols = linear_sum_assignment(costs)
-            for i, j in zip(rows, cols, strict=True):
-                if costs[i, j] < UNMATCHABLE:
-                    self._correct(self.tracks[i], det, j)
-                    matched_tracks.add(i)
-                    matched_dets.add(j)
+        for dets in (np.flatnonzero(confident), np.flatnonzero(~confident)):
+            rows = [i for i in range(len(self.tracks)) if i not in matched_tracks]
+            for i, j in self._assign(costs, rows, dets):
+                self._correct(self.tracks[i], det, j)
+                matched_tracks.add(i)
+                matched_dets.add(j)
         kept = []
         for i, t in enumerate(self.tracks):
             if i not in matched_tracks:
@@ -198,11 +210,23 @@ class Tracker:
                 if not t.confirmed or t.misses > self.params.max_misses:
                     continue
             kept.append(t)
-        for j in range(len(det.position_m)):
-            if j not in matched_dets:
+        for j in range(k):
+            if j not in matched_dets and confident[j]:
                 kept.append(self._birth(det, j))
         self.tracks = kept
         return sorted((t for t in self.tracks if t.confirmed), key=lambda t: t.track_id)
+
+    @staticmethod
+    def _assign(costs: np.ndarray, rows: list[int], cols: np.ndarray) -> list[tuple[int, int]]:
+        """The minimum-cost pairs (track, detection) of ``costs`` restricted to ``rows`` x ``cols``, less those
+        outside both gates (Hungarian method)."""
+        from scipy.optimize import linear_sum_assignment
+
+        if not len(rows) or not len(cols):
+            return []
+        sub = costs[np.ix_(rows, cols)]
+        found = linear_sum_assignment(sub)
+        return [(rows[a], int(cols[b])) for a, b in zip(*found, strict=True) if sub[a, b] < UNMATCHABLE]
 
     def _correct(self, t: Track, det: Detections, j: int) -> None:
         z = det.position_m[j]

@@ -125,3 +125,58 @@ def test_parameters_and_inputs_are_checked():
         TrackerParams(gate_probability=1.0)
     with pytest.raises(ValueError, match="position_m"):
         _dets((float("nan"), 0.0))
+
+
+def _scored(positions, scores) -> Detections:
+    det = _dets(*positions)
+    return Detections(det.position_m, det.box_px, det.class_id, det.size_m, np.array(scores, np.float64))
+
+
+def test_weak_detections_keep_a_track_but_never_start_one():
+    """ByteTrack's rule (birth_score 0.5): a weak detection (0.2) seen every frame never becomes a track; a car
+    confirmed from confident ones stays tracked, and corrected, on weak ones; with birth_score 0 the weak one is
+    tracked as before, and scores left out (None) count as confident."""
+    params = TrackerParams(dt_s=DT, birth_score=0.5)
+    tracker = Tracker(params)
+    for _ in range(10):
+        assert tracker.update(_scored([(40.0, 3.5)], [0.2])) == []  # a far lamp's glare, frame after frame
+    assert tracker.tracks == []
+    for k in range(5):
+        tracker.update(_scored([(20.0 + DT * k, 0.0)], [0.8]))
+    for k in range(5, 25):  # it fades: weak detections only, the object drifts away at 1 m/s
+        (track,) = tracker.update(_scored([(20.0 + DT * k, 0.0)], [0.2]))
+    assert track.track_id == 1  # the weak detections before it started none
+    assert track.misses == 0 and track.x[0] == pytest.approx(20.0 + DT * 24, abs=0.05)
+    assert track.x[2] == pytest.approx(1.0, abs=0.1)
+    plain = Tracker(TrackerParams(dt_s=DT))
+    for _ in range(3):
+        out = plain.update(_scored([(40.0, 3.5)], [0.2]))
+    assert len(out) == 1
+    unscored = Tracker(params)
+    for _ in range(3):
+        out = unscored.update(_dets((40.0, 3.5)))
+    assert len(out) == 1
+
+
+def test_confident_detections_are_associated_before_weak_ones():
+    """A track with a weak detection nearer its prediction and a confident one a little farther (both in its gate)
+    takes the confident one; the weak one, left over, starts nothing. Without the rule it takes the nearer one and
+    the confident one starts a track of its own."""
+    def run(birth_score):
+        tracker = Tracker(TrackerParams(dt_s=DT, birth_score=birth_score))
+        for _ in range(5):
+            tracker.update(_scored([(30.0, 0.0)], [0.9]))
+        (track,) = [t for t in tracker.update(_scored([(30.05, 0.0), (30.6, 0.1)], [0.1, 0.9])) if t.confirmed]
+        return tracker, track
+
+    tracker, track = run(0.5)
+    assert len(tracker.tracks) == 1 and track.x[0] > 30.2  # corrected towards the confident one
+    tracker, track = run(0.0)
+    assert len(tracker.tracks) == 2 and track.x[0] < 30.1
+
+
+def test_birth_score_is_checked():
+    with pytest.raises(ValueError, match="birth_score"):
+        TrackerParams(birth_score=1.5)
+    with pytest.raises(ValueError, match="score"):
+        Detections(np.zeros((2, 2)), np.zeros((2, 4)), np.zeros(2, np.int64), np.zeros((2, 2)), np.zeros(3))

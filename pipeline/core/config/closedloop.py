@@ -25,6 +25,9 @@ class ClosedLoopConfig(ConfigModel):
                           "(a model folder `roadsynth train` wrote); a relative PATH is relative to the config file")
     agent: str = Field("reference", description="the agent: reference (IDM + MOBIL, pipeline.envs.driver)")
     max_detections: int = Field(32, ge=1, le=1000)
+    birth_score: float = Field(0.0, ge=0.0, le=1.0, description="the tracker's birth_score: only detections scoring "
+                               "at least this start a track; weaker ones only continue one (0: every detection "
+                               "may start one; pipeline.envs.tracker)")
 
     @field_validator("seeds")
     @classmethod
