@@ -40,7 +40,7 @@ from pipeline.envs import features
 from pipeline.envs.options import EnvOptions, RewardWeights
 from pipeline.envs.reward import reward_terms
 from pipeline.traffic import networks
-from pipeline.traffic.demand import Demand, build_demand
+from pipeline.traffic.demand import Demand, build_demand, network_bus_stops
 from pipeline.traffic.parking import place_parked, with_parked
 from pipeline.traffic.roadgeometry import write_road_geometry
 from pipeline.traffic.simulation import (
@@ -322,7 +322,8 @@ class RoadsynthEnv(gym.Env):
             self._work_cleanup = weakref.finalize(self, shutil.rmtree, str(self._work), True)
             self._net_file = networks.build_network(self.config.network, self._work / "net")
             if self.sensors is not None:
-                write_road_geometry(self._net_file, self._work / "roads")
+                write_road_geometry(self._net_file, self._work / "roads",
+                                    network_bus_stops(self._net_file, self.config.demand))
         if run_seed not in self._demands:
             out = self._work / f"seed{run_seed}"
             out.mkdir()

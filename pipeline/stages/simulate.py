@@ -88,7 +88,7 @@ def write_run(out: Path, config: ScenarioConfig, seed: int, net_file: Path, dema
     tls = pd.DataFrame(tls_rows, columns=["frame", "time_s", "tls_id", "state"]).astype({"frame": np.int32})
     write_parquet(tls, out / "tls_states.parquet")
     write_parquet(demand.vehicles, out / "vehicles.parquet")
-    write_road_geometry(net_file, out / "roads")
+    write_road_geometry(net_file, out / "roads", demand.bus_stops)
     stats = _stats(trajectories, counters, config, ego_id, networks.network_summary(net_file))
     write_json(out / "stats.json", stats)
     return stats

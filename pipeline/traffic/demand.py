@@ -10,6 +10,7 @@ be recorded (``vehicles.parquet``) and tested against their distributions.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ import pandas as pd
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config import DemandConfig, DriverModel
 from pipeline.core.config.scenario import DeparturePattern
+from pipeline.traffic.busstops import choose_bus_stops, empty_bus_stops, waiting_people
+from pipeline.traffic.roadgeometry import read_network_geometry
 from pipeline.traffic.sumo_tools import run_python_tool
 
 log = logging.getLogger(__name__)
@@ -95,12 +98,17 @@ class Demand:
         vehicles: one row per vehicle: vehicle_id, cls, depart_s, route (space-separated edges),
             route_length_m, length_m, width_m, height_m, color_r/g/b, max_speed_mps and one column per
             DriverModel field.
+        persons: one row per person (see :func:`_pedestrians`): walkers, standing people, people waiting at the
+            bus stops.
         routes_file: the written SUMO route file.
+        bus_stops: the network's bus stops (:data:`pipeline.traffic.busstops.BUS_STOPS_SCHEMA`; none unless
+            ``config.bus_stops``), written beside the road geometry by the simulate stage.
     """
 
     vehicles: pd.DataFrame
     persons: pd.DataFrame
     routes_file: Path
+    bus_stops: pd.DataFrame = dataclasses.field(default_factory=empty_bus_stops)
 
     def actor_table(self) -> pd.DataFrame:
         """Static attributes of every actor, indexed by SUMO id: track_id (1.., stable), cls, size, colour."""
@@ -196,9 +204,21 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
     vehicles.insert(2, "depart_s", np.round(_depart_times(config, rng), 2))
     vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])
     persons = _pedestrians(config, net_file, work_dir, seed, rng)
+    stops = network_bus_stops(net_file, config)
+    if len(stops):
+        waiting = waiting_people(stops, config, len(persons), seed, CLOTHES, CLOTHES_SHARES)
+        persons = pd.concat([persons, waiting.astype(persons.dtypes.to_dict())], ignore_index=True)
     path = out_dir / ROUTES_FILE
     _write_routes(vehicles, persons, path, config.depart_pos.value)
-    return Demand(vehicles, persons, path)
+    return Demand(vehicles, persons, path, stops)
+
+
+def network_bus_stops(net_file: Path, config: DemandConfig) -> pd.DataFrame:
+    """The bus stops ``config.bus_stops`` asks for on the network of ``net_file``
+    (:func:`pipeline.traffic.busstops.choose_bus_stops`; none without it)."""
+    if config.bus_stops is None:
+        return empty_bus_stops()
+    return choose_bus_stops(read_network_geometry(net_file).lanes, config.bus_stops)
 
 
 def _pedestrians(config: DemandConfig, net_file: Path, work: Path, seed: int,

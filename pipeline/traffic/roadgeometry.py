@@ -6,6 +6,7 @@ The simulate stage calls :func:`write_road_geometry` on the generated network an
   :data:`LANES_SCHEMA`. Shapes are centre lines in the world frame (SUMO network coordinates, metres).
 - ``junctions.parquet``: one row per junction with its polygon, see :data:`JUNCTIONS_SCHEMA`.
 - ``traffic_lights.parquet``: one row per controlled link (tls_id, link_index), see :data:`TLS_SCHEMA`.
+- ``bus_stops.parquet``: the network's bus stops, see :mod:`pipeline.traffic.busstops` (no rows without).
 - ``network.json``: bounds (``convBoundary``), counts and flags.
 
 Lane ``kind`` comes from the lane's permissions (allow/disallow) and the edge function: ``crossing`` and
@@ -33,6 +34,7 @@ the walking area, heading across the crossing. ``linkIndex2`` (a crossing's reve
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import xml.etree.ElementTree as ET
@@ -45,6 +47,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.core.tables import read_parquet
+from pipeline.traffic.busstops import BUS_STOPS_SCHEMA
 
 log = logging.getLogger(__name__)
 
@@ -89,12 +92,15 @@ class RoadGeometry:
         junctions: one row per junction (:data:`JUNCTIONS_SCHEMA`).
         traffic_lights: one row per controlled link (:data:`TLS_SCHEMA`).
         network: bounds [xmin, ymin, xmax, ymax], has_pedestrians, counts (written as network.json).
+        bus_stops: one row per bus stop (:data:`pipeline.traffic.busstops.BUS_STOPS_SCHEMA`); none where the
+            scenario has none (and as the network file is read: the scenario chooses them).
     """
 
     lanes: pd.DataFrame
     junctions: pd.DataFrame
     traffic_lights: pd.DataFrame
     network: dict
+    bus_stops: pd.DataFrame = dataclasses.field(default_factory=lambda: BUS_STOPS_SCHEMA.empty_table().to_pandas())
 
 
 def parse_shape(text: str | None) -> np.ndarray:
@@ -281,10 +287,11 @@ def _write_parquet(frame: pd.DataFrame, schema: pa.Schema, path: Path) -> None:
                    write_page_checksum=True)  # read back checked (read_parquet): a flipped byte fails, naming the file
 
 
-def write_road_geometry(net_path: Path, out_dir: Path) -> None:
-    """Parse ``net_path`` and write lanes/junctions/traffic_lights parquet and network.json into ``out_dir``.
+def write_road_geometry(net_path: Path, out_dir: Path, bus_stops: pd.DataFrame | None = None) -> None:
+    """Parse ``net_path`` and write lanes/junctions/traffic_lights/bus_stops parquet and network.json into
+    ``out_dir``; ``bus_stops``: the scenario's stops on this network (:mod:`pipeline.traffic.busstops`; None: none).
 
-    Output is deterministic: the same network gives byte-identical files.
+    Output is deterministic: the same network and stops give byte-identical files.
     """
     geometry = read_network_geometry(net_path)
     out_dir = Path(out_dir)
@@ -292,17 +299,21 @@ def write_road_geometry(net_path: Path, out_dir: Path) -> None:
     _write_parquet(geometry.lanes, LANES_SCHEMA, out_dir / "lanes.parquet")
     _write_parquet(geometry.junctions, JUNCTIONS_SCHEMA, out_dir / "junctions.parquet")
     _write_parquet(geometry.traffic_lights, TLS_SCHEMA, out_dir / "traffic_lights.parquet")
+    _write_parquet(geometry.bus_stops if bus_stops is None else bus_stops, BUS_STOPS_SCHEMA,
+                   out_dir / "bus_stops.parquet")
     (out_dir / "network.json").write_text(json.dumps(geometry.network, indent=2, sort_keys=True) + "\n")
 
 
 def load_road_geometry(roads_dir: Path) -> RoadGeometry:
     """Read the tables written by :func:`write_road_geometry` (shape cells as (n,) float64 arrays)."""
     roads_dir = Path(roads_dir)
-    missing = [n for n in ("lanes.parquet", "junctions.parquet", "traffic_lights.parquet", "network.json")
-               if not (roads_dir / n).is_file()]
+    missing = [n for n in ("lanes.parquet", "junctions.parquet", "traffic_lights.parquet", "bus_stops.parquet",
+                           "network.json") if not (roads_dir / n).is_file()]
     if missing:
-        raise FileNotFoundError(f"{roads_dir}: road geometry incomplete, missing {', '.join(missing)}")
-    tables = [read_parquet(roads_dir / f"{n}.parquet") for n in ("lanes", "junctions", "traffic_lights")]
+        older = " (a simulation made before bus stops lacks it: simulate again)" \
+            if missing == ["bus_stops.parquet"] else ""
+        raise FileNotFoundError(f"{roads_dir}: road geometry incomplete, missing {', '.join(missing)}{older}")
+    tables = [read_parquet(roads_dir / f"{n}.parquet") for n in ("lanes", "junctions", "traffic_lights", "bus_stops")]
     for frame in tables:
         # Python strings, not pandas' Arrow-backed ones: the world build selects and reads these tables lane by lane,
         # and Arrow strings made that measurably slower (docs/performance.md).
@@ -312,4 +323,5 @@ def load_road_geometry(roads_dir: Path) -> RoadGeometry:
         for col in ("shape_x", "shape_y", "shape_z"):
             if col in frame:
                 frame[col] = [np.asarray(v, dtype=np.float64) for v in frame[col]]
-    return RoadGeometry(*tables, json.loads((roads_dir / "network.json").read_text()))
+    lanes, junctions, lights, stops = tables
+    return RoadGeometry(lanes, junctions, lights, json.loads((roads_dir / "network.json").read_text()), stops)

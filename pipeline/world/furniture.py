@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.traffic.busstops import SHELTER_LENGTH_M
 from pipeline.world.polygons import cumulative_length, interpolate, offset_polyline
 from pipeline.world.primitives import blobs, boxes, prisms
 from pipeline.world.roadmesh import lane_points
@@ -95,25 +96,34 @@ def signs(placer: PropPlacer) -> None:
     placer.take(pos[:, None, :2] + np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]])[None])
 
 
-def bus_shelters(placer: PropPlacer, share: float = 0.2, min_edge_m: float = 60.0) -> None:
-    """A bus shelter behind the sidewalk (away from the road) at the middle of some town edges."""
-    length_m, depth_m, height_m = 4.0, 1.5, 2.4
+def bus_shelters(placer: PropPlacer) -> None:
+    """A bus shelter behind the sidewalk (away from the road) at each of the network's bus stops (the road
+    geometry's ``bus_stops``, chosen by the scenario: pipeline.traffic.busstops), centred on the stop; where the
+    ground behind the sidewalk is taken (a building, a prop), the stop keeps only its sign, a flag on a pole at the
+    kerb (as many real stops are)."""
+    length_m, depth_m, height_m = SHELTER_LENGTH_M, 1.5, 2.4
+    walks = {lane.lane_id: lane for lanes in placer.edges.values()
+             for lane in lanes[lanes.kind == "sidewalk"].itertuples(index=False)}
     placed = blocked = 0
-    for _edge, walk in town_sidewalks(placer):
-        if placer.rng.random() >= share:
-            continue
-        back_line = offset_polyline(lane_points(walk), -(walk.width_m / 2 + 0.2 + depth_m / 2))
-        length = cumulative_length(back_line)[-1]
-        if length < min_edge_m:
-            continue
-        s = length / 2 + placer.rng.uniform(-10.0, 10.0)
-        (centre,), (direction,) = interpolate(back_line, np.array([s]))
+    flags = []
+    for stop in placer.geo.bus_stops.itertuples(index=False):
+        walk = walks.get(stop.lane_id)
+        if walk is None:
+            raise ValueError(f"bus stop {stop.stop_id}: {stop.lane_id!r} is not a sidewalk lane of this network "
+                             "(bus_stops.parquet and lanes.parquet of different networks?)")
+        centre_line = lane_points(walk)
+        share = stop.pos_m / max(float(walk.length_m), 1e-9)  # SUMO's length may differ from the shape's
+        back_line = offset_polyline(centre_line, -(walk.width_m / 2 + 0.2 + depth_m / 2))
+        (centre,), (direction,) = interpolate(back_line, np.array([share * cumulative_length(back_line)[-1]]))
         yaw = float(np.arctan2(direction[1], direction[0]))
         along, left = direction, np.array([-direction[1], direction[0]])
         u, v = np.meshgrid(np.linspace(-length_m / 2, length_m / 2, 9), np.linspace(-depth_m / 2, depth_m / 2, 4))
         pts = centre[:2] + u.reshape(-1, 1) * along + v.reshape(-1, 1) * left
         if not placer.free(pts).all():
             blocked += 1
+            kerb_line = offset_polyline(centre_line, walk.width_m / 2 - 0.35)
+            (pole,), (kerb_dir,) = interpolate(kerb_line, np.array([share * cumulative_length(kerb_line)[-1]]))
+            flags.append((pole, float(np.arctan2(-kerb_dir[1], -kerb_dir[0]))))  # facing the oncoming traffic
             continue
         placed += 1
         z = centre[2]
@@ -133,7 +143,15 @@ def bus_shelters(placer: PropPlacer, share: float = 0.2, min_edge_m: float = 60.
         placer.parts["building"].add(*boxes(bench, np.array([[2.0, 0.4, 0.45]]), yaws), "concrete")
         placer.take(np.array([[centre[:2] + a * along * (length_m / 2 + 0.5) + b * left * (depth_m / 2 + 0.3)
                              for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]]))
-    log.info("bus shelters: %d placed, %d not (the ground behind the sidewalk was taken)", placed, blocked)
+    if flags:
+        pos, yaw = np.array([f[0] for f in flags]), np.array([f[1] for f in flags])
+        placer.parts["pole"].add(*prisms(pos, np.full(len(pos), 0.035), np.full(len(pos), 2.9), 6), "metal")
+        centre = pos + np.array([0.0, 0.0, 2.55])
+        flag = np.array([[-0.25, -0.3], [0.25, -0.3], [0.25, 0.3], [-0.25, 0.3]])
+        placer.parts["pole"].add(*vertical_plates(centre, yaw, flag, 0.05, back=True), "metal")
+        placer.parts["pole"].add(*vertical_plates(centre, yaw, flag, 0.055), "plate")
+        placer.take(pos[:, None, :2] + np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]])[None])
+    log.info("bus stops: %d shelters, %d flags only (the ground behind the sidewalk was taken)", placed, blocked)
 
 
 def bushes(placer: PropPlacer) -> None:

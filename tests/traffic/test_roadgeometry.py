@@ -98,7 +98,8 @@ def test_written_files_deterministic_and_round_trip(tmp_path: Path) -> None:
     write_road_geometry(net, tmp_path / "r1")
     write_road_geometry(net, tmp_path / "r2")
     names = sorted(p.name for p in (tmp_path / "r1").iterdir())
-    assert names == ["junctions.parquet", "lanes.parquet", "network.json", "traffic_lights.parquet"]
+    assert names == ["bus_stops.parquet", "junctions.parquet", "lanes.parquet", "network.json",
+                     "traffic_lights.parquet"]
     for name in names:
         assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes(), name
     schema = pq.read_schema(tmp_path / "r1" / "lanes.parquet")

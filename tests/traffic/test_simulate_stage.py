@@ -16,7 +16,7 @@ from tests.conftest import tree_hashes
 EXPECTED_FILES = {
     "network.net.xml", "demand.rou.xml", "run.sumocfg", "trajectories.parquet", "tls_states.parquet",
     "vehicles.parquet", "stats.json", "meta.json", "roads/lanes.parquet", "roads/junctions.parquet",
-    "roads/traffic_lights.parquet", "roads/network.json",
+    "roads/traffic_lights.parquet", "roads/bus_stops.parquet", "roads/network.json",
 }
 
 
@@ -87,9 +87,12 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     traj = pd.read_parquet(tmp_path / "urban" / "trajectories.parquet")
     assert (traj["cls"] == "pedestrian").any()
     departs = [float(p.get("depart")) for p in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person")]
-    assert len(departs) == config.demand.pedestrians + config.demand.standing_pedestrians
+    bus_stops = pd.read_parquet(tmp_path / "urban" / "roads" / "bus_stops.parquet")
+    others = config.demand.pedestrians + config.demand.standing_pedestrians
+    waiting = len(departs) - others  # at the bus stops (pipeline.traffic.busstops)
+    assert len(bus_stops) > 5 and waiting > len(bus_stops)
     stops = list(ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("stop"))
-    assert 0 < len(stops) <= config.demand.standing_pedestrians  # those who stand first
+    assert 0 < len(stops) - waiting <= config.demand.standing_pedestrians  # those who stand first
     # Those standing now stand on their sidewalk (SUMO draws them 3 m to the right of its centre line, in the verge).
     lanes = list(ET.parse(tmp_path / "urban" / "network.net.xml").getroot().iter("lane"))
     shapes = {lane.get("id"): np.array([[float(v) for v in xy.split(",")[:2]] for xy in lane.get("shape").split()])
@@ -116,7 +119,7 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     pairs = 0
     groups: dict[tuple, list[str]] = {}
     for person in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person"):
-        if person.find("param") is not None:
+        if person.find("param") is not None and int(person.get("id")[3:]) < others:
             groups.setdefault((person.get("depart"), person.find("stop").get("lane")), []).append(person.get("id"))
     frame0 = traj[traj["frame"] == 0].set_index("actor_id")
     for ids in groups.values():
@@ -147,6 +150,29 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
         assert np.cos(row["yaw_rad"] - (along - face)) > 0.999
         alone += 1
     assert alone > 0
+    # The people at the bus stops stand at their places (dy right of the sidewalk's centre line: towards the shelter,
+    # or at the kerb) and face their way, all the run long; SUMO places a person's front, so the recorded centre lies
+    # half a person's length behind the place along the way it faces.
+    for person in ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("person"):
+        if int(person.get("id")[3:]) < others:
+            continue
+        lane, pos = person.find("stop").get("lane"), float(person.find("stop").get("endPos"))
+        assert lane in set(bus_stops.lane_id)
+        stop = bus_stops[bus_stops.lane_id == lane].iloc[0]
+        assert abs(pos - stop.pos_m) <= 2.5 + 0.16
+        _, dy, face = (float(v) for v in person.find("param").get("value").split())
+        track = traj[traj["actor_id"] == person.get("id")]
+        assert len(track) == traj["frame"].nunique() and (track["speed_mps"] == 0.0).all()
+        row, shape = track.iloc[0], shapes[lane]
+        xy = (row["x_m"], row["y_m"])
+        seg = np.argmin([_distance_to_polyline(xy, shape[i:i + 2]) for i in range(len(shape) - 1)])
+        direction = (shape[seg + 1] - shape[seg]) / np.linalg.norm(shape[seg + 1] - shape[seg])
+        along = np.arctan2(direction[1], direction[0])
+        assert np.cos(row["yaw_rad"] - (along - face)) > 0.999
+        front = np.array([row["x_m"], row["y_m"]]) + 0.5 * row["length_m"] * np.array([np.cos(row["yaw_rad"]),
+                                                                                        np.sin(row["yaw_rad"])])
+        right = np.array([direction[1], -direction[0]])
+        assert (front - shape[seg]) @ right == pytest.approx(dy, abs=0.05)
     last_frame_s = 30.0 + 1.0 - 0.1  # the run stops after the last recorded frame
     assert stats["persons_inserted"] == sum(d <= last_frame_s + 1e-9 for d in departs)
     tls = pd.read_parquet(tmp_path / "urban" / "tls_states.parquet")

@@ -169,6 +169,19 @@ class DepartPosition(str, enum.Enum):
     RANDOM_FREE = "random_free"  # at a random free position along the edge
 
 
+class BusStopConfig(_Model):
+    """Bus stops on the network's sidewalks, with a shelter behind each, and people waiting at them
+    (:mod:`pipeline.traffic.busstops`). The stops are the network's: the same for every seed of a scenario."""
+
+    share: float = Field(0.2, ge=0.0, le=1.0, description="the share of sidewalks (of at least min_sidewalk_m) "
+                         "with a stop, near their middle")
+    min_sidewalk_m: float = Field(60.0, ge=10.0, description="no stop on a sidewalk shorter than this")
+    waiting_mean: float = Field(0.0, ge=0.0, le=7.0, description="people waiting at a stop when the run starts: "
+                                "the mean of a Poisson distribution (at most 7, the places along a stop)")
+    waiting_s: Distribution = Field(Uniform(low=180.0, high=900.0),
+                                    description="how long a waiting person stands before walking on, seconds")
+
+
 class DemandConfig(_Model):
     """Background traffic. ``vehicles`` vehicles depart in ``[0, depart_window_s]`` on random routes."""
 
@@ -191,6 +204,8 @@ class DemandConfig(_Model):
     standing_s: Distribution = Field(Uniform(low=60.0, high=300.0),
                                      description="how long a standing pedestrian stands after departing, seconds")
     parked: ParkedConfig | None = Field(None, description="vehicles parked in the network's parking lanes")
+    bus_stops: BusStopConfig | None = Field(None, description="bus stops with shelters on the sidewalks, and the "
+                                            "people waiting at them")
 
     @model_validator(mode="after")
     def _check_classes(self) -> DemandConfig:
