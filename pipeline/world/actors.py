@@ -109,6 +109,9 @@ class Actors:
         return np.array([order.index(c) for c in self.object_class], dtype=np.int32)
 
 
+RARE_FAMILY_TAG = 0x5EA7  # the draw that picks a family with a share (ActorMeshes.family_codes)
+
+
 def actor_variants(track_id: np.ndarray, seed: int) -> np.ndarray:
     """(N,) uint32 per-actor random numbers from (run seed, track id): SplitMix64's finaliser of their mix, so an
     actor draws the same number in every frame and shard, and other seeds draw others."""
@@ -233,11 +236,13 @@ class ActorMeshes:
         # Per class code: its first family slot, and each of its families' (low, high) suitable length in metres.
         self._first = np.zeros(len(ObjectClass), np.int64)
         self._suits: list[np.ndarray] = []
+        self._shares: list[np.ndarray] = []  # per class, each family's share where it is picked by one (else 0)
         first_model, poses = [], []  # per family slot
         for code, object_class in enumerate(ObjectClass):
             self._first[code] = len(self.families)
             builtin = () if object_class in replaced else (families or {}).get(object_class, FAMILIES[object_class])
             suits = [SUITS_LENGTH_M.get(f, (0.0, np.inf)) for f in builtin]
+            shares = [float(getattr(f, "share", 0.0)) for f in builtin]
             for family in builtin:
                 first_model.append(len(self.models))
                 poses.append(family_poses(family))
@@ -250,9 +255,11 @@ class ActorMeshes:
                 poses.append(1)
                 self.families.append(model)
                 suits.append((0.0, np.inf))
+                shares.append(0.0)
                 extent = np.ones(3) if model.extent_m is None else np.asarray(model.extent_m, float)
                 self._add_model(object_class, model.mesh, model.name, extent, None, 0, model.extent_m is not None)
             self._suits.append(np.asarray(suits, np.float64).reshape(-1, 2))
+            self._shares.append(np.asarray(shares, np.float64))
         self._family_first_model = np.asarray(first_model, np.int64)
         self._family_poses = np.asarray(poses, np.int64)
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
@@ -306,20 +313,29 @@ class ActorMeshes:
         return self.models[int(self._first[list(ObjectClass).index(ObjectClass(object_class))])]
 
     def family_codes(self, actors: Actors) -> np.ndarray:
-        """(N,) int64 each actor's family (index into :attr:`families`): among its class's families whose length range
-        holds the actor's length (all of them where none does), the one at ``variant`` modulo their number."""
+        """(N,) int64 each actor's family (index into :attr:`families`). A family with a ``share`` (the wheelchair
+        users among the pedestrians) is an actor's where an independent draw from its variant (:func:`actor_variants`
+        of it, RARE_FAMILY_TAG) falls within that share; the others pick, among their class's other families whose
+        length range holds the actor's length (all of them where none does), the one at ``variant`` modulo their
+        number, so that a family with a share leaves every other actor's family as it was without it."""
         codes = actors.class_codes
         out = np.zeros(len(actors), np.int64)
         length = actors.boxes.size[:, 0] if len(actors) else np.zeros(0)
         for code in np.unique(codes):
             idx = np.flatnonzero(codes == code)
-            suits = self._suits[code]
-            ok = (length[idx, None] >= suits[None, :, 0]) & (length[idx, None] < suits[None, :, 1])
-            ok[~ok.any(axis=1)] = True
+            suits, share = self._suits[code], self._shares[code]
+            rare = share > 0.0
+            ok = (length[idx, None] >= suits[None, :, 0]) & (length[idx, None] < suits[None, :, 1]) & ~rare[None, :]
+            ok[~ok.any(axis=1)] = ~rare if (~rare).any() else True
             count = ok.sum(axis=1)
             pick = actors.variant[idx].astype(np.int64) % count  # the pick-th suitable family
             rank = np.cumsum(ok, axis=1) - 1
             family = np.argmax(ok & (rank == pick[:, None]), axis=1)
+            if rare.any():
+                draw = actor_variants(actors.variant[idx], RARE_FAMILY_TAG) / 2.0**32
+                which = np.searchsorted(np.cumsum(share[rare]), draw, side="right")
+                chosen = which < rare.sum()
+                family[chosen] = np.flatnonzero(rare)[which[chosen]]
             out[idx] = self._first[code] + family
         return out
 

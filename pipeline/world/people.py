@@ -46,6 +46,7 @@ from pipeline.world.gait import (
 )
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import merge
+from pipeline.world.wheelchairs import WHEELCHAIRS
 
 
 @dataclass(frozen=True)
@@ -143,10 +144,14 @@ UMBRELLAS = ("fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabr
              "fabric_black", "fabric_navy", "fabric_black", "fabric_beige", "fabric_black", "fabric_grey",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_red", "fabric_black", "fabric_white",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabric_black", "fabric_brown")
-PEDESTRIANS = FAMILIES
+# Every pedestrian family: the walking people, then the wheelchair users (pipeline.world.wheelchairs), picked by their
+# share instead of uniformly (pipeline.world.actors.ActorMeshes.family_codes).
+PEDESTRIANS = FAMILIES + WHEELCHAIRS
 # The same families with their umbrella poses: the meshes of a rain that asks for umbrellas
-# (pipeline.world.actors.umbrella_meshes); the others carry none, so that their meshes cost no memory.
-UMBRELLA_FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True))
+# (pipeline.world.actors.umbrella_meshes); the others carry none, so that their meshes cost no memory. A wheelchair
+# user's "umbrella poses" hold no umbrella (both hands are on the rims): the layout of poses is the same.
+UMBRELLA_FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True)) + tuple(
+    replace(w, umbrella="fabric_black") for w in WHEELCHAIRS)
 
 
 def person_statures(group: np.ndarray, track_id: np.ndarray, seed: int) -> np.ndarray:

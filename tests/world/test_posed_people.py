@@ -27,7 +27,7 @@ from pipeline.world.gait import (
     stride_m,
     walking_pose,
 )
-from pipeline.world.people import FAMILIES, STATURE_M, person_statures
+from pipeline.world.people import FAMILIES, PEDESTRIANS, STATURE_M, person_statures
 from pipeline.world.posed_people import posed_boxes, umbrella_carriers
 
 MESHES = ActorMeshes()
@@ -218,7 +218,8 @@ def test_boxes_enclose_the_posed_body_in_every_pose(speed_mps, umbrellas):
 
 
 def test_every_family_is_picked_and_others_keep_their_boxes():
-    """Persons' families cover all of FAMILIES; a car's row keeps its box and pose 0."""
+    """Persons' families cover all of PEDESTRIANS (the walking families and the wheelchair users); a car's row keeps
+    its box and pose 0."""
     people = 400
     tracks = np.arange(1, people + 2)
     classes = ["pedestrian"] * people + ["car"]
@@ -227,10 +228,30 @@ def test_every_family_is_picked_and_others_keep_their_boxes():
     boxes = Boxes3D(np.zeros((people + 1, 3)), sizes, np.zeros(people + 1))
     actors = Actors(tracks, classes, boxes, np.zeros((people + 1, 3)), variant=actor_variants(tracks, 9))
     names = {MESHES.families[f].__name__ for f in MESHES.family_codes(actors)[:people]}
-    assert names == {f.name for f in FAMILIES}
+    assert names == {f.name for f in PEDESTRIANS}
     out, pose = posed_boxes(MESHES, actors, np.arange(people + 1), np.zeros(people + 1), np.ones(people + 1), boxes, 9)
     np.testing.assert_array_equal(out.size[-1], [4.5, 1.8, 1.5])
     assert pose[-1] == 0 and MESHES.model_class[MESHES.model_codes(actors)[-1]] == ObjectClass.CAR
+
+
+def test_wheelchair_users_are_their_share_and_leave_everyone_else_their_family():
+    """A family with a share (the wheelchair users, 0.5 % each) is picked by a draw of its own: over 40,000 people
+    each is within binomial bounds of its share, and every other person has the family they have without it."""
+    from pipeline.world.wheelchairs import WHEELCHAIRS
+
+    n = 40000
+    tracks = np.arange(1, n + 1)
+    boxes = Boxes3D(np.zeros((n, 3)), np.tile([0.215, 0.478, 1.719], (n, 1)), np.zeros(n))
+    actors = Actors(tracks, ["pedestrian"] * n, boxes, np.zeros((n, 3)), variant=actor_variants(tracks, 4))
+    names = np.array([MESHES.families[f].__name__ for f in MESHES.family_codes(actors)])
+    walking = ActorMeshes(families={ObjectClass.PEDESTRIAN: FAMILIES})
+    without = np.array([walking.families[f].__name__ for f in walking.family_codes(actors)])
+    seated = np.isin(names, [w.name for w in WHEELCHAIRS])
+    for family in WHEELCHAIRS:
+        share = np.mean(names == family.name)
+        assert abs(share - family.share) < 4 * np.sqrt(family.share * (1 - family.share) / n)
+    np.testing.assert_array_equal(names[~seated], without[~seated])
+    assert set(without) == {f.name for f in FAMILIES}
 
 
 def test_a_bicycles_cranks_turn_with_the_distance_ridden():
