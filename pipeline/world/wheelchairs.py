@@ -19,9 +19,9 @@ phases: a push over the rims' top from 20 deg behind it to 40 deg ahead for 45 %
 lifted back over the rims (the semicircular pattern, one of the four patterns of Boninger et al., "Propulsion patterns
 and pushrim biomechanics in manual wheelchair propulsion", Arch. Phys. Med. Rehabil. 83, 2002; the contact angle and
 the push's share of the cycle are our choice, within the ranges such studies report), the trunk leaning forward as
-the hands push and back as they return; the STAND_POSES sit still (hands on the rims, on the thighs, one of each); the RUN_PHASES
-push faster (the same cycle, leaning 8 deg more); a family with umbrella poses (rain) repeats the walking and still
-ones, without an umbrella (a wheelchair user needs both hands for the rims).
+the hands push and back as they return; the STAND_POSES sit still (hands on the rims, on the thighs, one of each);
+the RUN_PHASES push faster (the same cycle, leaning 8 deg more); a family with umbrella poses (rain) repeats the
+walking and still ones, without an umbrella (a wheelchair user needs both hands for the rims).
 """
 
 from __future__ import annotations

@@ -67,9 +67,9 @@ def test_the_hands_push_on_the_rims_then_come_back_over_them():
 
 def test_the_poses_follow_a_walking_familys_layout():
     """As many poses as a walking family (with umbrella poses in the rain's set, which hold none: the same meshes
-    as the walking and still ones), a push cycle over the walk phases, still poses that do not move the chair."""
+    as the walking and still ones), and the arms moving through the push cycle."""
     walking = FAMILIES[0]
-    rainy = [f for f in UMBRELLA_FAMILIES if f.name == WHEELCHAIRS[0].name][0]
+    rainy = next(f for f in UMBRELLA_FAMILIES if f.name == WHEELCHAIRS[0].name)
     assert WHEELCHAIRS[0].poses == walking.poses and rainy.poses == walking.poses + UMBRELLA_POSES
     for k in range(WALK_PHASES + STAND_POSES):
         np.testing.assert_array_equal(rainy(UMBRELLA_FIRST + k).vertices, WHEELCHAIRS[0](k).vertices)
