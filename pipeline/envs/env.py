@@ -436,7 +436,8 @@ class RoadsynthEnv(gym.Env):
         """The run's actor table (Demand.actor_table) and parked vehicles, as simulate builds them (once per seed)."""
         if self._tables_seed != self._run_seed:
             _, _, demand = self._demands[self._run_seed]
-            self._tables = demand.actor_table(), place_parked(self.config.demand, self._net_file, self._run_seed)
+            self._tables = demand.actor_table(), place_parked(self.config.demand, self._net_file, self._run_seed,
+                                                              demand.bus_stops)
             self._tables_seed = self._run_seed
         return self._tables
 

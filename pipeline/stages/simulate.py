@@ -80,7 +80,7 @@ def write_run(out: Path, config: ScenarioConfig, seed: int, net_file: Path, dema
     holds the network, the demand and run.sumocfg); returns the stats. The recording comes from
     :class:`pipeline.traffic.simulation.RunRecorder` (``run`` here, or the driving environment's ``record=``)."""
     actors = demand.actor_table()
-    parked = place_parked(config.demand, net_file, seed)
+    parked = place_parked(config.demand, net_file, seed, demand.bus_stops)
     trajectories = with_parked(to_trajectories(vehicles, persons, actors, ego_id), parked,
                                int(actors["track_id"].max()) + 1)
     write_parquet(trajectories, out / "trajectories.parquet")

@@ -14,7 +14,9 @@ within ``end_clearance_m`` of the lane's end is not used, so no vehicle stands o
 (which lie beyond the lane ends). Vehicles of one lane never overlap (slots are disjoint along the line), and a
 vehicle lies inside its lane's width (its right side ``kerb_gap_m`` from the kerb edge, its left side inside
 the lane), so it never reaches a driving lane. Every draw comes from one generator derived from the seed,
-lanes taken in id order.
+lanes taken in id order. No vehicle parks within BUS_STOP_CLEAR_M before or after a bus stop (its edge's parking
+lane, at the stop's place along its sidewalk; pipeline.traffic.busstops): the slots there stay empty, their draws
+made all the same, so that every other parked vehicle is the one it would be without the stop.
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ from pipeline.traffic.networks import PARKING_LANE_TYPE
 log = logging.getLogger(__name__)
 
 PARKED_FILE = "parked.parquet"
+# No parking within this of a bus stop, before and after it: Germany's StVO section 12 (3) 4 forbids parking within
+# 15 m in front of and behind a bus stop's sign (other countries mark clearways of 20-40 m in all).
+BUS_STOP_CLEAR_M = 15.0
 
 
 class ParkingError(ValueError):
@@ -63,9 +68,11 @@ def _at(line: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray]:
     return line[i] + t * (line[i + 1] - line[i]), seg[i] / max(seg_len[i], 1e-12)
 
 
-def place_parked(config: DemandConfig, net_file: Path, seed: int) -> pd.DataFrame:
+def place_parked(config: DemandConfig, net_file: Path, seed: int, bus_stops: pd.DataFrame | None = None
+                 ) -> pd.DataFrame:
     """One row per parked vehicle: actor_id (``park0000``...), cls, lane_id, x_m, y_m, z_m (box centre),
-    yaw_rad, length_m, width_m, height_m, color_r/g/b (uint8). Empty when ``config.parked`` is None."""
+    yaw_rad, length_m, width_m, height_m, color_r/g/b (uint8). Empty when ``config.parked`` is None. ``bus_stops``:
+    the network's stops (:data:`pipeline.traffic.busstops.BUS_STOPS_SCHEMA`), kept clear of parked vehicles."""
     columns = ["actor_id", "cls", "lane_id", "x_m", "y_m", "z_m", "yaw_rad", "length_m", "width_m", "height_m",
                "color_r", "color_g", "color_b"]
     parked = config.parked
@@ -80,8 +87,12 @@ def place_parked(config: DemandConfig, net_file: Path, seed: int) -> pd.DataFram
     classes = sorted(parked.classes, key=lambda c: c.value)
     shares = np.array([parked.classes[c] for c in classes], dtype=np.float64)
     rows = []
+    stops = {} if bus_stops is None else {
+        edge: group["pos_m"].to_numpy() / group["lane_length_m"].to_numpy() for edge, group in bus_stops.groupby(
+            "edge_id")}  # each stop's place as a share of its edge's length
     for lane_id, lane_w, line in lanes:
         length = float(np.hypot(*np.diff(line[:, :2], axis=0).T).sum())
+        clear = stops.get(lane_id.rsplit("_", 1)[0], np.zeros(0)) * length
         s = parked.end_clearance_m
         while True:
             cls: ObjectClass = classes[int(rng.choice(len(classes), p=shares / shares.sum()))]
@@ -92,7 +103,7 @@ def place_parked(config: DemandConfig, net_file: Path, seed: int) -> pd.DataFram
             taken = bool(rng.random() < parked.occupancy)
             if s + size[0] > length - parked.end_clearance_m:
                 break
-            if taken:
+            if taken and not np.any((s < clear + BUS_STOP_CLEAR_M) & (s + size[0] > clear - BUS_STOP_CLEAR_M)):
                 centre, tangent = _at(line, s + size[0] / 2)
                 # Right of travel is the kerb; keep the whole body inside the lane.
                 offset = max(lane_w / 2 - size[1] / 2 - kerb_gap, 0.0)

@@ -173,3 +173,35 @@ def test_random_free_departures_let_all_200_highway_vehicles_in(dense_highway_ru
     config, _ = resolve_scenario("highway", vehicles=200, duration_s=1.0, warmup_s=90.0)
     base = config.model_copy(update={"demand": config.demand.model_copy(update={"depart_pos": DepartPosition.BASE})})
     assert simulate(base, 3, tmp_path / "base", progress=False)["vehicles_inserted"] < 170
+
+
+def test_no_vehicle_parks_at_a_bus_stop_and_the_others_stay(urban_run):
+    """With the urban run's bus stops (roads/bus_stops.parquet) no parked vehicle's body lies within BUS_STOP_CLEAR_M
+    of a stop along its edge's parking lane, and every vehicle parked elsewhere is the one parked without them."""
+    from pipeline.traffic.parking import BUS_STOP_CLEAR_M, parking_lanes
+
+    config, _ = resolve_scenario("urban")
+    full = config.demand.model_copy(update={"parked": ParkedConfig(occupancy=1.0)})
+    net = urban_run / "network.net.xml"
+    stops = pd.read_parquet(urban_run / "roads" / "bus_stops.parquet")
+    assert len(stops) > 5
+    cleared, kept = place_parked(full, net, 1, stops), place_parked(full, net, 1)
+    lanes = {lane_id: line for lane_id, _, line in parking_lanes(net)}
+    inside = 0
+    for row in kept.itertuples():
+        line = lanes[row.lane_id][:, :2]
+        assert len(line) == 2  # the urban grid's lanes are straight: a vehicle's place along one is a projection
+        length = float(np.linalg.norm(line[1] - line[0]))
+        s = float((np.array([row.x_m, row.y_m]) - line[0]) @ (line[1] - line[0])) / length
+        here = stops[stops.edge_id == row.lane_id.rsplit("_", 1)[0]]
+        at = here.pos_m.to_numpy() / here.lane_length_m.to_numpy() * length
+        near = np.any(np.abs(s - at) < BUS_STOP_CLEAR_M + row.length_m / 2 - 0.5)
+        clear_of = np.all(np.abs(s - at) > BUS_STOP_CLEAR_M + row.length_m / 2 + 0.5) if len(at) else True
+        match = ((cleared.x_m == row.x_m) & (cleared.y_m == row.y_m)).any()
+        if near:
+            inside += 1
+            assert not match
+        elif clear_of:
+            assert match
+    assert inside >= len(stops)  # a full lane has a vehicle or more in each stop's clearway without it
+    assert len(cleared) < len(kept) and set(cleared.lane_id) <= set(kept.lane_id)
