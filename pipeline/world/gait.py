@@ -215,6 +215,12 @@ def umbrella_pose(p: Pose) -> Pose:
                    hands=np.array([[0.0, 0.0, 1.0], p.hands[1]]))
 
 
+def pose_count(umbrella: bool) -> int:
+    """How many poses a person family has (:func:`person_pose`'s layout): walking, standing and running, and with
+    ``umbrella`` the umbrella poses after them."""
+    return WALK_PHASES + STAND_POSES + RUN_PHASES + (UMBRELLA_POSES if umbrella else 0)
+
+
 def run_phase(index: int) -> float:
     """The running phase of person pose ``index`` (>= WALK_PHASES + STAND_POSES)."""
     return (index - WALK_PHASES - STAND_POSES + 0.5) / RUN_PHASES

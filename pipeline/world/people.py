@@ -35,12 +35,11 @@ import numpy as np
 from pipeline.core.classes import ObjectClass
 from pipeline.world.figures import Outfit, figure
 from pipeline.world.gait import (
-    RUN_PHASES,
     STAND_POSES,
     UMBRELLA_FIRST,
-    UMBRELLA_POSES,
     WALK_PHASES,
     person_pose,
+    pose_count,
     run_clearance_m,
     run_phase,
 )
@@ -69,7 +68,7 @@ class PersonFamily:
     @property
     def poses(self) -> int:
         """Walking, standing and running; and under the umbrella, for a family with one."""
-        return WALK_PHASES + STAND_POSES + RUN_PHASES + (UMBRELLA_POSES if self.umbrella is not None else 0)
+        return pose_count(self.umbrella is not None)
 
     @property
     def __name__(self) -> str:

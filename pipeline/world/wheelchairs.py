@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.figures import FOREARM_M, UPPER_ARM_M, Outfit, Pose, figure, pose
-from pipeline.world.gait import RUN_PHASES, STAND_POSES, UMBRELLA_FIRST, UMBRELLA_POSES, WALK_PHASES
+from pipeline.world.gait import RUN_PHASES, STAND_POSES, UMBRELLA_FIRST, WALK_PHASES, pose_count
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import Part, capsule, cylinder, ellipsoid, merge, torus
 
@@ -177,7 +177,7 @@ class WheelchairFamily:
 
     @property
     def poses(self) -> int:
-        return WALK_PHASES + STAND_POSES + RUN_PHASES + (UMBRELLA_POSES if self.umbrella is not None else 0)
+        return pose_count(self.umbrella is not None)
 
     @property
     def __name__(self) -> str:
