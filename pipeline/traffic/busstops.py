@@ -25,6 +25,8 @@ BUS_STOPS_SCHEMA = pa.schema([
 ])
 BUS_STOPS_TAG = 43  # the stops' random stream (no run seed: the network's stops)
 WAITING_TAG = 44  # the waiting people's random stream, with the run's seed (everyone else draws as before)
+DWELL_TAG = 45  # the buses' dwell times at the stops, with the run's seed
+MIN_STOP_FROM_START_M = 15.0  # a bus departing on a stop's edge stops there only this far into it
 STOP_SPREAD_M = 10.0  # a stop lies within this of its sidewalk's middle
 SHELTER_LENGTH_M = 4.0  # along the sidewalk (pipeline.world.furniture.bus_shelters)
 # Where people wait: at places WAITING_SLOT_M apart along the stop's SHELTER_LENGTH_M + 1 m (a person's shoulders
@@ -65,6 +67,33 @@ def choose_bus_stops(lanes: pd.DataFrame, config: BusStopConfig | None) -> pd.Da
     return pd.DataFrame({"stop_id": [f"bus{i:03d}" for i in range(len(walks))], "edge_id": walks["edge_id"].to_numpy(),
                          "lane_id": walks["lane_id"].to_numpy(), "pos_m": pos,
                          "lane_length_m": walks["length_m"].to_numpy(), "lane_width_m": walks["width_m"].to_numpy()})
+
+
+def bus_stop_lanes(lanes: pd.DataFrame, stops: pd.DataFrame) -> pd.DataFrame:
+    """Where a bus stands at each stop: the rightmost lane of the stop's edge that buses may drive (kind
+    "driving", the lowest index) and the stop's place on it (its share of the sidewalk's length, on that lane's
+    length): one row per stop with edge_id, lane_id, pos_m. A stop whose edge has no such lane is left out."""
+    driving = lanes[(lanes["kind"] == "driving") & (lanes["function"] == "normal")]
+    driving = driving.sort_values(["edge_id", "index"]).drop_duplicates("edge_id").set_index("edge_id")
+    rows = []
+    for stop in stops.itertuples(index=False):
+        if stop.edge_id in driving.index:
+            lane = driving.loc[stop.edge_id]
+            rows.append((stop.edge_id, lane["lane_id"], round(stop.pos_m / stop.lane_length_m * lane["length_m"], 2)))
+    return pd.DataFrame(rows, columns=["edge_id", "lane_id", "pos_m"])
+
+
+def bus_route_stops(route: str, stop_lanes: pd.DataFrame) -> list[tuple[str, float]]:
+    """The stops (lane id, position) of a bus whose route is ``route`` (space-separated edge ids), in route order:
+    each stop on one of its edges (:func:`bus_stop_lanes`), but one less than MIN_STOP_FROM_START_M into the bus's
+    first edge (it departs at the edge's start)."""
+    at = {edge: i for i, edge in enumerate(stop_lanes["edge_id"])}
+    out = []
+    for k, edge in enumerate(route.split()):
+        i = at.get(edge)
+        if i is not None and (k > 0 or stop_lanes["pos_m"].iat[i] >= MIN_STOP_FROM_START_M):
+            out.append((str(stop_lanes["lane_id"].iat[i]), float(stop_lanes["pos_m"].iat[i])))
+    return out
 
 
 def waiting_people(stops: pd.DataFrame, config: DemandConfig, first_index: int, seed: int,

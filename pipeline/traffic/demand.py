@@ -22,7 +22,14 @@ import pandas as pd
 from pipeline.core.classes import ObjectClass
 from pipeline.core.config import DemandConfig, DriverModel
 from pipeline.core.config.scenario import DeparturePattern
-from pipeline.traffic.busstops import choose_bus_stops, empty_bus_stops, waiting_people
+from pipeline.traffic.busstops import (
+    DWELL_TAG,
+    bus_route_stops,
+    bus_stop_lanes,
+    choose_bus_stops,
+    empty_bus_stops,
+    waiting_people,
+)
 from pipeline.traffic.roadgeometry import read_network_geometry
 from pipeline.traffic.sumo_tools import run_python_tool
 
@@ -204,13 +211,36 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
     vehicles.insert(2, "depart_s", np.round(_depart_times(config, rng), 2))
     vehicles.insert(3, "route", [" ".join(edges) for _, edges in routes[: config.vehicles]])
     persons = _pedestrians(config, net_file, work_dir, seed, rng)
-    stops = network_bus_stops(net_file, config)
+    lanes = read_network_geometry(net_file).lanes if config.bus_stops is not None else None
+    stops = empty_bus_stops() if lanes is None else choose_bus_stops(lanes, config.bus_stops)
+    bus_stops = {}
     if len(stops):
         waiting = waiting_people(stops, config, len(persons), seed, CLOTHES, CLOTHES_SHARES)
         persons = pd.concat([persons, waiting.astype(persons.dtypes.to_dict())], ignore_index=True)
+        bus_stops = _bus_stops_on_routes(vehicles, stops, lanes, config, seed)
     path = out_dir / ROUTES_FILE
-    _write_routes(vehicles, persons, path, config.depart_pos.value)
+    _write_routes(vehicles, persons, path, config.depart_pos.value, bus_stops)
     return Demand(vehicles, persons, path, stops)
+
+
+def _bus_stops_on_routes(vehicles: pd.DataFrame, stops: pd.DataFrame, lanes: pd.DataFrame, config: DemandConfig,
+                         seed: int) -> dict[str, list[tuple[str, float, float]]]:
+    """vehicle id -> the stops (lane id, position, dwell seconds) each bus makes on its route
+    (:func:`pipeline.traffic.busstops.bus_route_stops`; ``lanes`` the network's lane table), dwell times from ``config.bus_stops.dwell_s`` on a random
+    stream of their own (DWELL_TAG), so that every other draw of the demand is as it was; none where ``dwell_s`` is
+    None."""
+    dwell = config.bus_stops.dwell_s if config.bus_stops is not None else None
+    if dwell is None:
+        return {}
+    lanes = bus_stop_lanes(lanes, stops)
+    rng = np.random.default_rng([seed, DWELL_TAG])
+    out = {}
+    for row in vehicles[vehicles["cls"] == ObjectClass.BUS.value].itertuples(index=False):
+        on_route = bus_route_stops(row.route, lanes)
+        if on_route:
+            times = np.round(dwell.sample(rng, len(on_route)), 1)
+            out[row.vehicle_id] = [(lane, pos, float(t)) for (lane, pos), t in zip(on_route, times, strict=True)]
+    return out
 
 
 def network_bus_stops(net_file: Path, config: DemandConfig) -> pd.DataFrame:
@@ -366,7 +396,11 @@ def _vtype(row) -> dict[str, str]:
     return attrs
 
 
-def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, depart_pos: str) -> None:
+def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, depart_pos: str,
+                  bus_stops: dict[str, list[tuple[str, float, float]]] | None = None) -> None:
+    """The SUMO route file: a vType per vehicle, then vehicles and persons by departure; ``bus_stops``: vehicle id
+    -> the stops (lane id, position, dwell seconds) the bus makes on its route, in route order."""
+    bus_stops = bus_stops or {}
     root = ET.Element("routes")
     root.append(ET.Comment(" roadsynth: one vType per background vehicle, parameters sampled per vehicle "))
     for row in vehicles.itertuples(index=False):
@@ -382,6 +416,8 @@ def _write_routes(vehicles: pd.DataFrame, persons: pd.DataFrame, path: Path, dep
             veh = ET.SubElement(root, "vehicle", id=ident, type=f"t_{ident}", depart=f"{depart:.2f}",
                                 departLane="best", departSpeed="max", departPos=depart_pos)
             ET.SubElement(veh, "route", edges=row.route)
+            for lane, pos, dwell in bus_stops.get(ident, ()):
+                ET.SubElement(veh, "stop", lane=lane, endPos=_g(pos), duration=_g(dwell), friendlyPos="true")
         elif row.stop_lane:  # stands at stop_pos_m on its first edge's sidewalk, then walks
             person = ET.SubElement(root, "person", id=ident, depart=f"{depart:.2f}", departPos=_g(row.stop_pos_m))
             ET.SubElement(person, "stop", lane=row.stop_lane, endPos=_g(row.stop_pos_m), duration=_g(row.stop_s))

@@ -14,6 +14,7 @@ import pytest
 from pipeline.core.config import ScenarioConfig, load_config
 from pipeline.core.config.scenario import BusStopConfig
 from pipeline.traffic.busstops import (
+    MIN_STOP_FROM_START_M,
     SHELTER_LENGTH_M,
     STOP_SPREAD_M,
     WAITING_AT_KERB,
@@ -23,6 +24,8 @@ from pipeline.traffic.busstops import (
     WAITING_MARGIN_M,
     WAITING_SLOT_M,
     WAITING_TURN_RAD,
+    bus_route_stops,
+    bus_stop_lanes,
     choose_bus_stops,
     waiting_people,
 )
@@ -121,3 +124,62 @@ def test_the_waiting_people_join_the_demand_and_leave_everyone_else_as_they_were
     pd.testing.assert_frame_equal(with_stops.persons.iloc[:40], without.persons)
     pd.testing.assert_frame_equal(with_stops.vehicles, without.vehicles)
     assert with_stops.actor_table().index[-1] == waiting.person_id.iloc[-1]
+
+
+def test_a_bus_stops_at_each_stop_on_its_route(grid):
+    """bus_stop_lanes puts each stop on its edge's rightmost driving lane at the same share of the length;
+    bus_route_stops lists a route's stops in route order, not one at the very start of its first edge."""
+    lanes = read_network_geometry(grid).lanes
+    stops = choose_bus_stops(lanes, BusStopConfig(share=0.5))
+    on_lanes = bus_stop_lanes(lanes, stops)
+    assert len(on_lanes) == len(stops)
+    table = lanes.set_index("lane_id")
+    for stop, lane in zip(stops.itertuples(), on_lanes.itertuples(), strict=True):
+        row = table.loc[lane.lane_id]
+        assert row.edge_id == stop.edge_id and row.kind == "driving"
+        assert row["index"] == lanes[(lanes.edge_id == stop.edge_id) & (lanes.kind == "driving")]["index"].min()
+        assert lane.pos_m == pytest.approx(stop.pos_m / stop.lane_length_m * row.length_m, abs=0.006)
+    a, b = on_lanes.edge_id.iloc[0], on_lanes.edge_id.iloc[1]
+    route = f"x {b} y {a}"
+    assert bus_route_stops(route, on_lanes) == [(on_lanes.lane_id.iloc[1], on_lanes.pos_m.iloc[1]),
+                                                (on_lanes.lane_id.iloc[0], on_lanes.pos_m.iloc[0])]
+    early = on_lanes.assign(pos_m=MIN_STOP_FROM_START_M - 1.0)
+    assert bus_route_stops(f"{a} y", early) == [] and len(bus_route_stops(f"y {a}", early)) == 1
+
+
+def test_buses_stand_at_their_stops_for_their_dwell_in_sumo(tmp_path):
+    """A real run of buses only, a stop on every long sidewalk: each bus that drives through one of its stops while
+    recorded stands still at it (its centre half its length before the stop's position) for its dwell time."""
+    import xml.etree.ElementTree as ET
+
+    from pipeline.core.classes import ObjectClass
+    from pipeline.stages.simulate import resolve_scenario, simulate
+
+    config, _ = resolve_scenario("urban", vehicles=30, duration_s=50.0, warmup_s=10.0)
+    demand = config.demand.model_copy(update={
+        "classes": {ObjectClass.BUS: config.demand.classes[ObjectClass.BUS].model_copy(update={"share": 1.0})},
+        "pedestrians": 0, "standing_pedestrians": 0, "parked": None, "depart_window_s": 10.0,
+        "bus_stops": BusStopConfig(share=1.0, waiting_mean=0.0)})
+    config = config.model_copy(update={"demand": demand, "ego": config.ego.model_copy(
+        update={"cls": ObjectClass.BUS, "min_neighbours": 0, "route_margin": 1.0})})
+    simulate(config, 2, tmp_path / "run", progress=False)
+    root = ET.parse(tmp_path / "run" / "demand.rou.xml").getroot()
+    shapes = {lane.get("id"): np.array([[float(c) for c in p.split(",")[:2]] for p in lane.get("shape").split()])
+              for lane in ET.parse(tmp_path / "run" / "network.net.xml").getroot().iter("lane")}
+    traj = pd.read_parquet(tmp_path / "run" / "trajectories.parquet")
+    seen = 0
+    for vehicle in root.iter("vehicle"):
+        track = traj[traj.actor_id == vehicle.get("id")]
+        for stop in vehicle.iter("stop"):
+            on = track[track.lane_id == stop.get("lane")]
+            line = shapes[stop.get("lane")]
+            assert len(line) == 2  # straight lanes: a place along one is a projection
+            d = line[1] - line[0]
+            s = (on[["x_m", "y_m"]].to_numpy() - line[0]) @ d / np.linalg.norm(d)
+            at = float(stop.get("endPos")) - on.length_m.iloc[0] / 2 if len(on) else 0.0
+            if not len(on) or s.min() > at - 5.0 or s.max() < at + 5.0:
+                continue  # it did not drive through this stop while recorded
+            still = on[(np.abs(s - at) < 1.5) & (on.speed_mps < 0.01)]
+            assert len(still) * 0.1 >= float(stop.get("duration")) - 1.0
+            seen += 1
+    assert seen >= 2

@@ -91,7 +91,8 @@ def test_urban_run_records_pedestrians_cyclists_and_lights(tmp_path):
     others = config.demand.pedestrians + config.demand.standing_pedestrians
     waiting = len(departs) - others  # at the bus stops (pipeline.traffic.busstops)
     assert len(bus_stops) > 5 and waiting > len(bus_stops)
-    stops = list(ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot().iter("stop"))
+    routes = ET.parse(tmp_path / "urban" / "demand.rou.xml").getroot()
+    stops = [stop for person in routes.iter("person") for stop in person.iter("stop")]  # (buses stop too)
     assert 0 < len(stops) - waiting <= config.demand.standing_pedestrians  # those who stand first
     # Those standing now stand on their sidewalk (SUMO draws them 3 m to the right of its centre line, in the verge).
     lanes = list(ET.parse(tmp_path / "urban" / "network.net.xml").getroot().iter("lane"))

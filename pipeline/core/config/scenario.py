@@ -180,6 +180,9 @@ class BusStopConfig(_Model):
                                 "the mean of a Poisson distribution (at most 7, the places along a stop)")
     waiting_s: Distribution = Field(Uniform(low=180.0, high=900.0),
                                     description="how long a waiting person stands before walking on, seconds")
+    dwell_s: Distribution | None = Field(Uniform(low=15.0, high=40.0),
+                                         description="how long a bus stands at each stop on its route, seconds "
+                                         "(None: buses drive past the stops)")
 
 
 class DemandConfig(_Model):
