@@ -226,6 +226,9 @@ def build_demand(config: DemandConfig, net_file: Path, out_dir: Path, work_dir: 
 def _bus_stops_on_routes(vehicles: pd.DataFrame, stops: pd.DataFrame, lanes: pd.DataFrame, config: DemandConfig,
                          seed: int) -> dict[str, list[tuple[str, float, float]]]:
     """vehicle id -> the stops (lane id, position, dwell seconds) each bus makes on its route
+    (:func:`pipeline.traffic.busstops.bus_route_stops`; ``lanes`` the network's lane table), dwell times from
+    ``config.bus_stops.dwell_s`` on a random stream of their own (DWELL_TAG), so that every other draw of the demand
+    is as it was; none where ``dwell_s`` is None."""vehicle id -> the stops (lane id, position, dwell seconds) each bus makes on its route
     (:func:`pipeline.traffic.busstops.bus_route_stops`; ``lanes`` the network's lane table), dwell times from ``config.bus_stops.dwell_s`` on a random
     stream of their own (DWELL_TAG), so that every other draw of the demand is as it was; none where ``dwell_s`` is
     None."""
