@@ -228,10 +228,7 @@ def _bus_stops_on_routes(vehicles: pd.DataFrame, stops: pd.DataFrame, lanes: pd.
     """vehicle id -> the stops (lane id, position, dwell seconds) each bus makes on its route
     (:func:`pipeline.traffic.busstops.bus_route_stops`; ``lanes`` the network's lane table), dwell times from
     ``config.bus_stops.dwell_s`` on a random stream of their own (DWELL_TAG), so that every other draw of the demand
-    is as it was; none where ``dwell_s`` is None."""vehicle id -> the stops (lane id, position, dwell seconds) each bus makes on its route
-    (:func:`pipeline.traffic.busstops.bus_route_stops`; ``lanes`` the network's lane table), dwell times from ``config.bus_stops.dwell_s`` on a random
-    stream of their own (DWELL_TAG), so that every other draw of the demand is as it was; none where ``dwell_s`` is
-    None."""
+    is as it was; none where ``dwell_s`` is None."""
     dwell = config.bus_stops.dwell_s if config.bus_stops is not None else None
     if dwell is None:
         return {}
