@@ -9,7 +9,8 @@ mesh at the person's stature (:func:`person_statures`, :func:`pipeline.world.pos
 
 Who: the families are 10 of men, 10 of women, 2 of teenagers and 2 of children, so that an actor's family (picked
 uniformly by its variant) makes about 83 % adults, 8 % teenagers (13-17) and 8 % children (6-12): our estimate of a
-weekday city street, where children are fewer than their ~15 % of Europe's population. Statures
+weekday city street, where children are fewer than their ~15 % of Europe's population. One person in a hundred
+sits in a wheelchair instead (:mod:`pipeline.world.wheelchairs`, picked by its share before the uniform pick). Statures
 (:data:`STATURE_M`): adults 1.76 m (men) and 1.63 m (women), between the means that NCD Risk Factor Collaboration,
 "A century of trends in adult human height", eLife 5:e13410 (2016), gives north-western Europeans born in the 1950s
 (about 1.75 and 1.62 m) and in the 1990s (about 1.79 and 1.66 m), as a street's adults span those ages; SD ~7 cm, the
