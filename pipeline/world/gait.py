@@ -33,11 +33,11 @@ sampled half a sample off the walk's phases, so that two of the eight show the f
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from pipeline.world.figures import FOREARM_M, SHIN_M, THIGH_M, UPPER_ARM_M, Pose, bend, pose
+from pipeline.world.figures import FOREARM_M, SHIN_M, THIGH_M, UPPER_ARM_M, Outfit, Pose, bend, pose
 
 MODEL_STATURE_M = 1.75  # the figures' stature as modelled (a standing figure's top of the head)
 WALK_PHASES = 8  # poses sampled per walk cycle (phase k / WALK_PHASES)
@@ -219,6 +219,31 @@ def pose_count(umbrella: bool) -> int:
     """How many poses a person family has (:func:`person_pose`'s layout): walking, standing and running, and with
     ``umbrella`` the umbrella poses after them."""
     return WALK_PHASES + STAND_POSES + RUN_PHASES + (UMBRELLA_POSES if umbrella else 0)
+
+
+@dataclass(frozen=True)
+class PosedFamily:
+    """What every person family shares (:class:`pipeline.world.people.PersonFamily`,
+    :class:`pipeline.world.wheelchairs.WheelchairFamily`): a name, a group of statures, an outfit, and poses in
+    :func:`person_pose`'s layout (the umbrella poses where a subclass's ``umbrella`` is set)."""
+
+    name: str
+    group: str
+    outfit: Outfit
+
+    @property
+    def poses(self) -> int:
+        """Walking, standing and running; and the umbrella poses, for a family with an umbrella."""
+        return pose_count(getattr(self, "umbrella", None) is not None)
+
+    @property
+    def __name__(self) -> str:
+        return self.name
+
+    def check_pose(self, pose: int) -> None:
+        """Raise a ValueError naming the family where ``pose`` is not one of its poses."""
+        if not 0 <= pose < self.poses:
+            raise ValueError(f"{self.name}: pose {pose} outside 0 .. {self.poses - 1}")
 
 
 def run_phase(index: int) -> float:

@@ -39,8 +39,8 @@ from pipeline.world.gait import (
     STAND_POSES,
     UMBRELLA_FIRST,
     WALK_PHASES,
+    PosedFamily,
     person_pose,
-    pose_count,
     run_clearance_m,
     run_phase,
 )
@@ -50,7 +50,7 @@ from pipeline.world.wheelchairs import WHEELCHAIRS
 
 
 @dataclass(frozen=True)
-class PersonFamily:
+class PersonFamily(PosedFamily):
     """A person's body and outfit in every pose: calling it with a pose index builds that pose's mesh.
 
     Attributes:
@@ -60,26 +60,13 @@ class PersonFamily:
             umbrella poses (:data:`FAMILIES`; :data:`UMBRELLA_FAMILIES` have them).
     """
 
-    name: str
-    group: str
-    outfit: Outfit
     lean_deg: float = 3.0
     umbrella: str | None = None
-
-    @property
-    def poses(self) -> int:
-        """Walking, standing and running; and under the umbrella, for a family with one."""
-        return pose_count(self.umbrella is not None)
-
-    @property
-    def __name__(self) -> str:
-        return self.name
 
     def __call__(self, pose: int = 0) -> Mesh:
         """The mesh in pose ``pose``, its lowest point (the stance foot's sole) on the ground; in a running pose's
         float, the lower sole :func:`pipeline.world.gait.run_clearance_m` above it."""
-        if not 0 <= pose < self.poses:
-            raise ValueError(f"{self.name}: pose {pose} outside 0 .. {self.poses - 1}")
+        self.check_pose(pose)
         outfit = replace(self.outfit, umbrella=self.umbrella) if pose >= UMBRELLA_FIRST else self.outfit
         mesh = merge(figure(person_pose(pose, self.lean_deg), outfit), ObjectClass.PEDESTRIAN)
         lift = run_clearance_m(run_phase(pose)) if WALK_PHASES + STAND_POSES <= pose < UMBRELLA_FIRST else 0.0

@@ -32,7 +32,7 @@ import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.figures import FOREARM_M, UPPER_ARM_M, Outfit, Pose, figure, pose
-from pipeline.world.gait import RUN_PHASES, STAND_POSES, UMBRELLA_FIRST, WALK_PHASES, pose_count
+from pipeline.world.gait import RUN_PHASES, STAND_POSES, UMBRELLA_FIRST, WALK_PHASES, PosedFamily
 from pipeline.world.mesh import Mesh
 from pipeline.world.solids import Part, capsule, cylinder, ellipsoid, merge, torus
 
@@ -157,7 +157,7 @@ def _chair(frame: str) -> list[Part]:
 
 
 @dataclass(frozen=True)
-class WheelchairFamily:
+class WheelchairFamily(PosedFamily):
     """A person in a manual wheelchair in every pose (see the module docstring): calling it with a pose index builds
     that pose's mesh, chair and person.
 
@@ -168,24 +168,12 @@ class WheelchairFamily:
             umbrella: as a PersonFamily's, for the layout of poses only (none is drawn).
     """
 
-    name: str
-    group: str
-    outfit: Outfit
     frame: str = "metal"
     share: float = 0.005
     umbrella: str | None = None
 
-    @property
-    def poses(self) -> int:
-        return pose_count(self.umbrella is not None)
-
-    @property
-    def __name__(self) -> str:
-        return self.name
-
     def __call__(self, pose: int = 0) -> Mesh:
-        if not 0 <= pose < self.poses:
-            raise ValueError(f"{self.name}: pose {pose} outside 0 .. {self.poses - 1}")
+        self.check_pose(pose)
         index = pose - UMBRELLA_FIRST if pose >= UMBRELLA_FIRST else pose
         if index < WALK_PHASES or index >= WALK_PHASES + STAND_POSES:
             running = index >= WALK_PHASES + STAND_POSES
