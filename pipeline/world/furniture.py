@@ -151,7 +151,8 @@ def bus_shelters(placer: PropPlacer) -> None:
         placer.parts["pole"].add(*vertical_plates(centre, yaw, flag, 0.05, back=True), "metal")
         placer.parts["pole"].add(*vertical_plates(centre, yaw, flag, 0.055), "plate")
         placer.take(pos[:, None, :2] + np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]])[None])
-    log.info("bus stops: %d shelters, %d flags only (the ground behind the sidewalk was taken)", placed, blocked)
+    if placed or blocked:  # a network without stops (the highway) says nothing
+        log.info("bus stops: %d shelters, %d flags only (the ground behind the sidewalk was taken)", placed, blocked)
 
 
 def bushes(placer: PropPlacer) -> None:
