@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from exporters.filters import HIDDEN, FilterSummary, ObjectFilter
+from exporters.filters import HIDDEN, NO_CATEGORY, FilterSummary, ObjectFilter
 from exporters.source import ExportSource, RecordSource
 from exporters.splits import SplitSpec
 from exporters.writing import atomic_dir, atomic_file, atomic_named_dir, write_json
@@ -107,11 +107,16 @@ class CameraRows:
     FLOATS = ("occlusion", "truncation", "distance_m", "sensor_x_m", "sensor_y_m", "sensor_z_m", "length_m",
               "width_m", "height_m", "sensor_yaw_rad")
 
-    def __init__(self, source: RecordSource, camera: str, options: ExportOptions) -> None:
+    def __init__(self, source: RecordSource, camera: str, options: ExportOptions,
+                 coco_categories: bool = False) -> None:
+        """``coco_categories``: the format's categories are COCO's (COCO, YOLO), so the rows of a class without one
+        (category_id 0: strollers) are ``no_category``, left out of :meth:`rows` and counted."""
         labels = source.labels[source.labels["sensor"] == camera]  # sorted by (frame, track_id)
         self.where = f"{source.record.root}: camera {camera}"
         self.mode = options.box
         self.reasons = options.filter.classify(labels)
+        if coco_categories:
+            self.reasons[(labels["category_id"].to_numpy() == 0) & (self.reasons != HIDDEN)] = NO_CATEGORY
         self.boxes = boxes_2d(labels, options.box)
         self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
             na_value=np.nan)
@@ -124,11 +129,12 @@ class CameraRows:
         self._span = {int(frames[lo]): (int(lo), int(hi)) for lo, hi in zip(starts, ends, strict=True) if hi > lo}
 
     def rows(self, frame: int, summary: FilterSummary) -> np.ndarray:
-        """Indices of ``frame``'s rows that are not hidden (in track id order), after counting all its rows in
-        ``summary``. Raises :class:`ExportError` for a shown object without a box: never dropped silently."""
+        """Indices of ``frame``'s rows that are neither hidden nor without a category (in track id order), after
+        counting all its rows in ``summary``. Raises :class:`ExportError` for a shown object without a box: never
+        dropped silently."""
         lo, hi = self._span.get(int(frame), (0, 0))
         summary.add(self.reasons[lo:hi], self.columns["cls"][lo:hi])
-        rows = lo + np.flatnonzero(self.reasons[lo:hi] != HIDDEN)
+        rows = lo + np.flatnonzero((self.reasons[lo:hi] != HIDDEN) & (self.reasons[lo:hi] != NO_CATEGORY))
         boxless = rows[~np.all(np.isfinite(self.boxes[rows]), axis=1)]
         if len(boxless):
             raise ExportError(f"{self.where}, frame {frame}, track {int(self.columns['track_id'][boxless[0]])}: "

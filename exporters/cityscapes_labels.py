@@ -101,6 +101,8 @@ CITYSCAPES_OF: dict[SemanticClass, str] = {
     SemanticClass.MOTORCYCLE: "motorcycle",
     SemanticClass.BICYCLE: "bicycle",
     SemanticClass.PEDESTRIAN: "person",
+    SemanticClass.STROLLER: "dynamic",  # Cityscapes' movable things (buggies among them); a person's class holds
+    # what the person carries, not what stands on the ground
     SemanticClass.EGO: "ego vehicle",
 }
 """Our semantic class -> the name of its Cityscapes label (every SemanticClass has one)."""

@@ -89,7 +89,8 @@ class CocoExporter(Exporter):
         annotations: dict[str, list] = {s: [] for s in source.split_names}
         summary = FilterSummary()
         linked = copied = 0
-        rows_of = {(id(s), c.name): CameraRows(s, c.name, options) for s in source.records for c in s.info.cameras}
+        rows_of = {(id(s), c.name): CameraRows(s, c.name, options, coco_categories=True)
+                   for s in source.records for c in s.info.cameras}
         for item in tqdm(source.frames(), total=source.n_frames(), desc="coco", unit="frame",
                          disable=not options.progress):
             for cam in item.source.info.cameras:

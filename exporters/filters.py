@@ -7,6 +7,8 @@ Each camera label row is exactly one of:
 - ``tiny``: visible, but fewer than ``min_visible_px`` visible pixels.
 - ``occluded``: visible, but more than ``max_occlusion`` of its unoccluded pixels hidden by other objects.
 - ``kept``: everything else: a normal annotation.
+- ``no_category``: visible, but of a class the format has no category for (a stroller in COCO and YOLO, whose
+  categories are COCO's); left out of those formats, counted (their category_id is 0 in the labels).
 
 ``tiny`` and ``occluded`` objects are real and visible, so a detector that finds them must not be
 punished: COCO writes them as crowd regions (``iscrowd`` 1, which COCO evaluation ignores), KITTI as
@@ -31,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-KEPT, HIDDEN, TINY, OCCLUDED = "kept", "hidden", "tiny", "occluded"
-REASONS = (KEPT, HIDDEN, TINY, OCCLUDED)
+KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY = "kept", "hidden", "tiny", "occluded", "no_category"
+REASONS = (KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY)
 
 DEFAULT_MIN_VISIBLE_PX = 20
 DEFAULT_MAX_OCCLUSION = 0.9

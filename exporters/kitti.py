@@ -38,8 +38,8 @@ from pipeline.core.record import CameraInfo, LidarInfo
 log = logging.getLogger(__name__)
 
 KITTI_TYPE = {"car": "Car", "van": "Van", "truck": "Truck", "bus": "Misc", "motorcycle": "Misc",
-              "bicycle": "Cyclist", "pedestrian": "Pedestrian"}
-"""Our class -> KITTI type. KITTI has no bus or motorcycle class; 'Misc' holds other vehicles there."""
+              "bicycle": "Cyclist", "pedestrian": "Pedestrian", "stroller": "Misc"}
+"""Our class -> KITTI type. KITTI has no bus, motorcycle or stroller class; 'Misc' holds other objects there."""
 
 OCCLUSION_LEVEL_EDGES = (0.1, 0.5)
 """Occlusion fraction < 0.1: level 0 (fully visible); < 0.5: 1 (partly); otherwise 2 (largely)."""

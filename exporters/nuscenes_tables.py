@@ -32,7 +32,8 @@ ALL_SPLIT = "all"
 """The custom split of splits.json that holds every scene of the export (evaluation's default set)."""
 
 CATEGORY = {"car": "vehicle.car", "van": "vehicle.car", "truck": "vehicle.truck", "bus": "vehicle.bus.rigid",
-            "motorcycle": "vehicle.motorcycle", "bicycle": "vehicle.bicycle", "pedestrian": "human.pedestrian.adult"}
+            "motorcycle": "vehicle.motorcycle", "bicycle": "vehicle.bicycle", "pedestrian": "human.pedestrian.adult",
+            "stroller": "human.pedestrian.stroller"}
 """Our class -> nuScenes category (nuScenes counts vans and SUVs as vehicle.car)."""
 CATEGORY_DESCRIPTION = {
     "vehicle.car": "Vehicle designed primarily for personal use, e.g. sedans, hatch-backs, wagons, vans, mini-vans, "
@@ -42,6 +43,8 @@ CATEGORY_DESCRIPTION = {
     "vehicle.motorcycle": "Gasoline or electric powered 2-wheeled vehicle (roadsynth: motorcycle, always ridden).",
     "vehicle.bicycle": "Human or electric powered 2-wheeled vehicle (roadsynth: bicycle, always ridden).",
     "human.pedestrian.adult": "Adult subcategory (roadsynth: pedestrian).",
+    "human.pedestrian.stroller": "Strollers. If a person is in the stroller, include in the annotation (roadsynth: "
+                                 "stroller, boxed apart from the person pushing it).",
 }
 ATTRIBUTE = {
     "vehicle.moving": "Vehicle is moving.",
@@ -167,7 +170,8 @@ def velocities(obj: pd.DataFrame, time_us: dict[int, int]) -> np.ndarray:
 
 def attribute_names(cls: np.ndarray, vel: np.ndarray) -> np.ndarray:
     """(N,) nuScenes attribute of each object: vehicles moving or stopped (we do not know parked), cycles always
-    with a rider, pedestrians moving or standing; an object without a velocity estimate counts as not moving."""
+    with a rider, pedestrians moving or standing; an object without a velocity estimate counts as not moving; a
+    stroller none ("": nuScenes' attributes describe vehicles, cycles and the people themselves)."""
     speed = np.hypot(vel[:, 0], vel[:, 1])
     moving = np.nan_to_num(speed, nan=0.0) > MOVING_SPEED_MPS
     cls = np.asarray(cls, dtype=object)
@@ -175,6 +179,7 @@ def attribute_names(cls: np.ndarray, vel: np.ndarray) -> np.ndarray:
     out[(cls == "motorcycle") | (cls == "bicycle")] = "cycle.with_rider"
     ped = cls == "pedestrian"
     out[ped] = np.where(moving[ped], "pedestrian.moving", "pedestrian.standing")
+    out[cls == "stroller"] = ""
     return out
 
 
@@ -205,7 +210,7 @@ def annotation_tables(stem: str, obj: pd.DataFrame, time_us: dict[int, int],
         anns.append({
             "token": toks[i], "sample_token": sample_of[int(frames[i])],
             "instance_token": token("instance", stem, int(tracks[i])), "visibility_token": vis[i],
-            "attribute_tokens": [token("attribute", attrs[i])],
+            "attribute_tokens": [token("attribute", attrs[i])] if attrs[i] else [],
             "translation": [cols["x_m"][i], cols["y_m"][i], cols["z_m"][i]],
             "size": [cols["width_m"][i], cols["length_m"][i], cols["height_m"][i]], "rotation": quats[i],
             "prev": toks[i - 1] if same_prev else "", "next": toks[i + 1] if same_next else "",

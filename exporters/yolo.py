@@ -62,7 +62,8 @@ class YoloExporter(Exporter):
         rows = io.StringIO()
         table = csv.writer(rows, lineterminator="\n")
         table.writerow(IMAGES_CSV_COLUMNS)
-        rows_of = {(id(s), c.name): CameraRows(s, c.name, options) for s in source.records for c in s.info.cameras}
+        rows_of = {(id(s), c.name): CameraRows(s, c.name, options, coco_categories=True)
+                   for s in source.records for c in s.info.cameras}
         for split in source.split_names:
             (tmp / "images" / safe_name(split)).mkdir(parents=True)
             (tmp / "labels" / safe_name(split)).mkdir(parents=True)

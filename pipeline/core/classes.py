@@ -2,7 +2,8 @@
 
 Category ids follow COCO's 80-class ids where the class exists there (person 1, bicycle 2, car 3,
 motorcycle 4, bus 6, truck 8), so that a COCO-trained detector is scored without remapping. The finer
-class (e.g. van) stays as an attribute (``subclass``). Ids are never 0.
+class (e.g. van) stays as an attribute (``subclass``). Ids are never 0: a class COCO has no category for (a
+stroller) has category id 0 in the labels, and COCO-style exports leave its rows out, saying how many.
 """
 
 from __future__ import annotations
@@ -20,14 +21,16 @@ class ObjectClass(str, enum.Enum):
     MOTORCYCLE = "motorcycle"
     BICYCLE = "bicycle"
     PEDESTRIAN = "pedestrian"
+    STROLLER = "stroller"  # a pram or pushchair pushed by a pedestrian (pipeline.world.prams); COCO has no category
 
     @property
     def coco_id(self) -> int:
-        """COCO category id (van counts as car)."""
-        return _COCO_ID[self]
+        """COCO category id (van counts as car); 0 for a class COCO has no category for (stroller)."""
+        return _COCO_ID.get(self, 0)
 
     @property
     def coco_name(self) -> str:
+        """COCO category name; a KeyError for a class without one (:attr:`coco_id` 0)."""
         return COCO_CATEGORIES[self.coco_id][0]
 
     @property
@@ -79,6 +82,7 @@ class SemanticClass(enum.IntEnum):
     MOTORCYCLE = 24
     BICYCLE = 25
     PEDESTRIAN = 26
+    STROLLER = 27
     EGO = 30
 
     @property

@@ -21,7 +21,7 @@ NEIGHBOUR_SLOTS = ("left_leader", "leader", "right_leader", "left_follower", "fo
 NEIGHBOUR_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m")
 NEARBY_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m", "heading_rel_rad", "class_index")
 # class_index of a nearby vehicle: 1 + its position here (0 only in absent rows).
-CLASS_ORDER = tuple(c for c in ObjectClass if c is not ObjectClass.PEDESTRIAN)
+CLASS_ORDER = tuple(c for c in ObjectClass if c not in (ObjectClass.PEDESTRIAN, ObjectClass.STROLLER))
 # traci.constants, spelled out: the ego's context subscription of the vehicles around it.
 # The neighbour slots read their vehicles' values from it too (one call a step instead of ~8 per neighbour).
 CMD_GET_VEHICLE_VARIABLE, VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_LENGTH, VAR_WIDTH = 0xA4, 0x42, 0x43, 0x40, 0x44, 0x4D

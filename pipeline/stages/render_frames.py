@@ -37,7 +37,9 @@ from pipeline.stages import radar_frames
 from pipeline.stages.rig import build_actor_meshes, build_sensors
 from pipeline.world.actors import ActorMeshes, Actors, actor_variants, srgb8_to_linear
 from pipeline.world.materials import material_index
+from pipeline.world.people import person_statures
 from pipeline.world.posed_people import posed_boxes
+from pipeline.world.prams import STROLLER_SIZE_M, stroller_colors, stroller_offset_m
 from pipeline.world.scene import FrameScene, StaticScene
 from pipeline.world.static import StaticWorld
 
@@ -118,6 +120,7 @@ def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
     (:func:`pipeline.world.posed_people.posed_boxes`: a person's box is its posed body's at its stature, in each
     row, with an umbrella for a share ``umbrellas`` of them; the others keep theirs, but for a pedestrian model's
     depth); the camera, the LiDAR, the label rows and so the exports all see that box."""
+    table = with_strollers(table, meshes, seed)
     _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
     cols = {c: table[c].to_numpy()[first] for c in SIMULATED_COLUMNS}  # an actor's class and size hold for its track
     rows = {c: table[c].to_numpy() for c in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")}
@@ -127,6 +130,58 @@ def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
              "length_m": boxes.size[:, 0], "width_m": boxes.size[:, 1], "height_m": boxes.size[:, 2]}
     changed = {c: v for c, v in posed.items() if not np.array_equal(v, rows[c])}
     return table.assign(**changed, pose=pose)
+
+
+STROLLER_TRACK_OFFSET = 1 << 15
+"""A stroller's track id: its pusher's plus this (instance images hold track ids as uint16)."""
+
+
+def with_strollers(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.DataFrame:
+    """The trajectories with a stroller actor (class ``stroller``) in front of every person who pushes one: the
+    pedestrians whose body family pushes a pram (:class:`pipeline.world.prams.PramPusherFamily`, picked by its
+    share, :meth:`ActorMeshes.family_codes`). In each of the pusher's rows the stroller stands on the same ground,
+    heading the same way, its handle in the pusher's hands (:func:`pipeline.world.prams.stroller_offset_m` at the
+    pusher's stature), with the pusher's speed; its track id is the pusher's + :data:`STROLLER_TRACK_OFFSET` (the
+    same in every frame, shard and step of the driving environment, which renders a frame's rows alone), its
+    ``actor_id`` the pusher's + ``/stroller``, its colour drawn from the seed
+    (:func:`pipeline.world.prams.stroller_colors`).
+    A stroller is its own object in every label and export, as nuScenes' annotators box a stroller apart from the
+    person pushing it (human.pedestrian.stroller). The input's rows come first, as they were (index and order); the
+    strollers' rows follow, sorted by (frame, track_id), their track ids above every other's."""
+    people = np.flatnonzero(table["cls"].to_numpy() == "pedestrian")
+    if not len(people):
+        return table
+    tracks, first = np.unique(table["track_id"].to_numpy()[people], return_index=True)
+    cols = {c: table[c].to_numpy()[people[first]] for c in SIMULATED_COLUMNS}
+    family = meshes.family_codes(_actors(cols, seed))
+    pushes = np.array([getattr(meshes.families[f], "pram", False) for f in family], bool)
+    if not pushes.any():
+        return table
+    if int(table["track_id"].max()) >= STROLLER_TRACK_OFFSET:
+        raise ValueError(f"track id {int(table['track_id'].max())}: strollers take their pusher's track id + "
+                         f"{STROLLER_TRACK_OFFSET}, so every track id must be below it (instance images are uint16)")
+    pushers = tracks[pushes]
+    group = np.array([meshes.families[f].group for f in family[pushes]], object)
+    rows = table.iloc[people[np.isin(table["track_id"].to_numpy()[people], pushers)]]
+    which = np.searchsorted(pushers, rows["track_id"].to_numpy())  # each row's pusher
+    ahead = stroller_offset_m(person_statures(group, pushers, seed))[which]
+    yaw = rows["yaw_rad"].to_numpy()
+    length, width, height = STROLLER_SIZE_M
+    track = (pushers + STROLLER_TRACK_OFFSET).astype(np.int32)
+    color = stroller_colors(track, seed)[which]
+    track = track[which]
+    values = {"track_id": track, "cls": "stroller", "x_m": rows["x_m"].to_numpy() + ahead * np.cos(yaw),
+              "y_m": rows["y_m"].to_numpy() + ahead * np.sin(yaw),
+              "z_m": rows["z_m"].to_numpy() - 0.5 * rows["height_m"].to_numpy() + 0.5 * height,
+              "length_m": length, "width_m": width, "height_m": height, "color_r": color[:, 0],
+              "color_g": color[:, 1], "color_b": color[:, 2], "braking": False, "signals": 0, "is_ego": False}
+    if "actor_id" in rows:
+        values["actor_id"] = rows["actor_id"].astype(str).to_numpy() + "/stroller"
+    strollers = rows.assign(**{c: v for c, v in values.items() if c in rows})
+    strollers = strollers.sort_values(["frame", "track_id"], kind="stable")
+    after = int(table.index.max()) + 1
+    strollers.index = pd.RangeIndex(after, after + len(strollers))
+    return pd.concat([table, strollers]).astype(table.dtypes.to_dict())
 
 
 def _actors(cols: dict[str, np.ndarray], seed: int) -> Actors:

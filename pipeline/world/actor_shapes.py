@@ -8,10 +8,10 @@ profile, with arches, glasshouse and pillars) with wheels (tyre, recessed rim, h
 plates and grille laid onto the end faces as decals; trucks have a lofted cab on boxes (cargo, trailer). Small
 parts (mirrors, bumper bars) are convex solids (cuboids, or a convex profile extruded across y), whose outward
 winding is fixed per part by facing away from its centre. Pedestrians (:mod:`pipeline.world.people`), bicycles and
-motorcycles with their riders (:mod:`pipeline.world.two_wheelers`) are smooth closed solids
-(:mod:`pipeline.world.solids`) dressed as figures (:mod:`pipeline.world.figures`). :data:`FAMILIES` lists each
-class's families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a tractor with a
-semi-trailer).
+motorcycles with their riders (:mod:`pipeline.world.two_wheelers`), prams and pushchairs (:mod:`pipeline.world.prams`)
+are smooth closed solids (:mod:`pipeline.world.solids`), people dressed as figures (:mod:`pipeline.world.figures`).
+:data:`FAMILIES` lists each class's families; :data:`SUITS_LENGTH_M` the lengths a family suits (a 16 m truck is a
+tractor with a semi-trailer).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from pipeline.world.loft import wheel as loft_wheel
 from pipeline.world.materials import material_index
 from pipeline.world.mesh import Mesh
 from pipeline.world.people import PEDESTRIANS
+from pipeline.world.prams import STROLLERS
 from pipeline.world.solids import Part, merge
 from pipeline.world.two_wheelers import BICYCLES, MOTORCYCLES
 
@@ -503,6 +504,7 @@ FAMILIES: dict[ObjectClass, tuple[Callable[[], Mesh], ...]] = {
     ObjectClass.MOTORCYCLE: MOTORCYCLES,
     ObjectClass.BICYCLE: BICYCLES,
     ObjectClass.PEDESTRIAN: PEDESTRIANS,
+    ObjectClass.STROLLER: STROLLERS,
 }
 # The length range (metres) each family suits; a family outside its range is chosen only when none suits.
 SUITS_LENGTH_M: dict[Callable[[], Mesh], tuple[float, float]] = {

@@ -10,7 +10,8 @@ mesh at the person's stature (:func:`person_statures`, :func:`pipeline.world.pos
 Who: the families are 10 of men, 10 of women, 2 of teenagers and 2 of children, so that an actor's family (picked
 uniformly by its variant) makes about 83 % adults, 8 % teenagers (13-17) and 8 % children (6-12): our estimate of a
 weekday city street, where children are fewer than their ~15 % of Europe's population. One person in a hundred
-sits in a wheelchair instead (:mod:`pipeline.world.wheelchairs`, picked by its share before the uniform pick). Statures
+sits in a wheelchair instead and two push a pram or pushchair (:mod:`pipeline.world.wheelchairs`,
+:mod:`pipeline.world.prams`; picked by their shares before the uniform pick). Statures
 (:data:`STATURE_M`): adults 1.76 m (men) and 1.63 m (women), between the means that NCD Risk Factor Collaboration,
 "A century of trends in adult human height", eLife 5:e13410 (2016), gives north-western Europeans born in the 1950s
 (about 1.75 and 1.62 m) and in the 1990s (about 1.79 and 1.66 m), as a street's adults span those ages; SD ~7 cm, the
@@ -45,6 +46,7 @@ from pipeline.world.gait import (
     run_phase,
 )
 from pipeline.world.mesh import Mesh
+from pipeline.world.prams import PRAM_PUSHERS
 from pipeline.world.solids import merge
 from pipeline.world.wheelchairs import WHEELCHAIRS
 
@@ -131,14 +133,17 @@ UMBRELLAS = ("fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabr
              "fabric_black", "fabric_navy", "fabric_black", "fabric_beige", "fabric_black", "fabric_grey",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_red", "fabric_black", "fabric_white",
              "fabric_black", "fabric_navy", "fabric_black", "fabric_grey", "fabric_black", "fabric_brown")
-# Every pedestrian family: the walking people, then the wheelchair users (pipeline.world.wheelchairs), picked by their
-# share instead of uniformly (pipeline.world.actors.ActorMeshes.family_codes).
-PEDESTRIANS = FAMILIES + WHEELCHAIRS
+# Every pedestrian family: the walking people, then the wheelchair users (pipeline.world.wheelchairs) and the people
+# pushing a pram (pipeline.world.prams), picked by their shares instead of uniformly
+# (pipeline.world.actors.ActorMeshes.family_codes); the pushers come after the wheelchair users, so that adding them
+# left every wheelchair user's draw as it was.
+PEDESTRIANS = FAMILIES + WHEELCHAIRS + PRAM_PUSHERS
 # The same families with their umbrella poses: the meshes of a rain that asks for umbrellas
 # (pipeline.world.actors.umbrella_meshes); the others carry none, so that their meshes cost no memory. A wheelchair
-# user's "umbrella poses" hold no umbrella (both hands are on the rims): the layout of poses is the same.
+# user's and a pram pusher's "umbrella poses" hold no umbrella (both hands are on the rims, or on the handle): the
+# layout of poses is the same.
 UMBRELLA_FAMILIES = tuple(replace(f, umbrella=u) for f, u in zip(FAMILIES, UMBRELLAS, strict=True)) + tuple(
-    replace(w, umbrella="fabric_black") for w in WHEELCHAIRS)
+    replace(w, umbrella="fabric_black") for w in WHEELCHAIRS + PRAM_PUSHERS)
 
 
 def person_statures(group: np.ndarray, track_id: np.ndarray, seed: int) -> np.ndarray:

@@ -70,3 +70,86 @@ def test_in_the_rain_the_person_walks_under_an_umbrella_that_the_box_encloses():
     assert (ratio > 1.12).all() and (ratio < 1.25).all()
     np.testing.assert_allclose(person["z_m"] - person["height_m"] / 2, 0.0, atol=1e-9)
     pd.testing.assert_frame_equal(wet[wet["cls"] != "pedestrian"], dry[dry["cls"] != "pedestrian"])
+
+
+def _crowd(people: int = 400, frames: int = 3) -> pd.DataFrame:
+    """An ego and ``people`` pedestrians walking north-east at 1.3 m/s on ground at z = 2 (SUMO's box)."""
+    rows = []
+    yaw = 0.7
+    for f in range(frames):
+        t = 0.1 * f
+        rows.append({"frame": f, "time_s": t, "track_id": 1, "is_ego": True, "cls": "car", "x_m": 5.0 * t, "y_m": 0.0,
+                     "z_m": 2.75, "length_m": 4.5, "width_m": 1.8, "height_m": 1.5, "yaw_rad": 0.0, "color_r": 30,
+                     "color_g": 30, "color_b": 30, "braking": False, "speed_mps": 5.0, "parked": False,
+                     "actor_id": "ego"})
+        for k in range(people):
+            rows.append({"frame": f, "time_s": t, "track_id": 10 + k, "is_ego": False, "cls": "pedestrian",
+                         "x_m": 3.0 * k + 1.3 * t * np.cos(yaw), "y_m": 10.0 + 1.3 * t * np.sin(yaw),
+                         "z_m": 2.0 + 1.719 / 2, "length_m": 0.215, "width_m": 0.478, "height_m": 1.719,
+                         "yaw_rad": yaw, "color_r": 90, "color_g": 20, "color_b": 20, "braking": False,
+                         "speed_mps": 1.3, "parked": False, "actor_id": f"ped{k}"})
+    return pd.DataFrame(rows)
+
+
+def test_a_pram_pusher_gets_a_stroller_in_the_hands_every_frame():
+    """Strollers (pipeline.world.prams) are actors of their own, derived per row from the people whose family pushes
+    one: about 2 % of the people, each with one stroller in each of its rows, ahead along its heading by the reach
+    of its hands at its stature, on its ground, its track id the pusher's + 32768; everyone else as without them,
+    and a frame's rows alone (the driving environment renders one frame at a time) give the same strollers."""
+    from pipeline.stages.render_frames import STROLLER_TRACK_OFFSET, with_strollers
+    from pipeline.world.people import person_statures
+    from pipeline.world.prams import STROLLER_SIZE_M, stroller_offset_m
+
+    table = _crowd()
+    out = with_strollers(table, DEFAULT_MESHES, seed=7)
+    pd.testing.assert_frame_equal(out.iloc[:len(table)], table)  # the simulated rows first, as they were
+    strollers = out.iloc[len(table):]
+    assert (strollers["cls"] == "stroller").all()
+    pushers = np.unique(strollers["track_id"].to_numpy() - STROLLER_TRACK_OFFSET)
+    assert 1 <= len(pushers) <= 25  # 2 % of 400 is 8; binomial 99.9 % bounds 1..19
+    assert len(strollers) == 3 * len(pushers)
+    families = [DEFAULT_MESHES.families[f] for f in DEFAULT_MESHES.family_codes(_people_actors(pushers, seed=7))]
+    assert all(getattr(f, "pram", False) for f in families)
+    statures = person_statures(np.array([f.group for f in families], object), pushers, seed=7)
+    ahead = dict(zip(pushers.tolist(), stroller_offset_m(statures).tolist(), strict=True))
+    person = table.set_index(["frame", "track_id"])
+    for row in strollers.itertuples():
+        p = person.loc[(row.frame, row.track_id - STROLLER_TRACK_OFFSET)]
+        d = ahead[row.track_id - STROLLER_TRACK_OFFSET]
+        assert 0.5 < d < 1.3
+        np.testing.assert_allclose([row.x_m, row.y_m], [p.x_m + d * np.cos(0.7), p.y_m + d * np.sin(0.7)], atol=1e-9)
+        assert row.yaw_rad == p.yaw_rad and row.speed_mps == p.speed_mps and row.actor_id == p.actor_id + "/stroller"
+        np.testing.assert_allclose(row.z_m - row.height_m / 2, 2.0, atol=1e-9)  # on the pusher's ground
+        np.testing.assert_allclose([row.length_m, row.width_m, row.height_m], STROLLER_SIZE_M)
+    assert strollers.groupby("track_id")[["color_r", "color_g", "color_b"]].nunique().max().max() == 1
+    for f in range(3):
+        alone = with_strollers(table[table["frame"] == f], DEFAULT_MESHES, seed=7)
+        pd.testing.assert_frame_equal(alone[alone["cls"] == "stroller"].reset_index(drop=True),
+                                      strollers[strollers["frame"] == f].reset_index(drop=True))
+    # Another seed, other pushers; the strollers pass through the render's posing with pose 0 and their boxes.
+    other = with_strollers(table, DEFAULT_MESHES, seed=8)
+    assert set(other.loc[other["cls"] == "stroller", "track_id"]) != set(strollers["track_id"])
+    posed = body_sized_trajectories(table, DEFAULT_MESHES, seed=7)
+    mine = posed[posed["cls"] == "stroller"]
+    assert (mine["pose"] == 0).all()
+    np.testing.assert_allclose(mine[["x_m", "y_m", "z_m", "length_m"]].to_numpy(),
+                               strollers[["x_m", "y_m", "z_m", "length_m"]].to_numpy())
+
+
+def _people_actors(track_id: np.ndarray, seed: int):
+    from pipeline.core.geometry import Boxes3D
+    from pipeline.world.actors import Actors, actor_variants
+
+    n = len(track_id)
+    return Actors(track_id, ["pedestrian"] * n, Boxes3D(np.zeros((n, 3)), np.tile([0.215, 0.478, 1.719], (n, 1)),
+                                                        np.zeros(n)),
+                  np.zeros((n, 3), np.float32), np.zeros(n, bool), actor_variants(track_id, seed))
+
+
+def test_track_ids_too_large_for_strollers_are_refused():
+    from pipeline.stages.render_frames import STROLLER_TRACK_OFFSET, with_strollers
+
+    table = _crowd(people=400, frames=1)
+    table.loc[table["track_id"] == 409, "track_id"] = STROLLER_TRACK_OFFSET
+    with pytest.raises(ValueError, match="must be below"):
+        with_strollers(table, DEFAULT_MESHES, seed=7)
