@@ -314,10 +314,11 @@ class ActorMeshes:
 
     def family_codes(self, actors: Actors) -> np.ndarray:
         """(N,) int64 each actor's family (index into :attr:`families`). A family with a ``share`` (the wheelchair
-        users among the pedestrians) is an actor's where an independent draw from its variant (:func:`actor_variants`
-        of it, RARE_FAMILY_TAG) falls within that share; the others pick, among their class's other families whose
-        length range holds the actor's length (all of them where none does), the one at ``variant`` modulo their
-        number, so that a family with a share leaves every other actor's family as it was without it."""
+        users and the people pushing a pram among the pedestrians) is an actor's where an independent draw from its
+        variant (:func:`actor_variants` of it, RARE_FAMILY_TAG) falls within that share; the others pick, among their
+        class's other families whose length range holds the actor's length (all of them where none does), the one at
+        ``variant`` modulo their number, so that a family with a share leaves every other actor's family as it was
+        without it."""
         codes = actors.class_codes
         out = np.zeros(len(actors), np.int64)
         length = actors.boxes.size[:, 0] if len(actors) else np.zeros(0)
@@ -383,7 +384,8 @@ DEFAULT_MESHES: ActorMeshes = cached("actor-meshes", lambda: ActorMeshes().compl
 def umbrella_meshes() -> ActorMeshes:
     """The built-in models with the people's umbrella poses too (:data:`pipeline.world.people.UMBRELLA_FAMILIES`),
     for a rain that asks for umbrellas: built (and kept in the build cache under a name of its own, so that neither
-    set's file evicts the other's) only when asked for, so that a run without them holds none of those 264 meshes."""
+    set's file evicts the other's) only when asked for, so that a run without them holds none of those 308 meshes
+    (11 more poses of each of the 28 families)."""
     global _UMBRELLA_MESHES
     if _UMBRELLA_MESHES is None:
         _UMBRELLA_MESHES = cached("umbrella-actor-meshes",
