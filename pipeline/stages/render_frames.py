@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from pipeline.core.classes import ObjectClass
 from pipeline.core.config import ConditionConfig, RadarConfig, RigConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.processes import RENDER_THRESHOLDS, ProcessCache, keep_freed_memory
@@ -116,10 +117,11 @@ class Trajectories:
 
 def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
                             umbrellas: float = 0.0) -> pd.DataFrame:
-    """The trajectories with every actor's box as its body fills it, and a ``pose`` column
-    (:func:`pipeline.world.posed_people.posed_boxes`: a person's box is its posed body's at its stature, in each
-    row, with an umbrella for a share ``umbrellas`` of them; the others keep theirs, but for a pedestrian model's
-    depth); the camera, the LiDAR, the label rows and so the exports all see that box."""
+    """The trajectories with a stroller in front of each person who pushes one (:func:`with_strollers`), every
+    actor's box as its body fills it, and a ``pose`` column (:func:`pipeline.world.posed_people.posed_boxes`: a
+    person's box is its posed body's at its stature, in each row, with an umbrella for a share ``umbrellas`` of them;
+    the others keep theirs, but for a pedestrian model's depth); the camera, the LiDAR, the label rows and so the
+    exports all see that box."""
     table = with_strollers(table, meshes, seed)
     _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
     cols = {c: table[c].to_numpy()[first] for c in SIMULATED_COLUMNS}  # an actor's class and size hold for its track
@@ -148,7 +150,7 @@ def with_strollers(table: pd.DataFrame, meshes: ActorMeshes, seed: int) -> pd.Da
     A stroller is its own object in every label and export, as nuScenes' annotators box a stroller apart from the
     person pushing it (human.pedestrian.stroller). The input's rows come first, as they were (index and order); the
     strollers' rows follow, sorted by (frame, track_id), their track ids above every other's."""
-    people = np.flatnonzero(table["cls"].to_numpy() == "pedestrian")
+    people = np.flatnonzero(table["cls"].to_numpy() == ObjectClass.PEDESTRIAN.value)
     if not len(people):
         return table
     tracks, first = np.unique(table["track_id"].to_numpy()[people], return_index=True)
