@@ -44,6 +44,12 @@ class Mesh:
     def __len__(self) -> int:
         return len(self.triangles)
 
+    def on_ground(self, clearance_m: float = 0.0) -> Mesh:
+        """The mesh moved along z so that its lowest vertex is ``clearance_m`` above z = 0 (a model standing on the
+        ground, or a runner's float above it)."""
+        lowest = self.vertices[:, 2].min() - clearance_m
+        return Mesh(self.vertices - [0.0, 0.0, lowest], self.triangles, self.material, self.semantic)
+
     @staticmethod
     def concatenate(meshes: list[Mesh], semantic: SemanticClass | None = None) -> Mesh:
         """Merge meshes into one (of ``semantic``, or the first mesh's class)."""

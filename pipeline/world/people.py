@@ -72,8 +72,7 @@ class PersonFamily(PosedFamily):
         outfit = replace(self.outfit, umbrella=self.umbrella) if pose >= UMBRELLA_FIRST else self.outfit
         mesh = merge(figure(person_pose(pose, self.lean_deg), outfit), ObjectClass.PEDESTRIAN)
         lift = run_clearance_m(run_phase(pose)) if WALK_PHASES + STAND_POSES <= pose < UMBRELLA_FIRST else 0.0
-        lowest = mesh.vertices[:, 2].min() - lift
-        return Mesh(mesh.vertices - [0.0, 0.0, lowest], mesh.triangles, mesh.material, mesh.semantic)
+        return mesh.on_ground(lift)
 
 
 def _o(trousers: str, shins: str | None = None, shoes: str = "trim", hair: str = "hair_black", **kw) -> Outfit:

@@ -195,9 +195,7 @@ class StrollerFamily:
 
     def __call__(self, pose: int = 0) -> Mesh:
         body = _carrycot(self.accent) if self.carrycot else _seat_unit(self.accent)
-        mesh = merge(_frame(self.frame) + body, ObjectClass.STROLLER)
-        return Mesh(mesh.vertices - [0.0, 0.0, mesh.vertices[:, 2].min()], mesh.triangles, mesh.material,
-                    mesh.semantic)
+        return merge(_frame(self.frame) + body, ObjectClass.STROLLER).on_ground()
 
 
 STROLLERS = (
@@ -282,9 +280,7 @@ class PramPusherFamily(PosedFamily):
 
     def __call__(self, pose: int = 0) -> Mesh:
         self.check_pose(pose)
-        mesh = merge(figure(pusher_pose(pose, self.grip_stature_m), self.outfit), ObjectClass.PEDESTRIAN)
-        return Mesh(mesh.vertices - [0.0, 0.0, mesh.vertices[:, 2].min()], mesh.triangles, mesh.material,
-                    mesh.semantic)
+        return merge(figure(pusher_pose(pose, self.grip_stature_m), self.outfit), ObjectClass.PEDESTRIAN).on_ground()
 
 
 # Our choice: about 2 % of urban pedestrians push a pram or pushchair (no count at hand), as many women as men here.

@@ -181,9 +181,7 @@ class WheelchairFamily(PosedFamily):
             body = seated_pose(push_lean_deg(phase, running), push_hands(phase))
         else:
             body = seated_pose(LEAN_DEG[0], ("lap", (0.0, PUSHRIM_R_M), "mixed")[index - WALK_PHASES])
-        mesh = merge(_chair(self.frame) + figure(body, self.outfit), ObjectClass.PEDESTRIAN)
-        return Mesh(mesh.vertices - [0.0, 0.0, mesh.vertices[:, 2].min()], mesh.triangles, mesh.material,
-                    mesh.semantic)
+        return merge(_chair(self.frame) + figure(body, self.outfit), ObjectClass.PEDESTRIAN).on_ground()
 
 
 def _seated(trousers: str, hair: str = "hair_black", **kw) -> Outfit:
