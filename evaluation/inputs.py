@@ -8,7 +8,7 @@ Conventions:
 - Images and categories are referred to by *index* (``image_index``, ``category_index``) into the
   record's sorted ``image_ids`` / ``category_ids``; the original ids are kept for output.
 - Optional per-annotation attributes (``distance_m``, ``occlusion``, ``track_id``) come with an explicit
-  validity mask, never a sentinel value.
+  validity mask, never a sentinel value; ``person`` (text) is "" where absent.
 - ``--group-by KEY`` groups images by their attribute ``KEY`` (:func:`image_groups`): one group per
   distinct value as text, :data:`MISSING_GROUP` for images without it. The table, the PR curves and the
   COCO stats per group all group this way.
@@ -49,6 +49,8 @@ class GroundTruth:
         track_id: (N,) int64 the object's identity across the images of one sequence (COCO's optional
             ``track_id``, as roadsynth's export writes it); meaningful where ``track_valid``.
         track_valid: (N,) bool.
+        person: (N,) object who a person is (roadsynth's COCO field ``person``: adult, teen, child,
+            wheelchair_user), "" where the annotation does not say (every non-person, and other datasets).
     """
 
     source: str
@@ -68,6 +70,11 @@ class GroundTruth:
     occlusion_valid: np.ndarray
     track_id: np.ndarray
     track_valid: np.ndarray
+    person: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.person is None:
+            object.__setattr__(self, "person", np.full(len(self.ann_ids), "", object))
 
     @property
     def num_images(self) -> int:
@@ -91,7 +98,8 @@ class GroundTruth:
             image_index=new_index[self.image_index[ann]], category_index=self.category_index[ann],
             bbox=self.bbox[ann], area=self.area[ann], iscrowd=self.iscrowd[ann], distance_m=self.distance_m[ann],
             distance_valid=self.distance_valid[ann], occlusion=self.occlusion[ann],
-            occlusion_valid=self.occlusion_valid[ann], track_id=self.track_id[ann], track_valid=self.track_valid[ann])
+            occlusion_valid=self.occlusion_valid[ann], track_id=self.track_id[ann], track_valid=self.track_valid[ann],
+            person=self.person[ann])
 
 
 @dataclasses.dataclass(frozen=True)

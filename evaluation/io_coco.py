@@ -103,6 +103,18 @@ def _track_ids(annotations: list[Any], path: str) -> tuple[np.ndarray, np.ndarra
     return np.where(present, values, 0).astype(np.int64), present
 
 
+def _persons(annotations: list[Any], path: str) -> np.ndarray:
+    """(N,) object the optional ``person`` text of each annotation ("" where absent)."""
+    out = np.full(len(annotations), "", object)
+    for i, a in enumerate(annotations):
+        value = a.get("person", "") if isinstance(a, dict) else ""
+        if not isinstance(value, str):
+            raise InputError(f"{where(path, 'annotations', i)}: field 'person' is {value!r} (expected text, e.g. "
+                             "'adult' or 'child')")
+        out[i] = value
+    return out
+
+
 def ground_truth_from_dict(data: Any, path: str = "<ground truth>") -> GroundTruth:
     """Validate a parsed COCO instances dict and convert it to a :class:`GroundTruth`."""
     if not isinstance(data, dict):
@@ -151,6 +163,7 @@ def ground_truth_from_dict(data: Any, path: str = "<ground truth>") -> GroundTru
         occlusion_valid=occlusion_valid,
         track_id=track_id,
         track_valid=track_valid,
+        person=_persons(annotations, path),
     )
 
 

@@ -211,6 +211,33 @@ def missed_objects(gt: GroundTruth, gm: GroupMatch, objects: np.ndarray, height:
     return picked[np.lexsort((picked, -gt.bbox[picked, 3]))]
 
 
+PERSON_ORDER = ("adult", "teen", "child", "wheelchair_user")
+"""The order of the people-by-person rows (others after, alphabetically)."""
+
+
+def person_rows(gt: GroundTruth, gm: GroupMatch, image_sets: dict[str, np.ndarray],
+                objects: np.ndarray) -> list[dict[str, Any]]:
+    """The people group's recall by who the person is (the annotations' ``person``), per image group and height bin
+    of :data:`REPORTED_HEIGHTS` but ``all``: objects, found in frames and as objects. Precision has no place here (a
+    false detection is nobody). Empty where no counted annotation says who it is."""
+    said = gm.gt_counted.any(axis=1) & (gt.person != "")
+    if not said.any():
+        return []
+    kinds = sorted(set(gt.person[said].tolist()), key=lambda k: (k not in PERSON_ORDER, PERSON_ORDER.index(k)
+                                                                 if k in PERSON_ORDER else 0, k))
+    rows = []
+    for value, images in image_sets.items():
+        for height in REPORTED_HEIGHTS[:-1]:
+            a = gm.bins.index(height)
+            for kind in kinds:
+                counted = gm.gt_counted[:, a] & images[gt.image_index] & (gt.person == kind)
+                n, k = int(counted.sum()), int((gm.gt_found[:, a] & counted).sum())
+                if n:
+                    rows.append({"group": value, "height_px": height, "person": kind, "gt": n, "found": k,
+                                 "recall": _ratio(k, n), **object_recall(objects[counted], gm.gt_found[counted, a])})
+    return rows
+
+
 def distance_labels(edges: tuple[float, ...] = DISTANCE_EDGES_M) -> list[str]:
     return [f"{lo:g}-{hi:g}" for lo, hi in itertools.pairwise(edges)] + [f"{edges[-1]:g}+"]
 
@@ -288,5 +315,6 @@ def realism_metrics(gt: GroundTruth, dt: Detections, *, score_threshold: float, 
         "distance": {"edges_m": list(distance_edges_m), "height_px": ALL, "visibility_m": visibility_m,
                      "rows": distance},
         "objects_per_frame": {"height_px": "30+", "by_group": per_frame},
+        "people_by_person": person_rows(gt, matches["people"], image_sets, objects),
     }
     return metrics, {"matches": matches, "objects": objects}

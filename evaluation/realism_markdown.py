@@ -61,6 +61,16 @@ def group_table(metrics: dict[str, Any], class_group: str) -> list[str]:
     return md_table(header, body, "ll" + "r" * (len(header) - 2))
 
 
+def person_table(metrics: dict[str, Any]) -> list[str]:
+    """The people's recall by who they are (annotations' ``person``), per image group and box height."""
+    header = [metrics["group_by"], "height px", "person", "boxes", "recall", "objects", "found any", "found most"]
+    order = _groups(metrics)
+    rows = sorted(metrics.get("people_by_person", []), key=lambda r: order.index(r["group"]))
+    body = [[r["group"], r["height_px"], r["person"], str(r["gt"]), _pct(r["recall"]), str(r["objects"]),
+             _pct(r["object_recall_any"]), _pct(r["object_recall_most"])] for r in rows]
+    return md_table(header, body, "lll" + "r" * (len(header) - 3))
+
+
 def distance_table(metrics: dict[str, Any], class_group: str = "vehicles") -> list[str]:
     """Recall (%) of ``class_group`` by distance bin per image group (objects of every size; boxes in brackets),
     and each visibility's transmittance at the bin's centre."""
@@ -104,6 +114,10 @@ def realism_markdown(metrics: dict[str, Any], title: str = "Realism report") -> 
                   "Per box height; *boxes*: object-frames counted; *objects*: distinct tracks; *found any / most*: "
                   "share of objects found in at least one / more than half of their frames; *mean share*: mean over "
                   "objects of the share of their frames found.", "", *group_table(metrics, group)]
+    if metrics.get("people_by_person"):
+        lines += ["", "## People by who they are", "",
+                  "Recall of the people (annotations' `person`: adult, teen, child, wheelchair user); precision has no "
+                  "row here, a false detection being nobody.", "", *person_table(metrics)]
     lines += ["", "## Vehicles: recall (%) by distance (objects of every size; object-frames in brackets)", "",
               "T: Koschmieder's transmittance exp(-3.912 d / V) at the bin's centre.", "",
               *distance_table(metrics), "", "![recall by distance](recall_by_distance.png)"]

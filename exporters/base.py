@@ -100,7 +100,8 @@ class CameraRows:
         reasons: (N,) the filter's verdict per row (:data:`exporters.filters.REASONS`).
         boxes: (N, 4) the ``options.box`` 2D box per row (:func:`boxes_2d`).
         amodal: (N, 4) the unclipped amodal box, NaN where none.
-        columns: the label columns by name: ints as stored, floats as float64 with NaN for nulls, ``cls`` as str.
+        columns: the label columns by name: ints as stored, floats as float64 with NaN for nulls, ``cls``,
+            ``model`` and ``person`` as str.
     """
 
     INTS = ("track_id", "category_id", "visible_px", "lidar_points")
@@ -120,7 +121,7 @@ class CameraRows:
         self.boxes = boxes_2d(labels, options.box)
         self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
             na_value=np.nan)
-        self.columns: dict[str, np.ndarray] = {"cls": labels["cls"].to_numpy(dtype=object)}
+        self.columns: dict[str, np.ndarray] = {c: labels[c].to_numpy(dtype=object) for c in ("cls", "model", "person")}
         self.columns |= {c: labels[c].to_numpy() for c in self.INTS}
         self.columns |= {c: labels[c].astype("float64").to_numpy(na_value=np.nan) for c in self.FLOATS}
         frames = labels["frame"].to_numpy(dtype=np.int64)

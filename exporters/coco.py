@@ -3,11 +3,12 @@
 Every (record, camera, frame) is one image, its RGB PNG hard-linked (or copied) as
 ``images/<scenario>_s<seed>_<condition>_<camera>_<frame:06d>.png``. Image and annotation ids start at
 1 and are unique across split files. Category ids are COCO's own (car 3, truck 8, ...; van counts as car
-and keeps ``subclass`` "van").
+and keeps ``subclass`` "van"; ``model`` names the body family, ``person`` who a pedestrian is: adult, teen, child or
+wheelchair_user).
 
 Per annotation: ``bbox`` [x, y, w, h] of the tight box (``--box amodal``: the amodal box clipped to
 the image), ``area`` = visible mask area (pixels), ``segmentation`` = RLE of the visible mask taken
-from the instance image (pycocotools), ``iscrowd``; extra fields ``track_id``, ``subclass``,
+from the instance image (pycocotools), ``iscrowd``; extra fields ``track_id``, ``subclass``, ``model``, ``person``,
 ``occlusion`` and ``truncation`` (fractions), ``distance_m``, ``bbox_amodal`` (unclipped [x, y, w, h]),
 ``box3d_camera`` (``center_m`` x, y, z and ``size_m`` length, width, height in the camera's OpenCV
 frame; ``rotation_y_rad``: KITTI's rotation about the camera's +y), ``lidar_points``, ``visible_px``,
@@ -135,7 +136,8 @@ class CocoExporter(Exporter):
                 "id": first_id + j, "image_id": image_id, "category_id": int(ints["category_id"][j]),
                 "bbox": xywh(table.boxes[i]), "area": float(area), "segmentation": rle,
                 "iscrowd": 0 if table.reasons[i] == KEPT else 1,
-                "track_id": int(ints["track_id"][j]), "subclass": str(table.columns["cls"][i]), "camera": camera,
+                "track_id": int(ints["track_id"][j]), "subclass": str(table.columns["cls"][i]),
+                "model": str(table.columns["model"][i]), "person": str(table.columns["person"][i]), "camera": camera,
                 "occlusion": _r(num["occlusion"][j], 6), "truncation": _r(num["truncation"][j], 6),
                 "distance_m": _r(num["distance_m"][j]), "visible_px": int(ints["visible_px"][j]),
                 "bbox_amodal": xywh(table.amodal[i]) if np.all(np.isfinite(table.amodal[i])) else None,

@@ -32,6 +32,7 @@ from exporters.base import Exporter, ExportError, ExportOptions
 from exporters.nuscenes_files import lidar_array, radar_pcd
 from exporters.source import ExportSource, RecordSource
 from exporters.writing import dumps_json, link_or_copy
+from pipeline.core.classes import Person
 from pipeline.core.png import encode_png
 
 log = logging.getLogger(__name__)
@@ -70,6 +71,10 @@ class NuScenesExporter(Exporter):
             if unknown:
                 raise ExportError(f"{root}: labels.parquet field cls has classes {unknown} without a nuScenes "
                                   f"category (known: {sorted(nt.CATEGORY)})")
+            persons = sorted(set(src.labels["person"]) - {p.value for p in Person} - {""})
+            if persons:
+                raise ExportError(f"{root}: labels.parquet field person has values {persons}; expected one of "
+                                  f"{sorted(p.value for p in Person)} or empty")
 
     def write(self, source: ExportSource, tmp: Path, options: ExportOptions, description: dict[str, Any],
               meta: dict[str, Any] | None) -> dict[str, Any]:
@@ -170,7 +175,7 @@ class NuScenesExporter(Exporter):
         anns, instances, _ = nt.annotation_tables(stem, obj, time_us, sample_of)
         tables["sample_annotation"] += anns
         tables["instance"] += instances
-        counts.update(nt.CATEGORY[c] for c in obj["cls"])
+        counts.update(nt.categories(obj["cls"].to_numpy(), obj["person"].to_numpy()).tolist())
 
 
 EXPORTER = NuScenesExporter()

@@ -35,6 +35,9 @@ CATEGORY = {"car": "vehicle.car", "van": "vehicle.car", "truck": "vehicle.truck"
             "motorcycle": "vehicle.motorcycle", "bicycle": "vehicle.bicycle", "pedestrian": "human.pedestrian.adult",
             "stroller": "human.pedestrian.stroller"}
 """Our class -> nuScenes category (nuScenes counts vans and SUVs as vehicle.car)."""
+PERSON_CATEGORY = {"child": "human.pedestrian.child", "wheelchair_user": "human.pedestrian.wheelchair"}
+"""A pedestrian's ``person`` -> its nuScenes category where it is not CATEGORY's (adults and teenagers:
+human.pedestrian.adult). A wheelchair user is the wheelchair with its occupant, as nuScenes boxes one."""
 CATEGORY_DESCRIPTION = {
     "vehicle.car": "Vehicle designed primarily for personal use, e.g. sedans, hatch-backs, wagons, vans, mini-vans, "
                    "SUVs and jeeps (roadsynth: car and van).",
@@ -42,7 +45,10 @@ CATEGORY_DESCRIPTION = {
     "vehicle.bus.rigid": "Rigid bus (roadsynth: bus).",
     "vehicle.motorcycle": "Gasoline or electric powered 2-wheeled vehicle (roadsynth: motorcycle, always ridden).",
     "vehicle.bicycle": "Human or electric powered 2-wheeled vehicle (roadsynth: bicycle, always ridden).",
-    "human.pedestrian.adult": "Adult subcategory (roadsynth: pedestrian).",
+    "human.pedestrian.adult": "Adult subcategory (roadsynth: pedestrian, adults and teenagers).",
+    "human.pedestrian.child": "Child subcategory (roadsynth: pedestrian, person child: 6-12 years).",
+    "human.pedestrian.wheelchair": "Wheelchairs. If a person is in the wheelchair, include in the annotation "
+                                   "(roadsynth: pedestrian, person wheelchair_user).",
     "human.pedestrian.stroller": "Strollers. If a person is in the stroller, include in the annotation (roadsynth: "
                                  "stroller, boxed apart from the person pushing it).",
 }
@@ -120,14 +126,14 @@ def record_channels(src: RecordSource) -> list[tuple[str, str, str]]:
 
 
 def objects(src: RecordSource) -> pd.DataFrame:
-    """One row per (frame, track) labelled by any sensor: world box, class, num_lidar_pts (sum over the LiDAR rows:
-    every object owning a point has one), num_radar_pts (the same over radar rows), visible (0-1: the best camera's
-    visible share of the silhouette, (1 - occlusion)(1 - truncation); 0 without a camera row). Sorted by
-    (track, frame)."""
+    """One row per (frame, track) labelled by any sensor: world box, class and person, num_lidar_pts (sum over the
+    LiDAR rows: every object owning a point has one), num_radar_pts (the same over radar rows), visible (0-1: the
+    best camera's visible share of the silhouette, (1 - occlusion)(1 - truncation); 0 without a camera row). Sorted
+    by (track, frame)."""
     labels = src.labels
     keys = ["frame", "track_id"]
-    boxes = labels.drop_duplicates(keys)[[*keys, "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m",
-                                          "yaw_rad"]]
+    boxes = labels.drop_duplicates(keys)[[*keys, "cls", "person", "x_m", "y_m", "z_m", "length_m", "width_m",
+                                          "height_m", "yaw_rad"]]
     kind = labels["sensor_type"]
 
     def summed(mask: pd.Series, column: str) -> pd.Series:
@@ -144,6 +150,15 @@ def objects(src: RecordSource) -> pd.DataFrame:
     out["num_radar_pts"] = summed(kind == "radar", "radar_detections").reindex(out.index, fill_value=0)
     out["visible"] = visible.reindex(out.index).fillna(0.0)
     return out.reset_index().sort_values(["track_id", "frame"], kind="stable").reset_index(drop=True)
+
+
+def categories(cls: np.ndarray, person: np.ndarray) -> np.ndarray:
+    """(N,) nuScenes category of each object of classes ``cls`` and persons ``person`` (labels.parquet's columns):
+    CATEGORY's, but PERSON_CATEGORY's for a child or a wheelchair user."""
+    out = np.array([CATEGORY[c] for c in np.asarray(cls, object).tolist()], object)
+    for who, name in PERSON_CATEGORY.items():
+        out[(np.asarray(cls, object) == "pedestrian") & (np.asarray(person, object) == who)] = name
+    return out
 
 
 def velocities(obj: pd.DataFrame, time_us: dict[int, int]) -> np.ndarray:
@@ -168,18 +183,19 @@ def velocities(obj: pd.DataFrame, time_us: dict[int, int]) -> np.ndarray:
     return vel
 
 
-def attribute_names(cls: np.ndarray, vel: np.ndarray) -> np.ndarray:
-    """(N,) nuScenes attribute of each object: vehicles moving or stopped (we do not know parked), cycles always
-    with a rider, pedestrians moving or standing; an object without a velocity estimate counts as not moving; a
-    stroller none ("": nuScenes' attributes describe vehicles, cycles and the people themselves)."""
+def attribute_names(category: np.ndarray, vel: np.ndarray) -> np.ndarray:
+    """(N,) nuScenes attribute of each object of nuScenes ``category`` (:func:`categories`): vehicles moving or
+    stopped (we do not know parked), cycles always with a rider, pedestrians (adults and children) moving or
+    standing; an object without a velocity estimate counts as not moving; a stroller and a wheelchair none ("":
+    nuScenes' attributes describe vehicles, cycles and the people themselves; these categories name the object)."""
     speed = np.hypot(vel[:, 0], vel[:, 1])
     moving = np.nan_to_num(speed, nan=0.0) > MOVING_SPEED_MPS
-    cls = np.asarray(cls, dtype=object)
+    category = np.asarray(category, dtype=object)
     out = np.where(moving, "vehicle.moving", "vehicle.stopped").astype(object)
-    out[(cls == "motorcycle") | (cls == "bicycle")] = "cycle.with_rider"
-    ped = cls == "pedestrian"
+    out[(category == "vehicle.motorcycle") | (category == "vehicle.bicycle")] = "cycle.with_rider"
+    ped = (category == "human.pedestrian.adult") | (category == "human.pedestrian.child")
     out[ped] = np.where(moving[ped], "pedestrian.moving", "pedestrian.standing")
-    out[cls == "stroller"] = ""
+    out[(category == "human.pedestrian.stroller") | (category == "human.pedestrian.wheelchair")] = ""
     return out
 
 
@@ -194,7 +210,8 @@ def annotation_tables(stem: str, obj: pd.DataFrame, time_us: dict[int, int],
                       sample_of: dict[int, str]) -> tuple[list[dict], list[dict], np.ndarray]:
     """sample_annotation and instance rows of one record's objects (:func:`objects`), and their velocities."""
     vel = velocities(obj, time_us)
-    attrs = attribute_names(obj["cls"].to_numpy(), vel)
+    category = categories(obj["cls"].to_numpy(), obj["person"].to_numpy())
+    attrs = attribute_names(category, vel)
     vis = visibility_token(obj["visible"].to_numpy())
     quats = quat_yaw(obj["yaw_rad"].to_numpy()).tolist()
     tracks, frames = obj["track_id"].to_numpy(), obj["frame"].to_numpy()
@@ -221,7 +238,7 @@ def annotation_tables(stem: str, obj: pd.DataFrame, time_us: dict[int, int],
         if not same_next:
             instances.append({
                 "token": token("instance", stem, int(tracks[i])),
-                "category_token": token("category", CATEGORY[obj["cls"].iat[i]]),
+                "category_token": token("category", category[i]),
                 "nbr_annotations": i - start + 1, "first_annotation_token": toks[start],
                 "last_annotation_token": toks[i],
             })
@@ -230,10 +247,10 @@ def annotation_tables(stem: str, obj: pd.DataFrame, time_us: dict[int, int],
 
 def static_tables() -> dict[str, list[dict]]:
     """category, attribute and visibility tables (the categories we map to, every attribute, every level)."""
-    categories = sorted(set(CATEGORY.values()))
+    names = sorted({*CATEGORY.values(), *PERSON_CATEGORY.values()})
     return {
         "category": [{"token": token("category", c), "name": c, "description": CATEGORY_DESCRIPTION[c]}
-                     for c in categories],
+                     for c in names],
         "attribute": [{"token": token("attribute", a), "name": a, "description": d} for a, d in ATTRIBUTE.items()],
         "visibility": [{"token": t, "level": level, "description": f"visibility of the annotation is {level[1:]} %"}
                        for t, level, _ in VISIBILITY],

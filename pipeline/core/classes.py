@@ -59,6 +59,18 @@ _COCO_ID = {
 }
 
 
+class Person(str, enum.Enum):
+    """Who a pedestrian is (labels.parquet ``person``; empty for every other class): an adult, a teenager (13-17), a
+    child (6-12), or a wheelchair user (an adult seated in a wheelchair, labelled with it as one pedestrian). The
+    body family decides (pipeline.world.people); exports with finer person categories read it (nuScenes:
+    human.pedestrian.child, human.pedestrian.wheelchair)."""
+
+    ADULT = "adult"
+    TEEN = "teen"
+    CHILD = "child"
+    WHEELCHAIR_USER = "wheelchair_user"
+
+
 class SemanticClass(enum.IntEnum):
     """Per-pixel / per-point semantic labels (uint8 in images and point clouds). 0 is 'nothing hit'."""
 

@@ -32,7 +32,7 @@ import pyarrow as pa
 from pipeline.core.png import check_png
 from pipeline.core.tables import damage_message, open_parquet, read_parquet, require_finite
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: labels name each actor's body (model, person)
 RECORD_FILE = "record.json"
 DEPTH_SCALE = 256.0  # depth PNG value = metres * 256
 
@@ -44,7 +44,7 @@ FRAME_COLUMNS = {
 LABEL_COLUMNS = {
     # identity
     "frame": "int32", "sensor": "str", "sensor_type": "str", "track_id": "int32", "cls": "str",
-    "category_id": "int32",
+    "category_id": "int32", "model": "str", "person": "str",
     # 3D box in the world (centre, size, yaw about +z)
     "x_m": "float64", "y_m": "float64", "z_m": "float64", "length_m": "float64", "width_m": "float64",
     "height_m": "float64", "yaw_rad": "float64",

@@ -95,8 +95,8 @@ class SignalState:
 
 
 ACTOR_COLUMNS = ("track_id", "cls", "x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad", "color_r",
-                 "color_g", "color_b", "braking", "speed_mps", "parked", "pose")
-SIMULATED_COLUMNS = ACTOR_COLUMNS[:-1]  # what simulate records; body_sized_trajectories adds the pose
+                 "color_g", "color_b", "braking", "speed_mps", "parked", "pose", "model", "person")
+SIMULATED_COLUMNS = ACTOR_COLUMNS[:-3]  # what simulate records; body_sized_trajectories adds pose, model, person
 
 
 class Trajectories:
@@ -121,7 +121,9 @@ def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
     actor's box as its body fills it, and a ``pose`` column (:func:`pipeline.world.posed_people.posed_boxes`: a
     person's box is its posed body's at its stature, in each row, with an umbrella for a share ``umbrellas`` of them;
     the others keep theirs, but for a pedestrian model's depth); the camera, the LiDAR, the label rows and so the
-    exports all see that box."""
+    exports all see that box. Two columns name each actor's body for the labels: ``model``, its body family's name
+    (:meth:`ActorMeshes.family_names`), and ``person``, who a pedestrian is (:meth:`ActorMeshes.family_persons`;
+    "" for the other classes)."""
     table = with_strollers(table, meshes, seed)
     _, first, inverse = np.unique(table["track_id"].to_numpy(), return_index=True, return_inverse=True)
     cols = {c: table[c].to_numpy()[first] for c in SIMULATED_COLUMNS}  # an actor's class and size hold for its track
@@ -131,7 +133,9 @@ def body_sized_trajectories(table: pd.DataFrame, meshes: ActorMeshes, seed: int,
     posed = {"x_m": boxes.center[:, 0], "y_m": boxes.center[:, 1], "z_m": boxes.center[:, 2],
              "length_m": boxes.size[:, 0], "width_m": boxes.size[:, 1], "height_m": boxes.size[:, 2]}
     changed = {c: v for c, v in posed.items() if not np.array_equal(v, rows[c])}
-    return table.assign(**changed, pose=pose)
+    family = meshes.family_codes(_actors(cols, seed))
+    return table.assign(**changed, pose=pose, model=meshes.family_names(family)[inverse.reshape(-1)],
+                        person=meshes.family_persons(family)[inverse.reshape(-1)])
 
 
 STROLLER_TRACK_OFFSET = 1 << 15

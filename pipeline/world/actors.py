@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.core.build_cache import cached
-from pipeline.core.classes import ObjectClass
+from pipeline.core.classes import ObjectClass, Person
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
 from pipeline.world.mesh import Mesh
@@ -345,6 +345,23 @@ class ActorMeshes:
         the actor's ``pose`` (modulo the family's number of poses)."""
         family = self.family_codes(actors)
         return self._family_first_model[family] + actors.pose % self._family_poses[family]
+
+    def family_names(self, family: np.ndarray) -> np.ndarray:
+        """(N,) object the names of families ``family`` (N,) (indices into :attr:`families`): a built-in family's
+        ("sedan", "child_jeans", ...) or a given model's."""
+        names = np.array(self.model_names, object)
+        return names[self._family_first_model[np.asarray(family, np.int64)]]
+
+    def family_persons(self, family: np.ndarray) -> np.ndarray:
+        """(N,) object who the people of families ``family`` (N,) are (:class:`pipeline.core.classes.Person`'s
+        values): a built-in person family's ``person``; "adult" for a pedestrian model given without a family; ""
+        for every other class."""
+        out = []
+        for f in np.asarray(family, np.int64).tolist():
+            cls = self.model_class[int(self._family_first_model[f])]
+            person = getattr(self.families[f], "person", Person.ADULT)
+            out.append(Person(person).value if cls is ObjectClass.PEDESTRIAN else "")
+        return np.array(out, object)
 
     def family_poses(self, family: int) -> int:
         """How many poses family ``family`` (an index into :attr:`families`) has."""

@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from pipeline.core.classes import Person
 from pipeline.world.figures import FOREARM_M, SHIN_M, THIGH_M, UPPER_ARM_M, Outfit, Pose, bend, pose
 
 MODEL_STATURE_M = 1.75  # the figures' stature as modelled (a standing figure's top of the head)
@@ -239,6 +240,11 @@ class PosedFamily:
     @property
     def __name__(self) -> str:
         return self.name
+
+    @property
+    def person(self) -> Person:
+        """Who the family's people are in the labels (``person``): its stature group's age, men and women adults."""
+        return Person.ADULT if self.group in ("man", "woman") else Person(self.group)
 
     def check_pose(self, pose: int) -> None:
         """Raise a ValueError naming the family where ``pose`` is not one of its poses."""

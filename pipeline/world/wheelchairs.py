@@ -9,9 +9,9 @@ ground, 0.42 m wide and deep; a sling backrest to 0.9 m with push handles; footp
 
 A wheelchair user is one pedestrian actor, chair and person together, as nuScenes' annotators box a wheelchair
 with the person in it (category human.pedestrian.wheelchair: "if a person is in the wheelchair, include in the
-annotation"); roadsynth's exports label them pedestrians (its nuScenes export: human.pedestrian.adult, as every
-pedestrian). A COCO-style annotator would box the seated person, whose silhouette the chair's wheels widen by a few
-centimetres each side.
+annotation"); roadsynth's labels make them pedestrians whose ``person`` is "wheelchair_user", which its nuScenes
+export writes as human.pedestrian.wheelchair. A COCO-style annotator would box the seated person, whose silhouette
+the chair's wheels widen by a few centimetres each side.
 
 The poses follow :class:`pipeline.world.people.PersonFamily`'s layout, so that the gait's pose choice
 (:func:`pipeline.world.gait.gait_poses`) serves both: the WALK_PHASES of the walk cycle are the push cycle at the same
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.core.classes import ObjectClass
+from pipeline.core.classes import ObjectClass, Person
 from pipeline.world.figures import FOREARM_M, UPPER_ARM_M, Outfit, Pose, figure, pose
 from pipeline.world.gait import RUN_PHASES, STAND_POSES, UMBRELLA_FIRST, WALK_PHASES, PosedFamily
 from pipeline.world.mesh import Mesh
@@ -171,6 +171,11 @@ class WheelchairFamily(PosedFamily):
     frame: str = "metal"
     share: float = 0.005
     umbrella: str | None = None
+
+    @property
+    def person(self) -> Person:
+        """A wheelchair user, whatever the stature group."""
+        return Person.WHEELCHAIR_USER
 
     def __call__(self, pose: int = 0) -> Mesh:
         self.check_pose(pose)

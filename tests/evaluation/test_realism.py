@@ -128,6 +128,32 @@ def test_objects_per_frame_count_30_px_and_taller():
     assert m["objects_per_frame"]["by_group"]["morning"] == {"vehicles": 0.5, "people": 1.0, "two-wheelers": 0.0}
 
 
+def test_people_by_who_they_are():
+    """An adult (track 1, 40 px, found in 2 of 3 frames) and a child (track 2, 70 px, never found); a 40 px person
+    without ``person`` (track 3) counts in the people rows but in no person row; a false person changes nothing."""
+    people = [{"image_id": i, "bbox": box, "track_id": t, "category_id": 1, **({"person": who} if who else {})}
+              for i in (1, 2, 3) for box, t, who in (([0, 0, 15, 40], 1, "adult"), ([100, 0, 30, 70], 2, "child"),
+                                                     ([200, 0, 15, 40], 3, None))]
+    results = [det(1, [0, 0, 15, 40], 0.9, 1), det(2, [0, 0, 15, 40], 0.8, 1), det(3, [0, 0, 15, 40], 0.1, 1),
+               det(1, [250, 150, 15, 40], 0.9, 1)]
+    m = metrics_of(coco(people), results)
+    rows = {(r["group"], r["height_px"], r["person"]): r for r in m["people_by_person"]}
+    adult, child = rows[("morning", "30+", "adult")], rows[("morning", "30+", "child")]
+    assert (adult["gt"], adult["found"], adult["objects"], adult["objects_found_any"]) == (3, 2, 1, 1)
+    assert adult["recall"] == pytest.approx(2 / 3) and adult["object_recall_most"] == 1.0
+    assert (child["gt"], child["found"], child["recall"], child["object_recall_any"]) == (3, 0, 0.0, 0.0)
+    assert ("morning", "30-60", "child") not in rows and rows[("morning", "60+", "child")]["gt"] == 3
+    assert {k[2] for k in rows} == {"adult", "child"} and [k[2] for k in rows][:2] == ["adult", "child"]
+    assert row(m, "people")["gt"] == 9
+    from evaluation.realism_markdown import realism_markdown
+    text = realism_markdown(m)
+    assert "## People by who they are" in text and "| morning | 60+ | child | 3 |" in text
+    assert metrics_of(coco([{k: v for k, v in a.items() if k != "person"} for a in people]), results)[
+        "people_by_person"] == []
+    with pytest.raises(InputError, match="field 'person' is 3"):
+        ground_truth_from_dict(coco([{"image_id": 1, "bbox": A, "person": 3}], n_images=1))
+
+
 def test_crowd_regions_are_neither_objects_nor_false_positives():
     anns = [{"image_id": 1, "bbox": [0, 0, 40, 40], "iscrowd": 1}]
     m = metrics_of(coco(anns, n_images=1), [det(1, [5, 5, 30, 30], 0.9)])

@@ -215,6 +215,7 @@ def _camera_rows(frame, boxes_ego, boxes_world, cam_from_ego, instance, masks, l
 def _common(frame: int, obj: ObjectSpec, boxes_world: Boxes3D, i: int) -> dict:
     return {
         "frame": frame, "track_id": obj.track_id, "cls": obj.cls.value, "category_id": obj.cls.coco_id,
+        "model": "box", "person": "adult" if obj.cls is ObjectClass.PEDESTRIAN else "",
         "x_m": boxes_world.center[i, 0], "y_m": boxes_world.center[i, 1], "z_m": boxes_world.center[i, 2],
         "length_m": boxes_world.size[i, 0], "width_m": boxes_world.size[i, 1], "height_m": boxes_world.size[i, 2],
         "yaw_rad": boxes_world.yaw_rad[i],

@@ -37,8 +37,10 @@ def test_people_are_posed_per_row_and_the_rest_kept():
     assert person["length_m"].nunique() >= 3
     np.testing.assert_allclose(person["z_m"] - person["height_m"] / 2, 0.0, atol=1e-9)
     assert (person["height_m"] > 1.0).all() and (person["height_m"] < 2.1).all()
-    pd.testing.assert_frame_equal(car.drop(columns="pose"), table[table["track_id"] == 2])
+    pd.testing.assert_frame_equal(car.drop(columns=["pose", "model", "person"]), table[table["track_id"] == 2])
     assert (car["pose"] == 0).all()
+    assert car["model"].nunique() == 1 and car["model"].iloc[0] in {"sedan", "hatchback", "estate", "suv", "coupe",
+                                                                    "pickup"} and (car["person"] == "").all()
     # The frame's actor columns carry the pose; the same table in another row order poses the same.
     _, others = Trajectories(out).frame(7)
     assert set(ACTOR_COLUMNS) <= set(others) and others["pose"][others["track_id"] == 3][0] == \
@@ -153,3 +155,26 @@ def test_track_ids_too_large_for_strollers_are_refused():
     table.loc[table["track_id"] == 409, "track_id"] = STROLLER_TRACK_OFFSET
     with pytest.raises(ValueError, match="must be below"):
         with_strollers(table, DEFAULT_MESHES, seed=7)
+
+
+def test_labels_name_each_actor_s_body_and_who_a_pedestrian_is():
+    """``model`` is the body family's name and ``person`` who a pedestrian is, one value per track: the families'
+    groups over 400 people (children, teenagers, adults, wheelchair users), a stroller's own family and no person."""
+    from pipeline.core.classes import Person
+
+    out = body_sized_trajectories(_crowd(), DEFAULT_MESHES, seed=7)
+    assert (out.groupby("track_id")[["model", "person"]].nunique() == 1).all().all()
+    people = out[out["cls"] == "pedestrian"].drop_duplicates("track_id")
+    family = {f.name: f for f in DEFAULT_MESHES.families if hasattr(f, "group")}
+    expected = ["wheelchair_user" if m.startswith("wheelchair_") else
+                {"man": "adult", "woman": "adult"}.get(family[m].group, family[m].group) for m in people["model"]]
+    assert people["person"].tolist() == expected
+    counts = people["person"].value_counts()
+    assert set(counts.index) <= {p.value for p in Person}
+    assert counts["adult"] > 250 and 10 <= counts.get("child", 0) <= 60 and 10 <= counts.get("teen", 0) <= 60
+    assert counts.get("wheelchair_user", 0) >= 1  # 1 % of them: 4 at this seed
+    assert people["model"].str.startswith("child_").sum() == counts["child"]
+    strollers = out[out["cls"] == "stroller"]
+    assert len(strollers) and set(strollers["model"]) <= {"pram", "pushchair"} and (strollers["person"] == "").all()
+    ego = out[out["is_ego"]]
+    assert (ego["person"] == "").all()

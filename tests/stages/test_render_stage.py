@@ -14,7 +14,7 @@ import pytest
 
 from pipeline.core.config import ConditionConfig, RigConfig, load_config
 from pipeline.core.geometry import Boxes3D, Transform
-from pipeline.core.record import DatasetRecord, RecordError
+from pipeline.core.record import SCHEMA_VERSION, DatasetRecord, RecordError
 from pipeline.stages import render_frames
 from pipeline.stages.render import render, worker_context
 from tests.conftest import tree_hashes
@@ -159,7 +159,7 @@ def test_missing_or_foreign_inputs_fail_clearly(tmp_path, rig, noon, record_dir)
         render(tmp_path, noon, rig, tmp_path / "out", progress=False)
     foreign = tmp_path / "foreign"
     shutil.copytree(record_dir, foreign)
-    text = (foreign / "record.json").read_text().replace('"schema_version": 1', '"schema_version": 99')
+    text = (foreign / "record.json").read_text().replace(f'"schema_version": {SCHEMA_VERSION}', '"schema_version": 99')
     (foreign / "record.json").write_text(text)
     with pytest.raises(RecordError, match="schema_version 99 is not supported"):
         DatasetRecord(foreign)

@@ -24,12 +24,14 @@ def actor_boxes(cols: dict[str, np.ndarray]) -> Boxes3D:
 
 def identity_columns(frame: int, sensor: str, sensor_type: str, cols: dict[str, np.ndarray],
                      index: np.ndarray) -> dict[str, np.ndarray]:
-    """Label columns naming the rows ``index`` of one frame's actors: frame, sensor, track, class, world box."""
+    """Label columns naming the rows ``index`` of one frame's actors: frame, sensor, track, class, body (model and
+    person), world box."""
     n = len(index)
     cls = cols["cls"][index]
     out = {"frame": np.full(n, frame), "sensor": np.full(n, sensor, object),
            "sensor_type": np.full(n, sensor_type, object), "track_id": cols["track_id"][index], "cls": cls,
-           "category_id": np.array([_COCO_ID[c] for c in cls], np.int64)}
+           "category_id": np.array([_COCO_ID[c] for c in cls], np.int64), "model": cols["model"][index],
+           "person": cols["person"][index]}
     out.update({k: cols[k][index] for k in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")})
     return out
 
