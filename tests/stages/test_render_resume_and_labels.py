@@ -136,7 +136,8 @@ def test_an_object_owning_points_beyond_the_range_gets_a_row(small_rig):
     cols = {"track_id": np.array([1, 2, 3], np.int32), "cls": np.array(["car", "truck", "car"], object),
             "x_m": np.array([30.0, 70.0, 70.0]), "y_m": np.zeros(n), "z_m": np.full(n, z_m),
             "length_m": np.full(n, 4.0), "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5),
-            "yaw_rad": np.zeros(n)}
+            "yaw_rad": np.zeros(n), "model": np.array(["sedan", "box_truck", "sedan"], object),
+            "person": np.full(n, "", object)}
     empty = np.zeros(0)
     sweep = LidarSweep(np.zeros((0, 3), np.float32), empty, empty, empty, empty, empty, empty,
                        points_per_actor=np.array([0, 5, 0]), range_max_m=60.0)
