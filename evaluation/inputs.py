@@ -50,7 +50,8 @@ class GroundTruth:
             ``track_id``, as roadsynth's export writes it); meaningful where ``track_valid``.
         track_valid: (N,) bool.
         person: (N,) object who a person is (roadsynth's COCO field ``person``: adult, teen, child,
-            wheelchair_user), "" where the annotation does not say (every non-person, and other datasets).
+            wheelchair_user; rider for its riders), "" where the annotation does not say (every non-person, and
+            other datasets).
     """
 
     source: str

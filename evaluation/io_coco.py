@@ -104,14 +104,15 @@ def _track_ids(annotations: list[Any], path: str) -> tuple[np.ndarray, np.ndarra
 
 
 def _persons(annotations: list[Any], path: str) -> np.ndarray:
-    """(N,) object the optional ``person`` text of each annotation ("" where absent)."""
+    """(N,) object the optional ``person`` text of each annotation ("" where absent); "rider" for roadsynth's
+    riders (``subclass`` rider: the person on a bicycle or motorcycle)."""
     out = np.full(len(annotations), "", object)
     for i, a in enumerate(annotations):
         value = a.get("person", "") if isinstance(a, dict) else ""
         if not isinstance(value, str):
             raise InputError(f"{where(path, 'annotations', i)}: field 'person' is {value!r} (expected text, e.g. "
                              "'adult' or 'child')")
-        out[i] = value
+        out[i] = "rider" if isinstance(a, dict) and a.get("subclass") == "rider" else value
     return out
 
 

@@ -211,7 +211,7 @@ def missed_objects(gt: GroundTruth, gm: GroupMatch, objects: np.ndarray, height:
     return picked[np.lexsort((picked, -gt.bbox[picked, 3]))]
 
 
-PERSON_ORDER = ("adult", "teen", "child", "wheelchair_user")
+PERSON_ORDER = ("adult", "teen", "child", "wheelchair_user", "rider")
 """The order of the people-by-person rows (others after, alphabetically)."""
 
 

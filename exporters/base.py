@@ -22,10 +22,11 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from exporters.filters import HIDDEN, NO_CATEGORY, FilterSummary, ObjectFilter
+from exporters.filters import HIDDEN, IN_CYCLE, NO_CATEGORY, FilterSummary, ObjectFilter
 from exporters.source import ExportSource, RecordSource
 from exporters.splits import SplitSpec
 from exporters.writing import atomic_dir, atomic_file, atomic_named_dir, write_json
+from pipeline.core.classes import RIDER
 from pipeline.core.record import RecordInfo
 
 log = logging.getLogger(__name__)
@@ -109,15 +110,19 @@ class CameraRows:
               "width_m", "height_m", "sensor_yaw_rad")
 
     def __init__(self, source: RecordSource, camera: str, options: ExportOptions,
-                 coco_categories: bool = False) -> None:
+                 coco_categories: bool = False, riders: bool = True) -> None:
         """``coco_categories``: the format's categories are COCO's (COCO, YOLO), so the rows of a class without one
-        (category_id 0: strollers) are ``no_category``, left out of :meth:`rows` and counted."""
+        (category_id 0: strollers) are ``no_category``, left out of :meth:`rows` and counted. ``riders`` False: the
+        format's cycle box holds its rider (KITTI's Cyclist), so a rider's row is ``in_cycle``, left out and
+        counted."""
         labels = source.labels[source.labels["sensor"] == camera]  # sorted by (frame, track_id)
         self.where = f"{source.record.root}: camera {camera}"
         self.mode = options.box
         self.reasons = options.filter.classify(labels)
         if coco_categories:
             self.reasons[(labels["category_id"].to_numpy() == 0) & (self.reasons != HIDDEN)] = NO_CATEGORY
+        if not riders:
+            self.reasons[(labels["cls"].to_numpy() == RIDER) & (self.reasons != HIDDEN)] = IN_CYCLE
         self.boxes = boxes_2d(labels, options.box)
         self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
             na_value=np.nan)
@@ -130,12 +135,13 @@ class CameraRows:
         self._span = {int(frames[lo]): (int(lo), int(hi)) for lo, hi in zip(starts, ends, strict=True) if hi > lo}
 
     def rows(self, frame: int, summary: FilterSummary) -> np.ndarray:
-        """Indices of ``frame``'s rows that are neither hidden nor without a category (in track id order), after
+        """Indices of ``frame``'s rows that are neither hidden, without a category nor a rider left in its cycle (in
+        track id order), after
         counting all its rows in ``summary``. Raises :class:`ExportError` for a shown object without a box: never
         dropped silently."""
         lo, hi = self._span.get(int(frame), (0, 0))
         summary.add(self.reasons[lo:hi], self.columns["cls"][lo:hi])
-        rows = lo + np.flatnonzero((self.reasons[lo:hi] != HIDDEN) & (self.reasons[lo:hi] != NO_CATEGORY))
+        rows = lo + np.flatnonzero(~np.isin(self.reasons[lo:hi], (HIDDEN, NO_CATEGORY, IN_CYCLE)))
         boxless = rows[~np.all(np.isfinite(self.boxes[rows]), axis=1)]
         if len(boxless):
             raise ExportError(f"{self.where}, frame {frame}, track {int(self.columns['track_id'][boxless[0]])}: "

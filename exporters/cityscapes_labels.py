@@ -13,8 +13,8 @@ Cityscapes' class definitions (https://www.cityscapes-dataset.com/dataset-overvi
 - nothing hit (0) is ``sky``: a camera ray that misses the world looks at the sky, and the image shows sky there;
 - our concrete highway barriers are ``guard rail`` ("all types of guard rails / crash barriers"), a class Cityscapes
   does not evaluate;
-- a van is a ``car`` (Cityscapes' car includes vans); a motorcycle or bicycle actor is ``motorcycle`` / ``bicycle``
-  as a whole: our actor mesh does not separate the rider, so no pixel is ``rider``;
+- a van is a ``car`` (Cityscapes' car includes vans); a motorcycle or bicycle is ``motorcycle`` / ``bicycle`` and
+  its rider's pixels (semantic RIDER) ``rider``, an instance of its own (the same track, another label);
 - the ego (30, not drawn by the current renderer) is ``ego vehicle``, void.
 """
 
@@ -101,6 +101,7 @@ CITYSCAPES_OF: dict[SemanticClass, str] = {
     SemanticClass.MOTORCYCLE: "motorcycle",
     SemanticClass.BICYCLE: "bicycle",
     SemanticClass.PEDESTRIAN: "person",
+    SemanticClass.RIDER: "rider",  # the person on a bicycle or motorcycle, as Cityscapes labels one
     SemanticClass.STROLLER: "dynamic",  # Cityscapes' movable things (buggies among them); a person's class holds
     # what the person carries, not what stands on the ground
     SemanticClass.EGO: "ego vehicle",

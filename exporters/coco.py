@@ -30,7 +30,7 @@ from exporters.base import BoxMode, CameraRows, Exporter, ExportOptions
 from exporters.filters import KEPT, FilterSummary
 from exporters.source import ExportSource, FrameItem, safe_name
 from exporters.writing import link_or_copy, write_json
-from pipeline.core.classes import COCO_CATEGORIES
+from pipeline.core.classes import COCO_CATEGORIES, RIDER, RIDER_TRACK_OFFSET, SemanticClass
 
 log = logging.getLogger(__name__)
 
@@ -128,7 +128,14 @@ class CocoExporter(Exporter):
         ints = {c: table.columns[c][rows].tolist() for c in CameraRows.INTS}
         num = {c: table.columns[c][rows].tolist() for c in CameraRows.FLOATS}
         instance = item.source.record.instance(camera, item.frame)
-        masks = instance_rles(instance, np.asarray(ints["track_id"], np.int64))
+        tracks = np.asarray(ints["track_id"], np.int64)
+        masks = instance_rles(instance, tracks)
+        rider = table.columns["cls"][rows] == RIDER
+        if rider.any():  # a rider's pixels are its cycle's showing the rider (semantic RIDER)
+            ridden = np.where(item.source.record.semantic(camera, item.frame) == SemanticClass.RIDER,
+                              instance.astype(np.int64) + RIDER_TRACK_OFFSET, 0)
+            for j, m in zip(np.flatnonzero(rider), instance_rles(ridden, tracks[rider]), strict=True):
+                masks[j] = m
         out = []
         for j, i in enumerate(rows):
             rle, area = masks[j]

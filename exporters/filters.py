@@ -9,6 +9,8 @@ Each camera label row is exactly one of:
 - ``kept``: everything else: a normal annotation.
 - ``no_category``: visible, but of a class the format has no category for (a stroller in COCO and YOLO, whose
   categories are COCO's); left out of those formats, counted (their category_id is 0 in the labels).
+- ``in_cycle``: visible, but a rider (class ``rider``) in a format whose cycle box holds its rider (KITTI's
+  Cyclist); left out, counted.
 
 ``tiny`` and ``occluded`` objects are real and visible, so a detector that finds them must not be
 punished: COCO writes them as crowd regions (``iscrowd`` 1, which COCO evaluation ignores), KITTI as
@@ -33,8 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY = "kept", "hidden", "tiny", "occluded", "no_category"
-REASONS = (KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY)
+KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY, IN_CYCLE = "kept", "hidden", "tiny", "occluded", "no_category", "in_cycle"
+REASONS = (KEPT, HIDDEN, TINY, OCCLUDED, NO_CATEGORY, IN_CYCLE)
 
 DEFAULT_MIN_VISIBLE_PX = 20
 DEFAULT_MAX_OCCLUSION = 0.9

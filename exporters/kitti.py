@@ -32,6 +32,7 @@ from exporters.base import CameraRows, Exporter, ExportError, ExportOptions, sen
 from exporters.filters import KEPT, FilterSummary
 from exporters.source import ExportSource, RecordSource, safe_name
 from exporters.writing import link_or_copy
+from pipeline.core.classes import RIDER
 from pipeline.core.geometry import wrap_angle
 from pipeline.core.record import CameraInfo, LidarInfo
 
@@ -120,7 +121,7 @@ class KittiExporter(Exporter):
     def check(self, source: ExportSource, options: ExportOptions) -> None:
         for src in source.records:
             sensors_of(src, options)
-            unknown = sorted(set(src.labels["cls"]) - set(KITTI_TYPE))
+            unknown = sorted(set(src.labels["cls"]) - set(KITTI_TYPE) - {RIDER})  # a rider: in its Cyclist
             if unknown:
                 raise ExportError(f"{src.record.root}: classes {unknown} have no KITTI type "
                                   f"(known: {sorted(KITTI_TYPE)})")
@@ -136,7 +137,7 @@ class KittiExporter(Exporter):
         per_record = {}
         for src in source.records:
             cam, lidar = sensors_of(src, options)
-            per_record[id(src)] = (cam, lidar, CameraRows(src, cam.name, options), calib_text(cam, lidar))
+            per_record[id(src)] = (cam, lidar, CameraRows(src, cam.name, options, riders=False), calib_text(cam, lidar))
         for index, item in enumerate(tqdm(source.frames(), total=source.n_frames(), desc="kitti", unit="frame",
                                           disable=not options.progress)):
             cam, lidar, labels, calib = per_record[id(item.source)]

@@ -37,6 +37,7 @@ from exporters.filters import KEPT, FilterSummary
 from exporters.kitti import KITTI_TYPE, occlusion_level, sensors_of
 from exporters.source import ExportSource, safe_name
 from exporters.writing import link_or_copy
+from pipeline.core.classes import RIDER
 from pipeline.core.geometry import wrap_angle
 from pipeline.core.record import CameraInfo, LidarInfo
 
@@ -103,7 +104,7 @@ class KittiTrackingExporter(Exporter):
     def check(self, source: ExportSource, options: ExportOptions) -> None:
         for src in source.records:
             sensors_of(src, options)
-            unknown = sorted(set(src.labels["cls"]) - set(KITTI_TYPE))
+            unknown = sorted(set(src.labels["cls"]) - set(KITTI_TYPE) - {RIDER})  # a rider: in its Cyclist
             if unknown:
                 raise ExportError(f"{src.record.root}: classes {unknown} have no KITTI type "
                                   f"(known: {sorted(KITTI_TYPE)})")
@@ -119,7 +120,7 @@ class KittiTrackingExporter(Exporter):
         progress = tqdm(total=source.n_frames(), desc="kitti-tracking", unit="frame", disable=not options.progress)
         for number, src in enumerate(source.records):
             cam, lidar = sensors_of(src, options)
-            table = CameraRows(src, cam.name, options)
+            table = CameraRows(src, cam.name, options, riders=False)
             seq = f"{number:04d}"
             (training / "image_02" / seq).mkdir()
             (training / "velodyne" / seq).mkdir()

@@ -27,6 +27,7 @@ CLASS_COLORS: dict[str, tuple[float, float, float, float]] = {
     "car": (0.12, 0.56, 1.0, 0.6), "van": (0.0, 0.8, 0.8, 0.6), "truck": (1.0, 0.55, 0.0, 0.6),
     "bus": (0.9, 0.9, 0.0, 0.6), "motorcycle": (0.8, 0.2, 0.8, 0.6), "bicycle": (0.2, 0.8, 0.2, 0.6),
     "pedestrian": (1.0, 0.2, 0.2, 0.6), "stroller": (1.0, 0.6, 0.7, 0.6),
+    "rider": (1.0, 0.45, 0.1, 0.6),
 }
 DEFAULT_COLOR = (0.7, 0.7, 0.7, 0.6)
 

@@ -37,9 +37,10 @@ from pipeline.core.record import CameraInfo
 
 log = logging.getLogger(__name__)
 
-MOT_CLASS = {"pedestrian": 1, "car": 3, "van": 3, "truck": 3, "bus": 3, "bicycle": 4, "motorcycle": 5, "stroller": 6}
-"""Our class -> MOTChallenge class id (1 pedestrian, 3 car, 4 bicycle, 5 motorbike, 6 non-motorized vehicle: a
-stroller; MOT16's classes)."""
+MOT_CLASS = {"pedestrian": 1, "rider": 2, "car": 3, "van": 3, "truck": 3, "bus": 3, "bicycle": 4, "motorcycle": 5,
+             "stroller": 6}
+"""Our class -> MOTChallenge class id (1 pedestrian, 2 person on vehicle: a rider, 3 car, 4 bicycle, 5 motorbike,
+6 non-motorized vehicle: a stroller; MOT16's classes)."""
 IGNORE_CLASS = 8
 """MOT's ``distractor`` class: what tiny and occluded objects are written as (with ``considered`` 0)."""
 

@@ -32,7 +32,7 @@ from exporters.base import Exporter, ExportError, ExportOptions
 from exporters.nuscenes_files import lidar_array, radar_pcd
 from exporters.source import ExportSource, RecordSource
 from exporters.writing import dumps_json, link_or_copy
-from pipeline.core.classes import Person
+from pipeline.core.classes import RIDER, Person
 from pipeline.core.png import encode_png
 
 log = logging.getLogger(__name__)
@@ -67,7 +67,7 @@ class NuScenesExporter(Exporter):
             if clash:
                 raise ExportError(f"{root}: sensors map to the same nuScenes channel {', '.join(clash)} "
                                   f"({', '.join(f'{k} {n} -> {c}' for k, n, c in nt.record_channels(src))})")
-            unknown = sorted(set(src.labels["cls"]) - set(nt.CATEGORY))
+            unknown = sorted(set(src.labels["cls"]) - set(nt.CATEGORY) - {RIDER})
             if unknown:
                 raise ExportError(f"{root}: labels.parquet field cls has classes {unknown} without a nuScenes "
                                   f"category (known: {sorted(nt.CATEGORY)})")
@@ -90,6 +90,7 @@ class NuScenesExporter(Exporter):
         progress.close()
         tables["sensor"] = [sensors[ch] for ch in sorted(sensors)]
         linked, images = counts.pop("_images_linked", 0), counts.pop("_images", 0)
+        riders = counts.pop("_riders", 0)
         tables["map"] = [{"token": nt.token("map", MAP_FILE), "category": "semantic_prior", "filename": MAP_FILE,
                           "log_tokens": [row["token"] for row in tables["log"]]}]
         (tmp / "maps").mkdir()
@@ -103,7 +104,7 @@ class NuScenesExporter(Exporter):
         return {"version": nt.VERSION, "scenes": len(tables["scene"]), "samples": len(tables["sample"]),
                 "sample_data": len(tables["sample_data"]), "annotations": len(tables["sample_annotation"]),
                 "instances": len(tables["instance"]), "annotations_by_class": dict(sorted(counts.items())),
-                "objects": {"total": {"annotated": len(tables["sample_annotation"])}},
+                "objects": {"total": {"annotated": len(tables["sample_annotation"]), "riders_in_cycle_boxes": riders}},
                 "images_linked": int(linked), "images_copied": int(images - linked),
                 "splits": {s: len(v) for s, v in splits.items()}}
 
@@ -172,6 +173,8 @@ class NuScenesExporter(Exporter):
                     path.write_bytes(radar_pcd(record.radar_columns(name, f), radars[name].velocity_resolution_mps))
             progress.update(1)
         obj = nt.objects(src)
+        riders = src.labels.loc[src.labels["cls"] == RIDER, ["frame", "track_id"]]
+        counts["_riders"] += len(riders.drop_duplicates())
         anns, instances, _ = nt.annotation_tables(stem, obj, time_us, sample_of)
         tables["sample_annotation"] += anns
         tables["instance"] += instances

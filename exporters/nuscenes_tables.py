@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from exporters.source import RecordSource, safe_name
+from pipeline.core.classes import RIDER
 
 VERSION = "v1.0-roadsynth"
 """The version folder (``NuScenes(version=VERSION, dataroot=OUT)``)."""
@@ -129,8 +130,9 @@ def objects(src: RecordSource) -> pd.DataFrame:
     """One row per (frame, track) labelled by any sensor: world box, class and person, num_lidar_pts (sum over the
     LiDAR rows: every object owning a point has one), num_radar_pts (the same over radar rows), visible (0-1: the
     best camera's visible share of the silhouette, (1 - occlusion)(1 - truncation); 0 without a camera row). Sorted
-    by (track, frame)."""
+    by (track, frame). Riders' rows are not objects: nuScenes' cycle box holds its rider, as ours does."""
     labels = src.labels
+    labels = labels[labels["cls"] != RIDER]  # nuScenes boxes a rider with its cycle: the cycle's rows hold both
     keys = ["frame", "track_id"]
     boxes = labels.drop_duplicates(keys)[[*keys, "cls", "person", "x_m", "y_m", "z_m", "length_m", "width_m",
                                           "height_m", "yaw_rad"]]

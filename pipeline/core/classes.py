@@ -59,6 +59,14 @@ _COCO_ID = {
 }
 
 
+RIDER = "rider"
+"""The ``cls`` of a camera label row of the person riding a bicycle or motorcycle (COCO's person; its cycle's row
+holds cycle and rider, as KITTI's Cyclist and nuScenes box them); never a simulated actor's class."""
+RIDER_TRACK_OFFSET = 1 << 15
+"""A rider's track id: its cycle's plus this (as a stroller's is its pusher's plus the same: a track is one class,
+so the two never meet)."""
+
+
 class Person(str, enum.Enum):
     """Who a pedestrian is (labels.parquet ``person``; empty for every other class): an adult, a teenager (13-17), a
     child (6-12), or a wheelchair user (an adult seated in a wheelchair, labelled with it as one pedestrian). The
@@ -95,6 +103,7 @@ class SemanticClass(enum.IntEnum):
     BICYCLE = 25
     PEDESTRIAN = 26
     STROLLER = 27
+    RIDER = 28  # the person on a bicycle or motorcycle (its triangles: pipeline.world.mesh.RIDER)
     EGO = 30
 
     @property

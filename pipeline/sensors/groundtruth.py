@@ -23,10 +23,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.core.classes import SemanticClass
 from pipeline.core.geometry import Transform
 from pipeline.core.jit import as_input, kernel
 from pipeline.sensors.camera import Camera
-from pipeline.world.actors import place_actors
+from pipeline.world.actors import place_actors, place_riders, rider_boxes
 from pipeline.world.scene import FrameScene, make_rays, rectangles_mask
 
 VIRTUAL_SAMPLES_PER_IMAGE = 0.25
@@ -84,20 +85,40 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
     geo = place_actors(scene.actors, scene.meshes, clipped) if clipped.any() else None
     verts = world_to_cam.apply(geo.vertices) if geo is not None else np.zeros((0, 3))
     tris = geo.triangles.astype(np.int64) if geo is not None else np.zeros((0, 3), np.int64)
+    vertex_actor = geo.vertex_actor if geo is not None else np.zeros(0, np.int32)
+    return _projected_bounds(camera, k, [world_to_cam.apply(scene.hull_vertices[on_hull])], [scene.hull_actor[on_hull]],
+                             verts, tris, vertex_actor)
+
+
+def project_riders(scene: FrameScene, camera: Camera, cam_to_world: Transform, where: np.ndarray) -> AmodalBoxes:
+    """Amodal 2D boxes of the riders of the actors ``where`` ((K,) bool; K the frame's actors): the projection of
+    each one's rider mesh (:func:`pipeline.world.actors.place_riders`) as :func:`project_actors` projects a mesh
+    that crosses the near plane (all its vertices, and the points where its edges cross the plane). Not valid for
+    an actor without a rider or one left out."""
+    verts, tris, owner = place_riders(scene.actors, scene.meshes, where & scene.active, scene.model_codes)
+    return _projected_bounds(camera, len(scene.actors), [], [], cam_to_world.inverse().apply(verts), tris, owner)
+
+
+def _projected_bounds(camera: Camera, k: int, points: list[np.ndarray], owner: list[np.ndarray], verts: np.ndarray,
+                      tris: np.ndarray, vertex_actor: np.ndarray) -> AmodalBoxes:
+    """The bounds of the projections of ``points`` (optical frame, each with its ``owner`` of 0..k-1, all in front
+    of the near plane) and of the meshes ``verts`` (V, 3) (optical frame), ``tris`` (T, 3) int64, ``vertex_actor``
+    (V,): their vertices in front of the near plane, the points where their edges cross it, and 8 samples per edge
+    through a distorting lens."""
+    near = camera.clip_near_m
     edges = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     z0, z1 = verts[edges[:, 0], 2], verts[edges[:, 1], 2]
     cross = (z0 > near) != (z1 > near)
     a, b = verts[edges[cross, 0]], verts[edges[cross, 1]]
     clip_pts = a + ((near - a[:, 2]) / (b[:, 2] - a[:, 2]))[:, None] * (b - a)
-    vertex_actor = geo.vertex_actor if geo is not None else np.zeros(0, np.int32)
-    points = [world_to_cam.apply(scene.hull_vertices[on_hull]), verts, clip_pts]
-    owner = [scene.hull_actor[on_hull], vertex_actor, vertex_actor[edges[cross, 0]]]
+    points = [*points, verts, clip_pts]
+    owner = [*owner, vertex_actor, vertex_actor[edges[cross, 0]]]
     if camera.has_distortion:  # straight edges project to curves: sample them
         front = (z0 > near) & (z1 > near)
         s = np.linspace(0.0, 1.0, 10)[1:-1]
         a, b = verts[edges[front, 0]], verts[edges[front, 1]]
         points.append((a[:, None, :] + s[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3))
-        owner.append(np.repeat(geo.vertex_actor[edges[front, 0]], len(s)))
+        owner.append(np.repeat(vertex_actor[edges[front, 0]], len(s)))
     pts, own = np.concatenate(points), np.concatenate(owner)
     keep = pts[:, 2] >= near * (1.0 - 1e-9)
     uv, _ = camera.project(np.where(keep[:, None], pts, [[0.0, 0.0, 1.0]]))
@@ -125,6 +146,8 @@ class CameraLabels:
         full_px: (N,) float64 pixels of the whole unclipped projection (virtual image plane).
         occlusion, truncation: (N,) float32 fractions in [0, 1].
         distance_m: (N,) float32 from the optical centre to the box centre.
+        rider: (N,) bool the row is the rider of the actor ``actor_index`` (its 3D box the rider's, its pixels the
+            rider's, its occlusion by everything but the rider itself); these rows follow the actors'.
     """
 
     actor_index: np.ndarray
@@ -142,6 +165,7 @@ class CameraLabels:
     occlusion: np.ndarray
     truncation: np.ndarray
     distance_m: np.ndarray
+    rider: np.ndarray
 
     def __len__(self) -> int:
         return len(self.actor_index)
@@ -197,15 +221,77 @@ def _grid_pairs(x0: np.ndarray, y0: np.ndarray, nx: np.ndarray, ny: np.ndarray, 
 
 
 def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, amodal: AmodalBoxes,
-                  actor_image: np.ndarray) -> CameraLabels:
-    """Labels of one camera frame.
+                  actor_image: np.ndarray, semantic_image: np.ndarray | None = None) -> CameraLabels:
+    """Labels of one camera frame: a row per actor, then a row per rider (``rider`` set) of a bicycle or motorcycle
+    in view, its pixels those of its actor that show the rider (``semantic_image`` RIDER), its unoccluded pixels and
+    silhouette cast against the rider alone (:meth:`FrameScene.cast_alone_rays`), its amodal box
+    :func:`project_riders`', its 3D box :func:`pipeline.world.actors.rider_boxes`'.
 
     Args:
         actor_image: (H, W) int32 dense actor index + 1 of the first hit per pixel centre (0 = no actor).
+        semantic_image: (H, W) uint8 the semantic class of the same hits; None: no rider rows.
     """
-    w, h, k = camera.width, camera.height, len(scene.actors)
-    flat = actor_image.reshape(-1)
+    k = len(scene.actors)
     visible_px, tight = _pixel_boxes(as_input(actor_image, np.int32), k)
+    unoccluded_px, full_px = _silhouettes(scene, camera, cam_to_world, amodal, actor_image, visible_px, tight, False)
+    rows = np.flatnonzero(unoccluded_px > 0)
+    has_rider, rider_box = rider_boxes(scene.actors, scene.meshes, scene.model_codes)
+    riders = np.zeros(0, np.int64)
+    r_amodal, r_visible, r_tight, r_unoccluded, r_full = amodal, visible_px, tight, unoccluded_px, full_px  # none
+    if semantic_image is not None and has_rider[rows].any():
+        where = np.zeros(k, bool)
+        where[rows[has_rider[rows]]] = True
+        rider_image = np.where(semantic_image == SemanticClass.RIDER, actor_image, 0).astype(np.int32)
+        r_amodal = project_riders(scene, camera, cam_to_world, where)
+        r_visible, r_tight = _pixel_boxes(as_input(rider_image, np.int32), k)
+        r_unoccluded, r_full = _silhouettes(scene, camera, cam_to_world, r_amodal, rider_image, r_visible, r_tight,
+                                            True)
+        riders = np.flatnonzero(where & (r_unoccluded > 0))
+    world_to_cam = cam_to_world.inverse()
+    boxes = scene.actors.boxes
+    index = np.concatenate([rows, riders])
+    center_world = np.concatenate([boxes.center[rows], rider_box.center[riders]])
+    c, s = np.cos(boxes.yaw_rad[index]), np.sin(boxes.yaw_rad[index])
+    rot_world = np.zeros((len(index), 3, 3))
+    rot_world[:, 0, 0], rot_world[:, 0, 1], rot_world[:, 1, 0], rot_world[:, 1, 1] = c, -s, s, c
+    rot_world[:, 2, 2] = 1.0
+    rot = world_to_cam.rotation @ rot_world
+    center_cam = world_to_cam.apply(center_world)
+    w, h = camera.width, camera.height
+
+    def both(actor_values, rider_values):
+        return np.concatenate([actor_values[rows], rider_values[riders]])
+
+    vis, unocc, full = both(visible_px, r_visible), both(unoccluded_px, r_unoccluded), both(full_px, r_full)
+    return CameraLabels(
+        actor_index=index.astype(np.int32),
+        track_id=scene.actors.track_id[index],
+        center_cam=center_cam,
+        rotation_cam=rot,
+        size=np.concatenate([boxes.size[rows], rider_box.size[riders]]),
+        box_tight=both(tight, r_tight),
+        box_amodal=both(amodal.box, r_amodal.box),
+        box_amodal_clipped=both(amodal.clipped(w, h), r_amodal.clipped(w, h)),
+        visible=vis > 0,
+        visible_px=vis,
+        unoccluded_px=unocc,
+        full_px=full,
+        occlusion=(1.0 - vis / unocc).astype(np.float32),
+        truncation=np.clip(1.0 - unocc / np.maximum(full, unocc), 0.0, 1.0).astype(np.float32),
+        distance_m=np.linalg.norm(center_cam, axis=1).astype(np.float32),
+        rider=np.arange(len(index)) >= len(rows),
+    )
+
+
+def _silhouettes(scene: FrameScene, camera: Camera, cam_to_world: Transform, amodal: AmodalBoxes,
+                 id_image: np.ndarray, visible_px: np.ndarray, tight: np.ndarray, rider: bool
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(unoccluded_px (K,) int64, full_px (K,) float64) of the frame's K actors (with ``rider``: of their riders)
+    whose pixels are ``id_image``'s (actor index + 1), visible pixel counts and tight boxes given: the pixels of
+    the (clipped) amodal region whose centre ray hits the actor (rider) alone, visible ones counted without a
+    cast, and its whole silhouette on the virtual image plane (the module's docstring)."""
+    w, h, k = camera.width, camera.height, len(scene.actors)
+    flat = id_image.reshape(-1)
     valid = amodal.valid | (visible_px > 0)
     box = np.where(np.isnan(amodal.box), tight, amodal.box)
     box = np.column_stack([np.fmin(box[:, :2], tight[:, :2]), np.fmax(box[:, 2:], tight[:, 2:])])
@@ -221,7 +307,7 @@ def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, am
     obj_cast, pix_cast = obj_in[~seen], pix_in[~seen]
     rays = make_rays(cam_to_world.translation, np.take(camera.pixel_directions, pix_cast, axis=0),
                      cam_to_world.rotation)
-    alone, _ = scene.cast_alone_rays(rays, obj_cast)
+    alone, _ = scene.cast_alone_rays(rays, obj_cast, rider=rider)
     unoccluded_px = visible_px + np.bincount(obj_cast[alone], minlength=k)
 
     # Off-image part of the virtual plane, only for labelled objects reaching past the image border.
@@ -235,33 +321,6 @@ def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, am
     dirs_out, invertible = camera.unproject(camera.pixel_uv(col_out, row_out))
     obj_out, dirs_out = obj_out[invertible], dirs_out[invertible]  # beyond the lens fold: no ray, not counted
     rays = make_rays(cam_to_world.translation, dirs_out.astype(np.float32), cam_to_world.rotation)
-    alone, _ = scene.cast_alone_rays(rays, obj_out)
+    alone, _ = scene.cast_alone_rays(rays, obj_out, rider=rider)
     full_px = unoccluded_px + np.bincount(obj_out, weights=alone * stride[obj_out] ** 2, minlength=k)
-
-    rows = np.flatnonzero(unoccluded_px > 0)
-    world_to_cam = cam_to_world.inverse()
-    boxes = scene.actors.boxes
-    center_cam = world_to_cam.apply(boxes.center[rows])
-    c, s = np.cos(boxes.yaw_rad[rows]), np.sin(boxes.yaw_rad[rows])
-    rot_world = np.zeros((len(rows), 3, 3))
-    rot_world[:, 0, 0], rot_world[:, 0, 1], rot_world[:, 1, 0], rot_world[:, 1, 1] = c, -s, s, c
-    rot_world[:, 2, 2] = 1.0
-    rot = world_to_cam.rotation @ rot_world
-    vis, unocc, full = visible_px[rows], unoccluded_px[rows], full_px[rows]
-    return CameraLabels(
-        actor_index=rows.astype(np.int32),
-        track_id=scene.actors.track_id[rows],
-        center_cam=center_cam,
-        rotation_cam=rot,
-        size=boxes.size[rows],
-        box_tight=tight[rows],
-        box_amodal=amodal.box[rows],
-        box_amodal_clipped=amodal.clipped(w, h)[rows],
-        visible=vis > 0,
-        visible_px=vis,
-        unoccluded_px=unocc,
-        full_px=full,
-        occlusion=(1.0 - vis / unocc).astype(np.float32),
-        truncation=np.clip(1.0 - unocc / np.maximum(full, unocc), 0.0, 1.0).astype(np.float32),
-        distance_m=np.linalg.norm(center_cam, axis=1).astype(np.float32),
-    )
+    return unoccluded_px, full_px

@@ -104,7 +104,7 @@ def render_camera(
     actor_image, depth = _actor_image_and_depth(as_input(hits.instance_id, np.int32), as_input(hits.actor_index,
                                                 np.int32), as_input(hits.hit, bool), as_input(hits.t_m, np.float32),
                                                 as_input(dirs_cam, np.float32))
-    labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image.reshape(h, w))
+    labels = camera_labels(scene, camera, cam_to_world, amodal, actor_image.reshape(h, w), hits.semantic.reshape(h, w))
 
     lights = condition.frame_lights(scene.actors, ego_pose, cam_to_world.translation, street_lights_m, ego_size_m)
     samples = camera.sample_directions

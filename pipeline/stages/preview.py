@@ -32,7 +32,7 @@ INPUT_ARGS = ("dataset",)
 HELP = "draw a contact sheet of a dataset record: boxes on images and a bird's-eye LiDAR (and radar) view"
 CLASS_BGR = {"car": (60, 200, 60), "van": (200, 200, 60), "truck": (40, 140, 255), "bus": (255, 120, 40),
              "motorcycle": (200, 60, 200), "bicycle": (255, 60, 160), "pedestrian": (60, 60, 255),
-             "stroller": (180, 150, 255)}
+             "stroller": (180, 150, 255), "rider": (20, 110, 255)}
 OTHER_BGR = (255, 255, 255)  # a class without a colour
 FOV_BGR = (255, 255, 0)
 BEV_RANGE_M, BEV_PX = 60.0, 600

@@ -19,6 +19,7 @@ from pipeline.core.config import ConditionConfig, RadarConfig
 from pipeline.core.geometry import Transform
 from pipeline.core.record import radar_path
 from pipeline.core.record_writers.radar import radar_label_rows, with_radar_detections, write_radar_scan
+from pipeline.core.record_writers.rows import rider_counts
 from pipeline.sensors.radar import (
     RadarScan,
     actors_in_radar_reach,
@@ -55,8 +56,9 @@ def scan_rows(frame: int, radars: list[RadarConfig], scans: list[RadarScan], oth
     """Give the frame's camera and LiDAR rows (``labels``) their objects' detections summed over the radars, then
     add each radar's rows to ``labels``."""
     counts = np.sum([scan.detections_per_actor for scan in scans], axis=0)
+    riders = np.sum([rider_counts(scan.instance_id, scan.semantic, others["track_id"]) for scan in scans], axis=0)
     for part in labels:
-        with_radar_detections(part, others["track_id"], counts)
+        with_radar_detections(part, others["track_id"], counts, riders)
     for config, scan in zip(radars, scans, strict=True):
         labels.append(radar_label_rows(frame, config, scan, others, ego_pose, lidar_points))
 

@@ -28,7 +28,7 @@ from pipeline.core.processes import RENDER_THRESHOLDS, ProcessCache, keep_freed_
 from pipeline.core.record import FRAME_COLUMNS, LABEL_COLUMNS, label_columns, lidar_path
 from pipeline.core.record_writers.camera import camera_label_rows, write_camera_frame
 from pipeline.core.record_writers.lidar import lidar_label_rows, write_lidar_sweep
-from pipeline.core.record_writers.rows import actor_boxes
+from pipeline.core.record_writers.rows import actor_boxes, rider_counts
 from pipeline.core.tables import read_parquet, write_ipc
 from pipeline.sensors.lidar import render_lidar
 from pipeline.sensors.radar import heading_velocity
@@ -406,6 +406,7 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
         active |= radar_frames.radar_reach(list(radars), actors, ego_pose)
     scene = FrameScene(static, actors, meshes, threads=threads, active=active)
     lidar_points = np.zeros(len(scene.actors), np.int64)
+    rider_points = np.zeros(len(scene.actors), np.int64)
     actor_velocity = heading_velocity(others["speed_mps"], others["yaw_rad"])
     # Every moving vehicle's spray, in reach or not: a vehicle beyond the rays' reach (an oncoming one just passed)
     # may trail its cloud into view.
@@ -421,12 +422,13 @@ def render_frame(world: StaticWorld, static: StaticScene, cameras: list, lidars:
         sweeps.append(sweep)
         labels.append(lidar_label_rows(frame, lidar.name, lidar.mount, sweep, others, ego_pose))
         lidar_points += sweep.points_per_actor
+        rider_points += rider_counts(sweep.instance_id, sweep.semantic, others["track_id"])
     for k, camera in enumerate(cameras):
         cam = render_camera(scene, camera, ego_pose, condition, frame_rng(seed, condition.name, frame, k),
                             street_lights_m=world.street_lights, ego_speed_mps=float(ego["speed_mps"]),
                             ego_size_m=ego_size_m, actor_velocity_mps=actor_velocity, spray=spray)
         frames.append(cam)
-        labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points))
+        labels.append(camera_label_rows(frame, camera.name, cam, others, lidar_points, rider_points))
     if radars:
         radar_frames.scan_rows(frame, list(radars), scans, others, ego_pose, lidar_points, labels)
     return FrameSensors(frames, sweeps, labels, scans)

@@ -32,7 +32,7 @@ from pipeline.core.build_cache import cached
 from pipeline.core.classes import ObjectClass, Person
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
-from pipeline.world.mesh import Mesh
+from pipeline.world.mesh import RIDER, Mesh
 from pipeline.world.smooth_normals import corner_normals
 
 
@@ -139,7 +139,7 @@ def normalise_to_unit_box(mesh: Mesh) -> Mesh:
     # Remove the last ulp of rounding so that min/max are exactly -0.5 / +0.5.
     unit[np.isclose(unit, -0.5, atol=1e-12)] = -0.5
     unit[np.isclose(unit, 0.5, atol=1e-12)] = 0.5
-    return Mesh(unit, mesh.triangles, mesh.material, mesh.semantic)
+    return Mesh(unit, mesh.triangles, mesh.material, mesh.semantic, mesh.part)
 
 
 @functools.cache
@@ -265,6 +265,7 @@ class ActorMeshes:
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
         self._hulls: dict[int, np.ndarray] = {}
         self._corners: dict[int, np.ndarray] = {}
+        self._riders: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}
 
     def _add_model(self, object_class: ObjectClass, mesh: Mesh, name: str, extent: np.ndarray,
                    low: np.ndarray | None, pose: int, known: bool) -> None:
@@ -284,6 +285,16 @@ class ActorMeshes:
             mesh = self.models[model]
             self._corners[model] = corner_normals(mesh.vertices, mesh.triangles, self.model_extent[model])
         return self._corners[model]
+
+    def rider(self, model: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """A model's rider (its triangles of part RIDER, :attr:`pipeline.world.mesh.Mesh.part`) as a mesh of its
+        own: (R, 3) float64 vertices (unit-box frame) and (S, 3) int64 triangles into them; None without one."""
+        if model not in self._riders:
+            mesh = self.models[model]
+            tris = mesh.triangles[mesh.part == RIDER]
+            used, inverse = np.unique(tris, return_inverse=True)
+            self._riders[model] = (mesh.vertices[used], inverse.reshape(-1, 3).astype(np.int64)) if len(tris) else None
+        return self._riders[model]
 
     def hull_mask(self, model: int) -> np.ndarray:
         """(V,) bool: the vertices of a model that are not strictly inside its convex hull (Qhull's vertices and the
@@ -485,7 +496,7 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
                 np.repeat(idx, nv),
                 np.repeat(idx, nt),
                 np.tile(mesh.material, len(idx)),
-                np.full(nt * len(idx), int(mesh.semantic), np.uint8),
+                np.tile(mesh.triangle_semantic, len(idx)),
                 np.tile(meshes.hull_mask(code), len(idx)),
             )
         )
@@ -504,6 +515,51 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         np.concatenate(cols[5]),
         np.concatenate(cols[6]),
     )
+
+
+def place_riders(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,
+                 models: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The riders of the actors (``where`` (A,) bool: of those only) placed as :func:`place_actors` places their
+    models (:meth:`ActorMeshes.rider`): (V, 3) float64 world vertices, (T, 3) int64 triangles into them and (V,)
+    int32 each vertex's actor; actors without a rider have none."""
+    codes = meshes.model_codes(actors) if models is None else np.asarray(models, np.int64)
+    if where is not None:
+        codes = np.where(np.asarray(where, bool), codes, -1)
+    vertices, triangles, owner = [np.zeros((0, 3))], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int32)]
+    count = 0
+    for code in np.unique(codes[codes >= 0]).tolist():
+        rider = meshes.rider(code)
+        if rider is None:
+            continue
+        idx = np.flatnonzero(codes == code)
+        verts, tris = rider
+        affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
+        vertices.append((np.matmul(verts, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]).reshape(-1, 3))
+        triangles.append((tris[None] + (count + len(verts) * np.arange(len(idx)))[:, None, None]).reshape(-1, 3))
+        owner.append(np.repeat(idx, len(verts)).astype(np.int32))
+        count += len(verts) * len(idx)
+    return np.concatenate(vertices), np.concatenate(triangles), np.concatenate(owner)
+
+
+def rider_boxes(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, models: np.ndarray | None = None
+                ) -> tuple[np.ndarray, Boxes3D]:
+    """Which actors have a rider ((A,) bool) and each rider's 3D box (A boxes; meaningful where it has one): the
+    bounds of its model's rider in the actor's box frame, placed as the actor (the same yaw)."""
+    codes = meshes.model_codes(actors) if models is None else np.asarray(models, np.int64)
+    has = np.zeros(len(actors), bool)
+    lo, hi = np.zeros((len(actors), 3)), np.zeros((len(actors), 3))
+    for code in np.unique(codes).tolist():
+        rider = meshes.rider(code)
+        if rider is not None:
+            sel = codes == code
+            has[sel] = True
+            lo[sel], hi[sel] = rider[0].min(axis=0), rider[0].max(axis=0)
+    size = np.where(has[:, None], actors.boxes.size * (hi - lo), actors.boxes.size)  # no rider: the actor's box
+    local = actors.boxes.size * 0.5 * (lo + hi)
+    c, s = np.cos(actors.boxes.yaw_rad), np.sin(actors.boxes.yaw_rad)
+    centre = actors.boxes.center + np.column_stack([c * local[:, 0] - s * local[:, 1],
+                                                    s * local[:, 0] + c * local[:, 1], local[:, 2]])
+    return has, Boxes3D(centre, size, actors.boxes.yaw_rad)
 
 
 def place_hulls(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,

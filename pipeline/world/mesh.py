@@ -13,6 +13,9 @@ import numpy as np
 from pipeline.core.classes import SemanticClass
 from pipeline.core.jit import as_input, kernel
 
+BODY, RIDER = 0, 1
+"""A triangle's :attr:`Mesh.part`: the actor's body, or the person riding it."""
+
 
 @dataclass(frozen=True)
 class Mesh:
@@ -23,23 +26,40 @@ class Mesh:
             geometry, the actor's box frame — centre at origin, x forward, z up — for actors).
         triangles: (T, 3) int32 vertex indices, counter-clockwise seen from outside.
         material: (T,) int32 material index per triangle (into the material table in use).
-        semantic: the semantic class of every triangle.
+        semantic: the semantic class of every triangle, but a rider's (``part``).
+        part: (T,) uint8 which part of the actor each triangle belongs to: :data:`BODY` (0, the default), or
+            :data:`RIDER`, the person riding a bicycle or motorcycle (semantic class RIDER in the label images and
+            the LiDAR's points, a label row of its own in the camera's labels).
     """
 
     vertices: np.ndarray
     triangles: np.ndarray
     material: np.ndarray
     semantic: SemanticClass
+    part: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
         triangles = np.asarray(self.triangles, dtype=np.int32).reshape(-1, 3)
         material = np.broadcast_to(np.asarray(self.material, dtype=np.int32), (len(triangles),)).copy()
+        part = np.broadcast_to(np.asarray(BODY if self.part is None else self.part, np.uint8), (len(triangles),))
         if len(triangles) and (triangles.min() < 0 or triangles.max() >= len(vertices)):
             raise ValueError(f"triangle indices out of range for {len(vertices)} vertices")
+        if not np.isin(part, (BODY, RIDER)).all():
+            raise ValueError(f"triangle parts must be {BODY} (body) or {RIDER} (rider), got {sorted(set(part))}")
         object.__setattr__(self, "vertices", vertices)
         object.__setattr__(self, "triangles", triangles)
         object.__setattr__(self, "material", material)
+        object.__setattr__(self, "part", part.copy())
+
+    @property
+    def triangle_semantic(self) -> np.ndarray:
+        """(T,) uint8 each triangle's semantic class: the mesh's, RIDER on a rider's triangles."""
+        return np.where(self.part == RIDER, np.uint8(SemanticClass.RIDER), np.uint8(self.semantic))
+
+    def rider_vertices(self) -> np.ndarray:
+        """(R, 3) float64 the vertices of the rider's triangles (none: (0, 3))."""
+        return self.vertices[np.unique(self.triangles[self.part == RIDER])]
 
     def __len__(self) -> int:
         return len(self.triangles)
@@ -48,7 +68,7 @@ class Mesh:
         """The mesh moved along z so that its lowest vertex is ``clearance_m`` above z = 0 (a model standing on the
         ground, or a runner's float above it)."""
         lowest = self.vertices[:, 2].min() - clearance_m
-        return Mesh(self.vertices - [0.0, 0.0, lowest], self.triangles, self.material, self.semantic)
+        return Mesh(self.vertices - [0.0, 0.0, lowest], self.triangles, self.material, self.semantic, self.part)
 
     @staticmethod
     def concatenate(meshes: list[Mesh], semantic: SemanticClass | None = None) -> Mesh:
@@ -61,6 +81,7 @@ class Mesh:
             np.concatenate([m.triangles + off for m, off in zip(meshes, offsets, strict=True)]),
             np.concatenate([m.material for m in meshes]),
             meshes[0].semantic if semantic is None else semantic,
+            np.concatenate([m.part for m in meshes]),
         )
 
 

@@ -66,7 +66,7 @@ from pipeline.world.actors import (
 )
 from pipeline.world.hit_attributes import resolve_hits, spread_cast
 from pipeline.world.materials import TINTED_MATERIALS, material_arrays, material_index
-from pipeline.world.mesh import Mesh, triangle_bounds
+from pipeline.world.mesh import RIDER, Mesh, triangle_bounds
 from pipeline.world.sunmap import SunMap, SunTiles, sun_slope
 
 
@@ -219,10 +219,22 @@ def _canonical_scene(meshes: ActorMeshes, model: int) -> o3d.t.geometry.Raycasti
     return meshes.scene_cache[model]
 
 
+def _rider_scene(meshes: ActorMeshes, model: int) -> o3d.t.geometry.RaycastingScene | None:
+    """The Embree scene of one model's rider alone (its triangles of part RIDER), cached on the library; None for a
+    model without a rider."""
+    key = ("rider", model)
+    if key not in meshes.scene_cache:
+        mesh = meshes.models[model]
+        rider = mesh.part == RIDER
+        meshes.scene_cache[key] = _embree(mesh.vertices, mesh.triangles[rider]) if rider.any() else None
+    return meshes.scene_cache[key]
+
+
 @dataclass(frozen=True)
 class _ClassTables:
     """Every model's canonical triangles numbered in one sequence (model by model, as ``ActorMeshes.models``):
-    offsets (M,) the first number of each model, semantic (T,) uint8 and material (T,) int32 per triangle."""
+    offsets (M,) the first number of each model, semantic (T,) uint8 (a rider's triangles RIDER) and material (T,)
+    int32 per triangle."""
 
     offsets: np.ndarray
     semantic: np.ndarray
@@ -236,7 +248,7 @@ def _class_tables(meshes: ActorMeshes) -> _ClassTables:
         counts = np.array([len(m.triangles) for m in parts], np.int64)
         meshes.scene_cache["tables"] = _ClassTables(
             np.concatenate([[0], np.cumsum(counts)[:-1]]),
-            np.concatenate([np.full(len(m.triangles), int(m.semantic), np.uint8) for m in parts]),
+            np.concatenate([m.triangle_semantic for m in parts]),
             np.concatenate([np.asarray(m.material, np.int32) for m in parts]))
     return meshes.scene_cache["tables"]
 
@@ -448,6 +460,11 @@ class FrameScene:
         self._grid: tuple | None = None  # see _pairs
         self._origin_lists: dict[tuple[float, float, float], tuple[np.ndarray, np.ndarray]] = {}  # see _pairs
 
+    @property
+    def model_codes(self) -> np.ndarray:
+        """(A,) int64 each actor's model (:meth:`ActorMeshes.model_codes`)."""
+        return self._model
+
     @functools.cached_property
     def geometry(self) -> ActorGeometry:
         """The placed (``active``) actors' whole meshes merged (:func:`pipeline.world.actors.place_actors`), placed on
@@ -503,8 +520,10 @@ class FrameScene:
         """
         return self.cast_alone_rays(_rays(origins, directions), actor_index)
 
-    def cast_alone_rays(self, rays: np.ndarray, actor_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`cast_alone` for prebuilt (N, 6) float32 rays [origin | unit direction]."""
+    def cast_alone_rays(self, rays: np.ndarray, actor_index: np.ndarray, rider: bool = False
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`cast_alone` for prebuilt (N, 6) float32 rays [origin | unit direction]; with ``rider``, against
+        each actor's rider alone (nothing hit for an actor without one)."""
         actor_index = np.asarray(actor_index, dtype=np.int64).reshape(-1)
         if len(actor_index) != len(rays):
             raise ValueError(f"{len(actor_index)} actor indices for {len(rays)} rays")
@@ -514,7 +533,9 @@ class FrameScene:
         local = unit_frame_rays(as_input(rays, np.float32), actor_index, self._inv_linear, self._center)
         for model, sel in self._pairs_by_model(actor_index):
             # Directions stay non-unit in the unit box frame, so t is still in world metres.
-            t[sel] = _cast(_canonical_scene(self.meshes, model), np.take(local, sel, axis=0), self.threads)[0]
+            scene = _rider_scene(self.meshes, model) if rider else _canonical_scene(self.meshes, model)
+            if scene is not None:
+                t[sel] = _cast(scene, np.take(local, sel, axis=0), self.threads)[0]
         return np.isfinite(t), t
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, t_max_m: float = np.inf) -> np.ndarray:

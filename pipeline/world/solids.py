@@ -20,7 +20,7 @@ import numpy as np
 
 from pipeline.core.classes import ObjectClass
 from pipeline.world.materials import material_index
-from pipeline.world.mesh import Mesh
+from pipeline.world.mesh import RIDER, Mesh
 
 Part = tuple[np.ndarray, np.ndarray, np.ndarray]  # vertices (V, 3), triangles (T, 3), material (T,)
 
@@ -146,12 +146,19 @@ def cylinder(p0, p1, radius: float, material: str, n: int = 10, ref=(1.0, 0.0, 0
     return sweep([p0, p1], [radius, radius], material, n, ref)
 
 
-def merge(parts: list[Part], semantic_class: ObjectClass) -> Mesh:
-    """Parts joined into one mesh of the class's semantic."""
+def merge(parts: list[Part], semantic_class: ObjectClass, rider: list[Part] = ()) -> Mesh:
+    """Parts joined into one mesh of the class's semantic; the ``rider``'s parts after them, marked as the rider's
+    (:attr:`Mesh.part`)."""
+    parts = [*parts, *rider]
     offsets = np.cumsum([0] + [len(v) for v, _, _ in parts[:-1]])
+    ridden = sum(len(t) for _, t, _ in rider)
+    material = np.concatenate([m for _, _, m in parts])
+    part = np.zeros(len(material), np.uint8)
+    part[len(material) - ridden:] = RIDER
     return Mesh(
         np.concatenate([v for v, _, _ in parts]),
         np.concatenate([t + o for (_, t, _), o in zip(parts, offsets, strict=True)]),
-        np.concatenate([m for _, _, m in parts]),
+        material,
         semantic_class.semantic,
+        part,
     )

@@ -1,4 +1,6 @@
-"""Bicycle and motorcycle body families, each with its rider (:mod:`.figures`).
+"""Bicycle and motorcycle body families, each with its rider (:mod:`.figures`), whose triangles are marked as the
+rider's (:attr:`pipeline.world.mesh.Mesh.part`): one actor, cycle and rider, as KITTI's Cyclist and nuScenes box it;
+the camera's labels give the rider a row of its own, as COCO's annotators box a rider as a person.
 
 Frame and conventions as :mod:`pipeline.world.actor_shapes` (x forward, y left, z up, ground at z = 0, metres at
 a typical size). Wheels are tori (tyre, ``rubber``; rim) about y with a hub; a bicycle's are thin with a few
@@ -48,12 +50,13 @@ CRANK_M = 0.17  # crank arm length
 CRANK_PHASES = 8  # poses per crank turn (:class:`BicycleFamily`)
 
 
-def _bicycle(sport: bool, crank_rad: float = np.radians(25.0), rider: Outfit | None = None) -> list[Part]:
+def _bicycle(sport: bool, crank_rad: float = np.radians(25.0),
+             rider: Outfit | None = None) -> tuple[list[Part], list[Part]]:
     """A 1.75 m bicycle: 0.34 m wheels 1.06 m apart, diamond (sport) or step-through (city) frame in paint, saddle,
     bars, cranks at ``crank_rad`` (the right crank, from forward, counter-clockwise seen from the left), a white lamp
     on the bars and a red lamp and reflector under the saddle (lit with the lights at night, as the law asks, e.g.
     StVZO 67 and UK RVLR 1989), pedal reflectors; and its rider, feet on the pedals, upright (city) or leaning low
-    over drop bars (sport, with a helmet)."""
+    over drop bars (sport, with a helmet). Returns the bicycle's parts and the rider's."""
     ax = 0.53
     pts = {"bb": (-0.05, 0.0, 0.3), "rear": (-ax, 0.0, 0.34), "front": (ax, 0.0, 0.34),
            "st": (-0.2, 0.0, 0.82 if sport else 0.72), "ht": (0.36, 0.0, 0.84 if sport else 0.8),
@@ -103,10 +106,10 @@ def _bicycle(sport: bool, crank_rad: float = np.radians(25.0), rider: Outfit | N
     if rider is None:
         rider = Outfit(top="garment", sleeves="skin", trousers="fabric_black", shins="skin") if sport else \
             Outfit(top="garment", sleeves="garment", trousers="denim", shins="denim")
-    parts += figure(rider_pose, rider)
+    person = figure(rider_pose, rider)
     if sport:
-        parts.append(ellipsoid(head + [-0.02, 0.0, 0.045], (0.15, 0.105, 0.1), "paint", 12, 6))
-    return parts
+        person.append(ellipsoid(head + [-0.02, 0.0, 0.045], (0.15, 0.105, 0.1), "paint", 12, 6))
+    return parts, person
 
 
 @dataclass(frozen=True)
@@ -127,17 +130,20 @@ class BicycleFamily:
 
     def __call__(self, pose: int = 0) -> Mesh:
         crank = 2.0 * np.pi * (pose % CRANK_PHASES) / CRANK_PHASES
-        return merge(_bicycle(self.sport, crank, self.rider), ObjectClass.BICYCLE)
+        parts, rider = _bicycle(self.sport, crank, self.rider)
+        return merge(parts, ObjectClass.BICYCLE, rider)
 
 
 def bicycle() -> Mesh:
     """A city bicycle (step-through frame, upright bars) with an upright rider in a garment top and jeans."""
-    return merge(_bicycle(sport=False), ObjectClass.BICYCLE)
+    parts, rider = _bicycle(sport=False)
+    return merge(parts, ObjectClass.BICYCLE, rider)
 
 
 def bicycle_sport() -> Mesh:
     """A road bicycle (diamond frame, drop bars) with a rider low over the bars, in a helmet and shorts."""
-    return merge(_bicycle(sport=True), ObjectClass.BICYCLE)
+    parts, rider = _bicycle(sport=True)
+    return merge(parts, ObjectClass.BICYCLE, rider)
 
 
 def _motorcycle_rider(hips, lean_deg: float, ankles, grips, jacket: str) -> list[Part]:
@@ -172,9 +178,9 @@ def motorcycle() -> Mesh:
              cylinder((0.5, -0.33, 0.96), (0.5, 0.33, 0.96), 0.017, "trim", 8)]
     parts += [capsule((ax, s, 0.31), (0.5, s, 0.95), 0.028, 0.028, "metal", 8, 1) for s in (0.09, -0.09)]
     parts += [capsule((-ax, s, 0.31), (-0.05, s, 0.42), 0.035, 0.035, "trim", 8, 1) for s in (0.09, -0.09)]
-    parts += _motorcycle_rider((-0.3, 0.0, 0.93), 45.0, [(-0.2, 0.19, 0.42), (-0.2, -0.19, 0.42)],
-                               [(0.5, 0.28, 0.96), (0.5, -0.28, 0.96)], "trim")
-    return merge(parts, ObjectClass.MOTORCYCLE)
+    rider = _motorcycle_rider((-0.3, 0.0, 0.93), 45.0, [(-0.2, 0.19, 0.42), (-0.2, -0.19, 0.42)],
+                              [(0.5, 0.28, 0.96), (0.5, -0.28, 0.96)], "trim")
+    return merge(parts, ObjectClass.MOTORCYCLE, rider)
 
 
 def scooter() -> Mesh:
@@ -192,9 +198,9 @@ def scooter() -> Mesh:
              ellipsoid((-0.8, 0.0, 0.48), (0.012, 0.09, 0.06), "plate", 10, 6),
              cylinder((0.44, -0.33, 1.02), (0.44, 0.33, 1.02), 0.017, "trim", 8),
              capsule((ax, 0.0, 0.24), (0.55, 0.0, 0.9), 0.035, 0.035, "trim", 8, 1)]
-    parts += _motorcycle_rider((-0.2, 0.0, 0.86), 20.0, [(0.14, 0.15, 0.44), (0.14, -0.15, 0.44)],
-                               [(0.4, 0.28, 1.02), (0.4, -0.28, 1.02)], "cloth")
-    return merge(parts, ObjectClass.MOTORCYCLE)
+    rider = _motorcycle_rider((-0.2, 0.0, 0.86), 20.0, [(0.14, 0.15, 0.44), (0.14, -0.15, 0.44)],
+                              [(0.4, 0.28, 1.02), (0.4, -0.28, 1.02)], "cloth")
+    return merge(parts, ObjectClass.MOTORCYCLE, rider)
 
 
 BICYCLES = (

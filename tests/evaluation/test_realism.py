@@ -150,6 +150,9 @@ def test_people_by_who_they_are():
     assert "## People by who they are" in text and "| morning | 60+ | child | 3 |" in text
     assert metrics_of(coco([{k: v for k, v in a.items() if k != "person"} for a in people]), results)[
         "people_by_person"] == []
+    on_bike = coco([{"image_id": 1, "bbox": [0, 0, 15, 40], "category_id": 1, "person": "adult", "subclass": "rider"}],
+                   n_images=1)
+    assert {r["person"] for r in metrics_of(on_bike, [])["people_by_person"]} == {"rider"}
     with pytest.raises(InputError, match="field 'person' is 3"):
         ground_truth_from_dict(coco([{"image_id": 1, "bbox": A, "person": 3}], n_images=1))
 

@@ -96,7 +96,7 @@ def test_extra_fields_classes_and_filters(coco_out):
     pedestrian = by_track[12][0]  # 16 visible pixels < 20: an ignore region
     assert pedestrian["iscrowd"] == 1 and pedestrian["ignore_reason"] == "tiny" and pedestrian["category_id"] == 1
     summary = json.loads((coco_out / "export.json").read_text())["counts"]["objects"]["total"]
-    assert summary == {"kept": 18, "hidden": 6, "tiny": 6, "occluded": 0, "no_category": 0}
+    assert summary == {"kept": 18, "hidden": 6, "tiny": 6, "occluded": 0, "no_category": 0, "in_cycle": 0}
 
 
 def test_filter_thresholds_are_options(tmp_path, morning):

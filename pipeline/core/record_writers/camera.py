@@ -15,7 +15,7 @@ from pipeline.core.geometry import R_CAMERA_FROM_BODY, Transform, wrap_angle
 from pipeline.core.jit import as_input, kernel
 from pipeline.core.png import write_png
 from pipeline.core.record import DEPTH_SCALE, CameraInfo, camera_path
-from pipeline.core.record_writers.rows import BOX_KEYS, identity_columns, matrix_rows
+from pipeline.core.record_writers.rows import BOX_KEYS, as_riders, identity_columns, matrix_rows
 
 # One fixed PNG row filter per image kind (libpng's adaptive choice per row costs more than it saves): Up for the
 # noisy RGB image, Sub for depth (smooth along rows), none for the label images (runs of one value).
@@ -31,12 +31,15 @@ def camera_info(camera) -> CameraInfo:
                       distortion=[float(d) for d in cfg.distortion], T_ego_sensor=matrix_rows(optical_to_ego.matrix))
 
 
-def camera_label_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray],
-                      lidar_points: np.ndarray) -> dict[str, np.ndarray]:
+def camera_label_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray], lidar_points: np.ndarray,
+                      rider_points: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Label columns of one camera frame (``cam``: a :class:`pipeline.sensors.render.CameraFrame`); ``lidar_points``
-    (K,) counts each actor's points over the rig's LiDARs."""
+    (K,) counts each actor's points over the rig's LiDARs, ``rider_points`` (K,) those on its rider (none: 0). A
+    rider's row (the labels' ``rider``) is :func:`as_riders`'."""
     lab = cam.labels
     out = identity_columns(frame, name, "camera", cols, lab.actor_index)
+    rider_points = np.zeros_like(lidar_points) if rider_points is None else rider_points
+    as_riders(out, lab.rider, cam.cam_to_world.apply(lab.center_cam[lab.rider]), lab.size[lab.rider])
     heading = lab.rotation_cam[:, :, 0]  # the box's forward axis in the optical frame
     tight = np.where(lab.visible[:, None], lab.box_tight, np.nan)  # NaN becomes null when typed Float64
     out.update({
@@ -46,7 +49,7 @@ def camera_label_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray],
         "distance_m": lab.distance_m.astype(np.float64), "visible": lab.visible,
         "visible_px": lab.visible_px, "unoccluded_px": lab.unoccluded_px,
         "occlusion": lab.occlusion.astype(np.float64), "truncation": lab.truncation.astype(np.float64),
-        "lidar_points": lidar_points[lab.actor_index],
+        "lidar_points": np.where(lab.rider, rider_points[lab.actor_index], lidar_points[lab.actor_index]),
     })
     for j, key in enumerate(BOX_KEYS):
         out[key], out[f"amodal_{key}"], out[f"amodal_clip_{key}"] = (

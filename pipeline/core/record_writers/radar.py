@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from pipeline.core.classes import RIDER, RIDER_TRACK_OFFSET
 from pipeline.core.config import RadarConfig
 from pipeline.core.geometry import Transform, wrap_angle
 from pipeline.core.record import RADAR_COLUMNS, RadarInfo
@@ -74,8 +75,14 @@ def radar_label_rows(frame: int, config: RadarConfig, scan, cols: dict[str, np.n
     return out
 
 
-def with_radar_detections(part: dict[str, np.ndarray], track_ids: np.ndarray, counts: np.ndarray) -> None:
+def with_radar_detections(part: dict[str, np.ndarray], track_ids: np.ndarray, counts: np.ndarray,
+                          rider_counts: np.ndarray | None = None) -> None:
     """Add ``radar_detections`` to a camera's or LiDAR's label columns ``part``: the detections of its rows' objects
-    (``counts`` per actor of the frame, whose track ids are ``track_ids``) summed over the rig's radars."""
+    (``counts`` per actor of the frame, whose track ids are ``track_ids``) summed over the rig's radars; a rider's
+    row (class rider) those on its rider (``rider_counts`` per actor; none: 0)."""
+    rider = part["cls"] == RIDER
+    track = np.where(rider, part["track_id"] - RIDER_TRACK_OFFSET, part["track_id"])
     order = np.argsort(track_ids, kind="stable")
-    part["radar_detections"] = counts[order[np.searchsorted(track_ids, part["track_id"], sorter=order)]]
+    which = order[np.searchsorted(track_ids, track, sorter=order)]
+    riders = np.zeros_like(counts) if rider_counts is None else rider_counts
+    part["radar_detections"] = np.where(rider, riders[which], counts[which])
