@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pipeline.core.classes import ObjectClass
+from pipeline.core.classes import RIDER, ObjectClass, SemanticClass
 from pipeline.core.files import atomic_file
 from pipeline.core.geometry import Boxes3D
 from pipeline.core.outputs import MARK, OutputSpec, png_file
@@ -41,6 +41,7 @@ RADAR_VELOCITY_RANGE_MPS = (-30.0, 10.0)  # the colour map's ends (red .. blue)
 _SEMANTIC_BGR = np.tile(np.array(OTHER_BGR, np.uint8), (256, 1))
 for _cls in ObjectClass:
     _SEMANTIC_BGR[_cls.semantic] = CLASS_BGR.get(_cls.value, OTHER_BGR)
+_SEMANTIC_BGR[SemanticClass.RIDER] = CLASS_BGR[RIDER]  # a cycle's rider's points
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
