@@ -466,6 +466,13 @@ class ActorGeometry:
     vertex_on_hull: np.ndarray
 
 
+def _placed(vertices: np.ndarray, actors: Actors, idx: np.ndarray) -> np.ndarray:
+    """(len(idx), V, 3) float64 the unit-frame ``vertices`` (V, 3) placed in each actor ``idx``'s box: vertex v of
+    actor n at A_n @ v + t_n (:func:`unit_to_world`), as one stacked matmul (much faster than the same einsum)."""
+    affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
+    return np.matmul(vertices, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]
+
+
 def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,
                  models: np.ndarray | None = None) -> ActorGeometry:
     """Scale and place every actor's canonical mesh (vectorised per model) and merge them; with ``where`` (A,) bool,
@@ -483,9 +490,7 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         idx = np.flatnonzero(codes == code)
         if not len(idx):
             continue
-        affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
-        # verts[n, v] = A_n @ vertex_v + t_n; as one stacked matmul (much faster than the same einsum).
-        verts = np.matmul(mesh.vertices, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]
+        verts = _placed(mesh.vertices, actors, idx)
         nv, nt = len(mesh.vertices), len(mesh.triangles)
         offsets = vertex_offset + nv * np.arange(len(idx), dtype=np.int64)
         tris = mesh.triangles[None, :, :] + offsets[:, None, None]
@@ -533,8 +538,7 @@ def place_riders(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
             continue
         idx = np.flatnonzero(codes == code)
         verts, tris = rider
-        affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
-        vertices.append((np.matmul(verts, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]).reshape(-1, 3))
+        vertices.append(_placed(verts, actors, idx).reshape(-1, 3))
         triangles.append((tris[None] + (count + len(verts) * np.arange(len(idx)))[:, None, None]).reshape(-1, 3))
         owner.append(np.repeat(idx, len(verts)).astype(np.int32))
         count += len(verts) * len(idx)
@@ -576,9 +580,7 @@ def place_hulls(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.
         idx = np.flatnonzero(codes == code)
         if not len(idx):
             continue
-        affine = unit_to_world(Boxes3D(actors.boxes.center[idx], actors.boxes.size[idx], actors.boxes.yaw_rad[idx]))
         hull = np.ascontiguousarray(mesh.vertices[meshes.hull_mask(code)])
-        # The arithmetic of place_actors (one stacked matmul), row by row the same numbers.
-        vertices.append((np.matmul(hull, affine[:, :, :3].transpose(0, 2, 1)) + affine[:, None, :, 3]).reshape(-1, 3))
+        vertices.append(_placed(hull, actors, idx).reshape(-1, 3))  # row by row place_actors' numbers
         owner.append(np.repeat(idx, len(hull)).astype(np.int32))
     return np.concatenate(vertices), np.concatenate(owner)
