@@ -85,6 +85,21 @@ class ExportOptions:
         }
 
 
+def _float_columns(labels: pd.DataFrame, columns: list[str]) -> np.ndarray:
+    """(N, len(columns)) float64 of nullable label columns, NaN for nulls."""
+    return labels[columns].astype("float64").to_numpy(dtype=np.float64, na_value=np.nan).reshape(-1, len(columns))
+
+
+def cycle_boxes_2d(labels: pd.DataFrame, mode: BoxMode, width: int, height: int) -> np.ndarray:
+    """(N, 4) float64 a ridden cycle's box without its rider in the chosen mode (tight; or amodal clipped to the
+    ``width`` x ``height`` image), NaN on other rows and where its cycle does not show."""
+    if mode is BoxMode.TIGHT:
+        return _float_columns(labels, ["cycle_x1", "cycle_y1", "cycle_x2", "cycle_y2"])
+    box = np.clip(_float_columns(labels, [f"cycle_amodal_{k}" for k in ("x1", "y1", "x2", "y2")]), 0.0,
+                  [width, height, width, height])
+    return np.where((box[:, 2:] > box[:, :2]).all(axis=1)[:, None], box, np.nan)
+
+
 def boxes_2d(labels: pd.DataFrame, mode: BoxMode) -> np.ndarray:
     """(N, 4) float64 x1, y1, x2, y2 (pixels, x2 = last covered column + 1) of the chosen box; NaN where none."""
     cols = ["x1", "y1", "x2", "y2"] if mode is BoxMode.TIGHT else [
@@ -99,8 +114,12 @@ class CameraRows:
 
     Attributes:
         reasons: (N,) the filter's verdict per row (:data:`exporters.filters.REASONS`).
-        boxes: (N, 4) the ``options.box`` 2D box per row (:func:`boxes_2d`).
-        amodal: (N, 4) the unclipped amodal box, NaN where none.
+        boxes: (N, 4) the ``options.box`` 2D box per row (:func:`boxes_2d`; where riders have rows of their own, a
+            ridden cycle's box without its rider, :func:`cycle_boxes_2d`).
+        amodal: (N, 4) the unclipped amodal box, NaN where none (where riders have rows of their own, a ridden
+            cycle's without its rider).
+        ridden: (N,) bool the row is a bicycle or motorcycle boxed without its rider (``riders``; its ``cycle_*``
+            boxes given).
         columns: the label columns by name: ints as stored, floats as float64 with NaN for nulls, ``cls``,
             ``model`` and ``person`` as str.
     """
@@ -114,7 +133,8 @@ class CameraRows:
         """``coco_categories``: the format's categories are COCO's (COCO, YOLO), so the rows of a class without one
         (category_id 0: strollers) are ``no_category``, left out of :meth:`rows` and counted. ``riders`` False: the
         format's cycle box holds its rider (KITTI's Cyclist), so a rider's row is ``in_cycle``, left out and
-        counted."""
+        counted; otherwise (``riders`` True) a ridden cycle is boxed without its rider, as COCO's and MOT's annotators
+        box a bicycle beside the person on it, and where only its rider shows it is ``hidden``."""
         labels = source.labels[source.labels["sensor"] == camera]  # sorted by (frame, track_id)
         self.where = f"{source.record.root}: camera {camera}"
         self.mode = options.box
@@ -124,8 +144,14 @@ class CameraRows:
         if not riders:
             self.reasons[(labels["cls"].to_numpy() == RIDER) & (self.reasons != HIDDEN)] = IN_CYCLE
         self.boxes = boxes_2d(labels, options.box)
-        self.amodal = labels[["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"]].astype("float64").to_numpy(
-            na_value=np.nan)
+        self.amodal = _float_columns(labels, ["amodal_x1", "amodal_y1", "amodal_x2", "amodal_y2"])
+        cycle_amodal = _float_columns(labels, [f"cycle_amodal_{k}" for k in ("x1", "y1", "x2", "y2")])
+        self.ridden = np.isfinite(cycle_amodal).all(axis=1) & riders
+        if riders and self.ridden.any():
+            cam = next(c for c in source.info.cameras if c.name == camera)
+            cycle = cycle_boxes_2d(labels, options.box, cam.width_px, cam.height_px)
+            self.boxes[self.ridden], self.amodal[self.ridden] = cycle[self.ridden], cycle_amodal[self.ridden]
+            self.reasons[self.ridden & ~np.isfinite(cycle).all(axis=1)] = HIDDEN
         self.columns: dict[str, np.ndarray] = {c: labels[c].to_numpy(dtype=object) for c in ("cls", "model", "person")}
         self.columns |= {c: labels[c].to_numpy() for c in self.INTS}
         self.columns |= {c: labels[c].astype("float64").to_numpy(na_value=np.nan) for c in self.FLOATS}

@@ -4,7 +4,9 @@ Every (record, camera, frame) is one image, its RGB PNG hard-linked (or copied) 
 ``images/<scenario>_s<seed>_<condition>_<camera>_<frame:06d>.png``. Image and annotation ids start at
 1 and are unique across split files. Category ids are COCO's own (car 3, truck 8, ...; van counts as car
 and keeps ``subclass`` "van"; ``model`` names the body family, ``person`` who a pedestrian is: adult, teen, child or
-wheelchair_user).
+wheelchair_user). As in COCO, the person riding a bicycle or motorcycle is a person of its own (``subclass`` rider)
+and the cycle's box and mask hold the cycle alone (its occlusion, truncation and 3D box are those of the cycle with
+its rider, as the labels give them).
 
 Per annotation: ``bbox`` [x, y, w, h] of the tight box (``--box amodal``: the amodal box clipped to
 the image), ``area`` = visible mask area (pixels), ``segmentation`` = RLE of the visible mask taken
@@ -130,12 +132,14 @@ class CocoExporter(Exporter):
         instance = item.source.record.instance(camera, item.frame)
         tracks = np.asarray(ints["track_id"], np.int64)
         masks = instance_rles(instance, tracks)
-        rider = table.columns["cls"][rows] == RIDER
-        if rider.any():  # a rider's pixels are its cycle's showing the rider (semantic RIDER)
-            ridden = np.where(item.source.record.semantic(camera, item.frame) == SemanticClass.RIDER,
-                              instance.astype(np.int64) + RIDER_TRACK_OFFSET, 0)
-            for j, m in zip(np.flatnonzero(rider), instance_rles(ridden, tracks[rider]), strict=True):
-                masks[j] = m
+        rider, ridden = table.columns["cls"][rows] == RIDER, table.ridden[rows]
+        if rider.any() or ridden.any():  # a rider's pixels are its cycle's showing the rider (semantic RIDER)
+            on_rider = item.source.record.semantic(camera, item.frame) == SemanticClass.RIDER
+            riders = np.where(on_rider, instance.astype(np.int64) + RIDER_TRACK_OFFSET, 0)
+            cycles = np.where(on_rider, 0, instance)
+            for which, image in ((rider, riders), (ridden, cycles)):
+                for j, m in zip(np.flatnonzero(which), instance_rles(image, tracks[which]), strict=True):
+                    masks[j] = m
         out = []
         for j, i in enumerate(rows):
             rle, area = masks[j]

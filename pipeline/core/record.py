@@ -32,7 +32,7 @@ import pyarrow as pa
 from pipeline.core.png import check_png
 from pipeline.core.tables import damage_message, open_parquet, read_parquet, require_finite
 
-SCHEMA_VERSION = 2  # 2: labels name each actor's body (model, person)
+SCHEMA_VERSION = 3  # 2: labels name each actor's body (model, person); 3: a ridden cycle's boxes without its rider
 RECORD_FILE = "record.json"
 DEPTH_SCALE = 256.0  # depth PNG value = metres * 256
 
@@ -57,6 +57,10 @@ LABEL_COLUMNS = {
     "amodal_x1": "Float64", "amodal_y1": "Float64", "amodal_x2": "Float64", "amodal_y2": "Float64",
     "amodal_clip_x1": "Float64", "amodal_clip_y1": "Float64", "amodal_clip_x2": "Float64",
     "amodal_clip_y2": "Float64",
+    # a ridden bicycle's or motorcycle's tight and amodal (unclipped) boxes without its rider (null on other rows)
+    "cycle_x1": "Float64", "cycle_y1": "Float64", "cycle_x2": "Float64", "cycle_y2": "Float64",
+    "cycle_amodal_x1": "Float64", "cycle_amodal_y1": "Float64", "cycle_amodal_x2": "Float64",
+    "cycle_amodal_y2": "Float64",
     "visible_px": "Int64", "unoccluded_px": "Int64", "occlusion": "Float64", "truncation": "Float64",
     # LiDAR points carrying this object's id (cameras: summed over the rig's LiDARs)
     "lidar_points": "int32",

@@ -90,12 +90,13 @@ def project_actors(scene: FrameScene, camera: Camera, cam_to_world: Transform) -
                              verts, tris, vertex_actor)
 
 
-def project_riders(scene: FrameScene, camera: Camera, cam_to_world: Transform, where: np.ndarray) -> AmodalBoxes:
-    """Amodal 2D boxes of the riders of the actors ``where`` ((K,) bool; K the frame's actors): the projection of
-    each one's rider mesh (:func:`pipeline.world.actors.place_riders`) as :func:`project_actors` projects a mesh
-    that crosses the near plane (all its vertices, and the points where its edges cross the plane). Not valid for
-    an actor without a rider or one left out."""
-    verts, tris, owner = place_riders(scene.actors, scene.meshes, where & scene.active, scene.model_codes)
+def project_riders(scene: FrameScene, camera: Camera, cam_to_world: Transform, where: np.ndarray,
+                   cycles: bool = False) -> AmodalBoxes:
+    """Amodal 2D boxes of the riders of the actors ``where`` ((K,) bool; K the frame's actors; ``cycles``: of their
+    cycles without the rider): the projection of each one's rider mesh (:func:`pipeline.world.actors.place_riders`)
+    as :func:`project_actors` projects a mesh that crosses the near plane (all its vertices, and the points where its
+    edges cross the plane). Not valid for an actor without a rider or one left out."""
+    verts, tris, owner = place_riders(scene.actors, scene.meshes, where & scene.active, scene.model_codes, cycles)
     return _projected_bounds(camera, len(scene.actors), [], [], cam_to_world.inverse().apply(verts), tris, owner)
 
 
@@ -148,6 +149,10 @@ class CameraLabels:
         distance_m: (N,) float32 from the optical centre to the box centre.
         rider: (N,) bool the row is the rider of the actor ``actor_index`` (its 3D box the rider's, its pixels the
             rider's, its occlusion by everything but the rider itself); these rows follow the actors'.
+        box_cycle: (N, 4) float64 a ridden bicycle's or motorcycle's tight box without its rider (from its pixels
+            that do not show the rider, as COCO boxes a bicycle); NaN on other rows and where none shows.
+        box_cycle_amodal: (N, 4) float64 the same cycle's amodal box without its rider (the projection of its
+            triangles that are not the rider's), unclipped; NaN on other rows.
     """
 
     actor_index: np.ndarray
@@ -166,6 +171,8 @@ class CameraLabels:
     truncation: np.ndarray
     distance_m: np.ndarray
     rider: np.ndarray
+    box_cycle: np.ndarray
+    box_cycle_amodal: np.ndarray
 
     def __len__(self) -> int:
         return len(self.actor_index)
@@ -238,10 +245,15 @@ def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, am
     has_rider, rider_box = rider_boxes(scene.actors, scene.meshes, scene.model_codes)
     riders = np.zeros(0, np.int64)
     r_amodal, r_visible, r_tight, r_unoccluded, r_full = amodal, visible_px, tight, unoccluded_px, full_px  # none
+    c_tight, c_amodal = np.full((k, 4), np.nan), np.full((k, 4), np.nan)
     if semantic_image is not None and has_rider[rows].any():
         where = np.zeros(k, bool)
         where[rows[has_rider[rows]]] = True
-        rider_image = np.where(semantic_image == SemanticClass.RIDER, actor_image, 0).astype(np.int32)
+        on_rider = semantic_image == SemanticClass.RIDER
+        rider_image = np.where(on_rider, actor_image, 0).astype(np.int32)
+        c_tight = np.where(where[:, None], _pixel_boxes(as_input(np.where(on_rider, 0, actor_image), np.int32), k)[1],
+                           np.nan)
+        c_amodal = np.where(where[:, None], project_riders(scene, camera, cam_to_world, where, cycles=True).box, np.nan)
         r_amodal = project_riders(scene, camera, cam_to_world, where)
         r_visible, r_tight = _pixel_boxes(as_input(rider_image, np.int32), k)
         r_unoccluded, r_full = _silhouettes(scene, camera, cam_to_world, r_amodal, rider_image, r_visible, r_tight,
@@ -280,6 +292,8 @@ def camera_labels(scene: FrameScene, camera: Camera, cam_to_world: Transform, am
         truncation=np.clip(1.0 - unocc / np.maximum(full, unocc), 0.0, 1.0).astype(np.float32),
         distance_m=np.linalg.norm(center_cam, axis=1).astype(np.float32),
         rider=np.arange(len(index)) >= len(rows),
+        box_cycle=np.concatenate([c_tight[rows], np.full((len(riders), 4), np.nan)]),
+        box_cycle_amodal=np.concatenate([c_amodal[rows], np.full((len(riders), 4), np.nan)]),
     )
 
 

@@ -32,7 +32,7 @@ from pipeline.core.build_cache import cached
 from pipeline.core.classes import ObjectClass, Person
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actor_shapes import FAMILIES, SUITS_LENGTH_M
-from pipeline.world.mesh import RIDER, Mesh
+from pipeline.world.mesh import BODY, RIDER, Mesh
 from pipeline.world.smooth_normals import corner_normals
 
 
@@ -265,7 +265,7 @@ class ActorMeshes:
         self.scene_cache: dict[object, object] = {}  # model index -> Embree scene; "tables" -> triangle tables
         self._hulls: dict[int, np.ndarray] = {}
         self._corners: dict[int, np.ndarray] = {}
-        self._riders: dict[int, tuple[np.ndarray, np.ndarray] | None] = {}
+        self._parts: dict[tuple[int, int], tuple[np.ndarray, np.ndarray] | None] = {}
 
     def _add_model(self, object_class: ObjectClass, mesh: Mesh, name: str, extent: np.ndarray,
                    low: np.ndarray | None, pose: int, known: bool) -> None:
@@ -289,12 +289,23 @@ class ActorMeshes:
     def rider(self, model: int) -> tuple[np.ndarray, np.ndarray] | None:
         """A model's rider (its triangles of part RIDER, :attr:`pipeline.world.mesh.Mesh.part`) as a mesh of its
         own: (R, 3) float64 vertices (unit-box frame) and (S, 3) int64 triangles into them; None without one."""
-        if model not in self._riders:
+        return self.part(model, RIDER)
+
+    def cycle(self, model: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """A ridden model's cycle without its rider (its triangles of part BODY) as :meth:`rider` gives the rider;
+        None for a model without a rider."""
+        return self.part(model, BODY) if self.rider(model) is not None else None
+
+    def part(self, model: int, part: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """A model's triangles of ``part`` (BODY or RIDER) as a mesh of their own: (R, 3) float64 vertices
+        (unit-box frame) and (S, 3) int64 triangles into them; None where it has none."""
+        if (model, part) not in self._parts:
             mesh = self.models[model]
-            tris = mesh.triangles[mesh.part == RIDER]
+            tris = mesh.triangles[mesh.part == part]
             used, inverse = np.unique(tris, return_inverse=True)
-            self._riders[model] = (mesh.vertices[used], inverse.reshape(-1, 3).astype(np.int64)) if len(tris) else None
-        return self._riders[model]
+            self._parts[(model, part)] = ((mesh.vertices[used], inverse.reshape(-1, 3).astype(np.int64))
+                                          if len(tris) else None)
+        return self._parts[(model, part)]
 
     def hull_mask(self, model: int) -> np.ndarray:
         """(V,) bool: the vertices of a model that are not strictly inside its convex hull (Qhull's vertices and the
@@ -523,21 +534,22 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
 
 
 def place_riders(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.ndarray | None = None,
-                 models: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 models: np.ndarray | None = None, cycles: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The riders of the actors (``where`` (A,) bool: of those only) placed as :func:`place_actors` places their
-    models (:meth:`ActorMeshes.rider`): (V, 3) float64 world vertices, (T, 3) int64 triangles into them and (V,)
-    int32 each vertex's actor; actors without a rider have none."""
+    models (:meth:`ActorMeshes.rider`; ``cycles``: their cycles without the rider, :meth:`ActorMeshes.cycle`): (V, 3)
+    float64 world vertices, (T, 3) int64 triangles into them and (V,) int32 each vertex's actor; actors without a
+    rider have none."""
     codes = meshes.model_codes(actors) if models is None else np.asarray(models, np.int64)
     if where is not None:
         codes = np.where(np.asarray(where, bool), codes, -1)
     vertices, triangles, owner = [np.zeros((0, 3))], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int32)]
     count = 0
     for code in np.unique(codes[codes >= 0]).tolist():
-        rider = meshes.rider(code)
-        if rider is None:
+        part = meshes.cycle(code) if cycles else meshes.rider(code)
+        if part is None:
             continue
         idx = np.flatnonzero(codes == code)
-        verts, tris = rider
+        verts, tris = part
         vertices.append(_placed(verts, actors, idx).reshape(-1, 3))
         triangles.append((tris[None] + (count + len(verts) * np.arange(len(idx)))[:, None, None]).reshape(-1, 3))
         owner.append(np.repeat(idx, len(verts)).astype(np.int32))

@@ -70,6 +70,13 @@ def test_the_rider_has_its_own_row_pixels_and_boxes(ridden):
         lab.box_tight[rider][[1, 3, 0, 2]].astype(int))
     np.testing.assert_allclose(lab.box_amodal[cycle][[0, 2]], lab.box_amodal[rider][[0, 2]], atol=1e-6)
     assert lab.box_amodal[cycle][3] > CY + 15  # the cycle's holds the lower half too
+    # Without its rider (as COCO boxes a bicycle): the lower half, z -1..0, whose top edge is the horizon.
+    u, v = _project([19.0, 19.0, 21.0, 21.0], [-0.5, 0.5, -0.5, 0.5], [-1.0, -1.0, -1.0, -1.0])
+    np.testing.assert_allclose(lab.box_cycle_amodal[cycle], [u.min(), CY, u.max(), v.max()], atol=1e-6)
+    rows, cols = np.nonzero(mine & ~on_rider)
+    assert (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) == tuple(
+        lab.box_cycle[cycle][[1, 3, 0, 2]].astype(int))
+    assert np.isnan(lab.box_cycle[rider]).all() and np.isnan(lab.box_cycle_amodal[rider]).all()
     assert lab.occlusion[rider] == 0.0 and lab.truncation[rider] == 0.0
     assert lab.unoccluded_px[rider] == lab.visible_px[rider]
     # 3D: the rider's box is the upper half (optical frame: x = -y, y = -z, z = x).
@@ -108,11 +115,14 @@ def test_a_rider_cut_by_the_image_border_is_truncated_and_its_row_written_as_a_p
     np.testing.assert_allclose([out["x_m"][1], out["y_m"][1], out["z_m"][1], out["height_m"][1]],
                                [20.0, 20.0, 0.5, 1.0], atol=1e-9)
     assert out["length_m"][0] == 2.0 and out["z_m"][0] == 0.0  # the cycle's own box is untouched
+    assert np.isfinite(out["cycle_x1"][0]) and np.isnan(out["cycle_x1"][1])  # its boxes without the rider: its row
+    assert out["cycle_amodal_x1"][0] < 0 <= out["cycle_x1"][0]
 
 
 def test_cars_and_a_frame_without_riders_get_no_rider_rows(ridden):
     lab = _render(ridden, [[20.0, 0.0, 0.0]], [[4.0, 2.0, 1.5]], [ObjectClass.CAR]).labels
     assert len(lab) == 1 and not lab.rider.any()
+    assert np.isnan(lab.box_cycle).all() and np.isnan(lab.box_cycle_amodal).all()  # a car is no ridden cycle
 
 
 @pytest.mark.parametrize("family", [*BICYCLES, *MOTORCYCLES], ids=lambda f: f.__name__)

@@ -2,7 +2,8 @@
 
 Images (docs/dataset.md): rgb (8-bit sRGB), instance (uint16 track id, 0 = no object), semantic (uint8
 SemanticClass) and depth (uint16 z-depth x DEPTH_SCALE, 0 = no hit). Label rows: one per actor the camera's ground
-truth describes, with its sensor-frame box, tight and amodal 2D boxes, pixel counts, occlusion and truncation.
+truth describes, with its sensor-frame box, tight and amodal 2D boxes (a ridden cycle's also without its rider), pixel
+counts, occlusion and truncation.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def camera_label_rows(frame: int, name: str, cam, cols: dict[str, np.ndarray], l
     for j, key in enumerate(BOX_KEYS):
         out[key], out[f"amodal_{key}"], out[f"amodal_clip_{key}"] = (
             tight[:, j], lab.box_amodal[:, j], lab.box_amodal_clipped[:, j])
+        out[f"cycle_{key}"], out[f"cycle_amodal_{key}"] = lab.box_cycle[:, j], lab.box_cycle_amodal[:, j]
     return out
 
 

@@ -55,7 +55,7 @@ def lidar_label_rows(frame: int, name: str, mount: Transform, sweep, cols: dict[
     for key in ("visible_px", "unoccluded_px", "occlusion", "truncation") + BOX_KEYS:
         out[key] = null
     for key in BOX_KEYS:
-        out[f"amodal_{key}"] = out[f"amodal_clip_{key}"] = null
+        out[f"amodal_{key}"] = out[f"amodal_clip_{key}"] = out[f"cycle_{key}"] = out[f"cycle_amodal_{key}"] = null
     return out
 
 

@@ -71,7 +71,7 @@ def radar_label_rows(frame: int, config: RadarConfig, scan, cols: dict[str, np.n
     for key in ("visible_px", "unoccluded_px", "occlusion", "truncation") + BOX_KEYS:
         out[key] = null
     for key in BOX_KEYS:
-        out[f"amodal_{key}"] = out[f"amodal_clip_{key}"] = null
+        out[f"amodal_{key}"] = out[f"amodal_clip_{key}"] = out[f"cycle_{key}"] = out[f"cycle_amodal_{key}"] = null
     return out
 
 
