@@ -32,7 +32,7 @@ from exporters.base import CameraRows, Exporter, ExportError, ExportOptions, sen
 from exporters.filters import KEPT, FilterSummary
 from exporters.source import ExportSource, RecordSource, safe_name
 from exporters.writing import link_or_copy
-from pipeline.core.classes import RIDER
+from pipeline.core.classes import RIDER, Person
 from pipeline.core.geometry import wrap_angle
 from pipeline.core.record import CameraInfo, LidarInfo
 
@@ -40,6 +40,13 @@ log = logging.getLogger(__name__)
 
 KITTI_TYPE = {"car": "Car", "van": "Van", "truck": "Truck", "bus": "Misc", "motorcycle": "Misc",
               "bicycle": "Cyclist", "pedestrian": "Pedestrian", "stroller": "Misc"}
+
+
+def kitti_type(cls: str, person: str) -> str:
+    """A label row's KITTI type: :data:`KITTI_TYPE` of its class, but a wheelchair user (``person``) is
+    ``Person_sitting``, as KITTI's annotators label a seated person (its evaluation neither counts nor punishes it
+    for Pedestrian: a neighbouring class)."""
+    return "Person_sitting" if cls == "pedestrian" and person == Person.WHEELCHAIR_USER.value else KITTI_TYPE[cls]
 """Our class -> KITTI type. KITTI has no bus, motorcycle or stroller class; 'Misc' holds other objects there."""
 
 OCCLUSION_LEVEL_EDGES = (0.1, 0.5)
@@ -109,7 +116,8 @@ def label_lines(table: CameraRows, rows: np.ndarray) -> list[str]:
         x, y, z = col["sensor_x_m"][i], col["sensor_y_m"][i] + h / 2.0, col["sensor_z_m"][i]  # bottom centre (y down)
         ry = wrap_angle(col["sensor_yaw_rad"][i])
         alpha = wrap_angle(ry - np.arctan2(x, z))
-        objects.append(f"{KITTI_TYPE[col['cls'][i]]} {min(max(float(col['truncation'][i]), 0.0), 1.0):.2f} "
+        kind = kitti_type(col["cls"][i], col["person"][i])
+        objects.append(f"{kind} {min(max(float(col['truncation'][i]), 0.0), 1.0):.2f} "
                        f"{int(levels[j])} {alpha:.2f} {x1:.2f} {y1:.2f} {x2:.2f} {y2:.2f} {h:.2f} {w:.2f} "
                        f"{length:.2f} {x:.2f} {y:.2f} {z:.2f} {ry:.2f}")
     return objects + dont_care

@@ -34,7 +34,7 @@ from tqdm import tqdm
 
 from exporters.base import CameraRows, Exporter, ExportError, ExportOptions
 from exporters.filters import KEPT, FilterSummary
-from exporters.kitti import KITTI_TYPE, occlusion_level, sensors_of
+from exporters.kitti import KITTI_TYPE, kitti_type, occlusion_level, sensors_of
 from exporters.source import ExportSource, safe_name
 from exporters.writing import link_or_copy
 from pipeline.core.classes import RIDER
@@ -79,7 +79,8 @@ def label_lines(table: CameraRows, rows: np.ndarray, frame: int) -> list[str]:
         x, y, z = col["sensor_x_m"][i], col["sensor_y_m"][i] + h / 2.0, col["sensor_z_m"][i]  # bottom centre (y down)
         ry = wrap_angle(col["sensor_yaw_rad"][i])
         alpha = wrap_angle(ry - np.arctan2(x, z))
-        objects.append(f"{frame} {int(col['track_id'][i])} {KITTI_TYPE[col['cls'][i]]} {int(truncated[j])} "
+        kind = kitti_type(col["cls"][i], col["person"][i])
+        objects.append(f"{frame} {int(col['track_id'][i])} {kind} {int(truncated[j])} "
                        f"{int(occluded[j])} {alpha:.2f} {x1:.2f} {y1:.2f} {x2:.2f} {y2:.2f} {h:.2f} {w:.2f} "
                        f"{length:.2f} {x:.2f} {y:.2f} {z:.2f} {ry:.2f}")
     return objects + dont_care

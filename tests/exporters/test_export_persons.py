@@ -1,7 +1,8 @@
 """Who a pedestrian is (labels.parquet ``person``) in the exports: nuScenes' finer person categories, read back by
 the devkit (a child human.pedestrian.child with a pedestrian's attribute, a wheelchair user human.pedestrian.wheelchair
 without one, as its strollers; the devkit's detection evaluation counts the child a pedestrian and leaves the
-wheelchair out), COCO's extra fields, and a clear error for a value outside the vocabulary.
+wheelchair out), KITTI's Person_sitting for a wheelchair user, COCO's extra fields, and a clear error for a value
+outside the vocabulary.
 
 The record is the exporters' closed-form one (tests/exporters/synthetic_record.py) with the far pedestrian P
 (track 12) a child and car A (track 3) relabelled a pedestrian in a wheelchair."""
@@ -83,3 +84,16 @@ def test_a_person_outside_the_vocabulary_fails_naming_the_field(record, tmp_path
     with pytest.raises(ExportError, match=r"field person has values \['toddler'\]"):
         _export("nuscenes", bad, tmp_path / "n")
     assert not (tmp_path / "n").exists()
+
+
+def test_kitti_writes_a_wheelchair_user_as_a_person_sitting(record, tmp_path):
+    _export("kitti-tracking", record, tmp_path / "t")
+    rows = [line.split() for f in sorted((tmp_path / "t").rglob("label_02/*.txt"))
+            for line in f.read_text().splitlines()]
+    kinds = {int(r[1]): r[2] for r in rows if r[2] != "DontCare"}
+    assert kinds[WHEELCHAIR] == "Person_sitting" and sum(int(r[1]) == WHEELCHAIR for r in rows) == 3
+    assert kinds.get(CHILD, "Pedestrian") == "Pedestrian"  # a child stays a pedestrian
+    _export("kitti", record, tmp_path / "k")
+    objects = [line.split()[0] for f in sorted((tmp_path / "k").rglob("label_2/*.txt")) for line in
+               f.read_text().splitlines()]
+    assert objects.count("Person_sitting") == 3
