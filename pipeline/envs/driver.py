@@ -15,6 +15,13 @@ stack made (docs/closedloop.md): a difference in its driving is the perception's
   a keep-right bias (the rule of European motorways): a change to the left must also beat ``keep_right_bias``, a
   change to the right gains it. A tilde is the acceleration after the change. Followers' desired speeds are not
   observed: each is taken as the ego's desired speed.
+- **Traffic signals** (the observation's "signal" row: the next signal on the ego's way): a signal that shows red
+  is a standing vehicle of no length at its stop line for IDM, the way Treiber & Kesting model a red light
+  ("Traffic Flow Dynamics", 2013: a virtual standing obstacle; IDM's minimum gap then keeps the ego s0 short of the
+  line). At amber the ego stops the same way where it can without braking harder than ``amber_decel_mps2`` (its
+  speed^2 / (2 x the distance to the line)); otherwise it drives on, and keeps driving on through that signal when it
+  turns red: the amber dilemma of Gazis, Herman & Maradudin ("The problem of the amber signal light in traffic
+  flow", Operations Research 8(1), 1960), decided once, so a driver who went at amber does not brake in the junction.
 - **Lateral control**: the target lane's centre is followed by the PD law of :class:`pipeline.envs.MetaActions`
   (a_lat = k_lat x lateral error - d_lat x lateral speed); a new change waits ``cooldown_s`` after the last one and
   until the ego is within ``settled_m`` of its lane centre.
@@ -33,11 +40,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.envs.checks import check_number
-from pipeline.envs.features import EGO_FIELDS, NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+from pipeline.envs.features import (
+    EGO_FIELDS,
+    NEIGHBOUR_FIELDS,
+    NEIGHBOUR_SLOTS,
+    SIGNAL_AMBER,
+    SIGNAL_FIELDS,
+    SIGNAL_STOP,
+)
 
 _EGO = {name: k for k, name in enumerate(EGO_FIELDS)}
 _COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
 _SLOT = {name: k for k, name in enumerate(NEIGHBOUR_SLOTS)}
+_SIG = {name: k for k, name in enumerate(SIGNAL_FIELDS)}
 
 
 @dataclass(frozen=True)
@@ -178,6 +193,8 @@ class ReferenceDriver:
         settled_m: a new change waits until the ego is this close to its target lane's centre.
         observed_slots: the neighbour slots the observation can fill (all for ground truth; a front camera's
             perception fills only the leaders): no change to a lane whose follower slot is not observed.
+        amber_decel_mps2: at amber the ego stops where that needs no harder braking than this (see the module
+            docstring), else drives on through the signal.
     """
 
     idm: IdmParams = field(default_factory=IdmParams)
@@ -189,12 +206,14 @@ class ReferenceDriver:
     cooldown_s: float = 4.0
     settled_m: float = 0.3
     observed_slots: tuple[str, ...] = NEIGHBOUR_SLOTS
+    amber_decel_mps2: float = 4.0
     target_offset_m: float = 0.0
     since_change_s: float = math.inf
     last_offset_m: float = 0.0
+    passing_m: float = math.nan  # the distance to the signal the ego decided to drive on through (NaN: none)
 
     def __post_init__(self) -> None:
-        for name in ("ego_length_m", "dt_s", "k_lat", "d_lat"):
+        for name in ("ego_length_m", "dt_s", "k_lat", "d_lat", "amber_decel_mps2"):
             check_number("ReferenceDriver", name, getattr(self, name))
         for name in ("cooldown_s", "settled_m"):
             check_number("ReferenceDriver", name, getattr(self, name), allow_low=True)
@@ -202,7 +221,26 @@ class ReferenceDriver:
     def reset(self, obs: dict[str, np.ndarray]) -> None:
         self.target_offset_m = 0.0
         self.since_change_s = math.inf
+        self.passing_m = math.nan
         self.last_offset_m = float(obs["ego"][_EGO["lateral_offset_m"]])
+
+    def stop_line_m(self, obs: dict[str, np.ndarray], speed_mps: float) -> float | None:
+        """The distance to a stop line the ego must stop at (a red signal's, or an amber one's it can stop at;
+        see the module docstring), or None; it remembers deciding to drive on through an amber signal."""
+        row = obs.get("signal")
+        if row is None or row[_SIG["present"]] < 0.5:
+            self.passing_m = math.nan
+            return None
+        distance, state = float(row[_SIG["distance_m"]]), round(float(row[_SIG["state"]]))
+        if not distance <= self.passing_m + 1.0:  # not the signal it drives through (a farther one, or none decided)
+            self.passing_m = math.nan
+        if (state == SIGNAL_AMBER and math.isnan(self.passing_m)
+                and speed_mps * speed_mps > 2.0 * self.amber_decel_mps2 * max(distance, 1e-3)):
+            self.passing_m = distance  # too near to stop comfortably: drive on through
+        if not math.isnan(self.passing_m):
+            self.passing_m = distance
+            return None
+        return distance if state in (SIGNAL_AMBER, SIGNAL_STOP) else None
 
     def accelerations(self, obs: dict[str, np.ndarray], lane_width_m: float,
                       lane_drivable=lambda side: True) -> tuple[float, float]:
@@ -221,6 +259,9 @@ class ReferenceDriver:
         leader = neighbours.get("leader")
         gap = None if leader is None else leader.ds_m - 0.5 * (leader.length_m + self.ego_length_m)
         lon = idm_accel(speed, self.idm, gap, None if leader is None else leader.speed_mps)
+        stop = self.stop_line_m(obs, speed)
+        if stop is not None:  # the stop line as a standing vehicle of no length
+            lon = min(lon, idm_accel(speed, self.idm, max(stop, 1e-3), 0.0))
         settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m
         if settled and self.since_change_s >= self.cooldown_s and lane_width_m > 0:
             choices = [mobil(speed, self.ego_length_m, neighbours, side, self.idm, self.mobil, self.observed_slots)

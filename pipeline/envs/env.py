@@ -60,7 +60,7 @@ _owners = itertools.count()
 
 
 class RoadsynthEnv(gym.Env):
-    """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours") (pipeline.envs.features);
+    """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours", "signal") (pipeline.envs.features);
     action: Box(2,) float32 (longitudinal, lateral) acceleration, normalised or in m/s^2 (EnvOptions).
 
     Args:
@@ -396,6 +396,7 @@ class RoadsynthEnv(gym.Env):
             "ego": np.clip(ego_row, space["ego"].low, space["ego"].high).astype(np.float32),
             "neighbours": features.neighbour_rows(sumo, ego, self._speed, lane_yaw, self.options.neighbour_range_m,
                                                   context, space["neighbours"]),
+            "signal": features.signal_row(sumo.vehicle.getNextTLS(ego), self.options.neighbour_range_m),
         }
         if "nearby" in space.spaces:
             obs["nearby"] = features.nearby_rows(context, ego, (cx, cy), lane_yaw, self._speed,

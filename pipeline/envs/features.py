@@ -20,6 +20,11 @@ EGO_FIELDS = ("speed_mps", "accel_mps2", "lane_index", "lateral_offset_m", "head
 NEIGHBOUR_SLOTS = ("left_leader", "leader", "right_leader", "left_follower", "follower", "right_follower")
 NEIGHBOUR_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m")
 NEARBY_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m", "heading_rel_rad", "class_index")
+SIGNAL_FIELDS = ("present", "distance_m", "state")
+# A signal's state: what its light for the ego's lane says (SUMO's link state letters).
+SIGNAL_GO, SIGNAL_AMBER, SIGNAL_STOP = 0, 1, 2
+_SIGNAL_STATE = {**dict.fromkeys("GgOo", SIGNAL_GO), **dict.fromkeys("yYu", SIGNAL_AMBER),
+                 **dict.fromkeys("rRs", SIGNAL_STOP)}
 # class_index of a nearby vehicle: 1 + its position here (0 only in absent rows).
 CLASS_ORDER = tuple(c for c in ObjectClass if c not in (ObjectClass.PEDESTRIAN, ObjectClass.STROLLER))
 # traci.constants, spelled out: the ego's context subscription of the vehicles around it.
@@ -39,8 +44,9 @@ MAX_SIZE_M = 30.0
 def observation_space(max_speed_mps: float, accel_min_mps2: float, accel_max_mps2: float,
                       range_m: float, nearby_k: int) -> spaces.Dict:
     """The Dict space: "ego" (6,) float32 in EGO_FIELDS order, "neighbours" (6, 6) float32 (NEIGHBOUR_SLOTS x
-    NEIGHBOUR_FIELDS) and, if ``nearby_k`` > 0, "nearby" (nearby_k, 8) float32 (the nearest vehicles, nearest
-    first, x NEARBY_FIELDS); an absent row is all zeros (``present`` is the mask)."""
+    NEIGHBOUR_FIELDS), "signal" (3,) float32 (SIGNAL_FIELDS: the next traffic signal on the ego's way within
+    ``range_m``) and, if ``nearby_k`` > 0, "nearby" (nearby_k, 8) float32 (the nearest vehicles, nearest first, x
+    NEARBY_FIELDS); an absent row is all zeros (``present`` is the mask)."""
     ego_low = np.array([0.0, accel_min_mps2, 0.0, -MAX_LATERAL_M, -math.pi, 0.0], dtype=np.float32)
     ego_high = np.array([max_speed_mps, accel_max_mps2, MAX_LANES - 1, MAX_LATERAL_M, math.pi, MAX_ROUTE_M],
                         dtype=np.float32)
@@ -50,6 +56,8 @@ def observation_space(max_speed_mps: float, accel_min_mps2: float, accel_max_mps
     boxes = {
         "ego": spaces.Box(ego_low, ego_high, dtype=np.float32),
         "neighbours": spaces.Box(np.tile(row_low, (n, 1)), np.tile(row_high, (n, 1)), dtype=np.float32),
+        "signal": spaces.Box(np.zeros(3, np.float32), np.array([1.0, range_m, SIGNAL_STOP], np.float32),
+                             dtype=np.float32),
     }
     if nearby_k > 0:
         near_low = np.append(row_low, [-math.pi, 0.0]).astype(np.float32)
@@ -152,3 +160,20 @@ def nearby_rows(results: dict[str, dict[int, object]], ego: str, ego_xy: tuple[f
             values[order, 3] * np.cos(yaw[order] - lane_yaw) - ego_speed_mps, values[order, 4], values[order, 5],
             rel, [classes.get(ids[i], 0) for i in order]])
     return np.clip(rows, space.low, space.high).astype(np.float32)
+
+
+def signal_row(next_signals: list[tuple], range_m: float) -> np.ndarray:
+    """The "signal" row (SIGNAL_FIELDS) from SUMO's ``vehicle.getNextTLS`` of the ego (its route's coming signals,
+    nearest first: (tls id, link index, distance from the front bumper to the stop line, link state letter)): the
+    nearest within ``range_m``, its distance and its state for the ego's lane (SIGNAL_GO: green, also a minor green
+    or a signal switched off; SIGNAL_AMBER: yellow or red-yellow; SIGNAL_STOP: red, or a stop-then-go arrow); all
+    zeros when none lies within range."""
+    row = np.zeros(len(SIGNAL_FIELDS), np.float32)
+    for _tls, _link, distance, state in next_signals:
+        if 0.0 <= distance <= range_m:
+            if state not in _SIGNAL_STATE:
+                raise ValueError(f"traffic signal {_tls!r}: link state {state!r} is not one of SUMO's letters "
+                                 f"({''.join(sorted(_SIGNAL_STATE))})")
+            row[:] = 1.0, distance, _SIGNAL_STATE[state]
+            break
+    return row

@@ -11,7 +11,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import pipeline.envs  # noqa: F401  (registers the envs)
-from pipeline.envs.features import NEIGHBOUR_SLOTS
+from pipeline.envs.features import NEIGHBOUR_SLOTS, SIGNAL_AMBER, SIGNAL_GO, SIGNAL_STOP, signal_row
 from pipeline.traffic.simulation import SumoBusyError, active_sumo_owner, close_sumo, start_sumo
 
 pytestmark = pytest.mark.slow
@@ -73,9 +73,10 @@ def test_observations_are_finite_and_inside_the_declared_spaces():
         observations, rewards = rollout(env, seed=3, steps=30)
     finally:
         env.close()
-    assert set(env.observation_space.spaces) == {"ego", "neighbours", "nearby"}
+    assert set(env.observation_space.spaces) == {"ego", "neighbours", "signal", "nearby"}
     for obs in observations:
         assert obs in env.observation_space
+        assert (obs["signal"] == 0).all()  # the highway has no traffic signal
         assert obs["ego"].dtype == obs["neighbours"].dtype == np.float32
         assert np.isfinite(obs["ego"]).all() and np.isfinite(obs["neighbours"]).all()
         absent = obs["neighbours"][:, 0] == 0
@@ -224,3 +225,15 @@ def test_drifting_onto_the_urban_parking_lane_or_sidewalk_is_off_road():
         env.close()
     assert terminated and info["reason"] == "off_road"
     assert obs["ego"][2] >= 2  # never mapped onto a lane it may not use
+
+
+def test_the_signal_row_is_the_nearest_signal_in_range_with_its_state():
+    ahead = [("J1", 3, 42.5, "r"), ("J2", 0, 80.0, "G")]
+    np.testing.assert_array_equal(signal_row(ahead, 100.0), np.array([1.0, 42.5, SIGNAL_STOP], np.float32))
+    np.testing.assert_array_equal(signal_row(ahead, 40.0), np.zeros(3, np.float32))  # beyond the range: none
+    np.testing.assert_array_equal(signal_row([], 100.0), np.zeros(3, np.float32))
+    for letters, state in (("Gg", SIGNAL_GO), ("yu", SIGNAL_AMBER), ("rs", SIGNAL_STOP)):
+        assert {signal_row([("J", 0, 5.0, c)], 100.0)[2] for c in letters} == {state}
+    with pytest.raises(ValueError, match="traffic signal 'J': link state 'x'"):
+        signal_row([("J", 0, 5.0, "x")], 100.0)
+

@@ -1,4 +1,6 @@
-"""The reference driver (pipeline/envs/driver.py): IDM and MOBIL in closed form, and an episode in the real env."""
+"""The reference driver (pipeline/envs/driver.py): IDM, MOBIL and traffic signals in closed form, and episodes in the
+real env (the highway; an urban seed whose ego, before signals were observed, drove into junction A4 at red and
+collided there)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.envs.driver import IdmParams, MobilParams, Neighbour, ReferenceAgent, ReferenceDriver, idm_accel, mobil
-from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
+from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS, SIGNAL_AMBER, SIGNAL_GO, SIGNAL_STOP
 
 IDM = IdmParams()
 
@@ -116,6 +118,47 @@ def test_the_driver_follows_with_idm_and_steers_to_the_chosen_lane():
     assert stay.target_offset_m == 0.0
 
 
+def _signal(obs: dict[str, np.ndarray], distance: float | None, state: int = SIGNAL_STOP) -> dict[str, np.ndarray]:
+    row = np.zeros(3, np.float32) if distance is None else np.array([1.0, distance, state], np.float32)
+    return {**obs, "signal": row}
+
+
+def test_a_red_signal_is_a_standing_vehicle_at_its_stop_line():
+    driver = ReferenceDriver(dt_s=0.1)
+    obs = _obs(10.0)
+    driver.reset(obs)
+    free = driver.accelerations(obs, 3.5)[0]
+    assert free == pytest.approx(idm_accel(10.0, IDM))
+    lon = driver.accelerations(_signal(obs, 30.0), 3.5)[0]
+    assert lon == pytest.approx(idm_accel(10.0, IDM, 30.0, 0.0)) and lon < 0.0
+    assert driver.accelerations(_signal(obs, 30.0, SIGNAL_GO), 3.5)[0] == pytest.approx(free)
+    # A leader nearer than the stop line governs; a farther one does not.
+    near = _signal(_obs(10.0, leader=(12.0, -10.0, 4.5)), 30.0)
+    assert driver.accelerations(near, 3.5)[0] == pytest.approx(idm_accel(10.0, IDM, 12.0 - 4.5, 0.0))
+
+
+def test_at_amber_it_stops_where_it_comfortably_can_and_else_drives_on_through_the_red():
+    driver = ReferenceDriver(dt_s=0.1, amber_decel_mps2=4.0)
+    obs = _obs(12.0)
+    driver.reset(obs)
+    # 12 m/s needs 18 m at 4 m/s^2: from 40 m it stops ...
+    assert driver.accelerations(_signal(obs, 40.0, SIGNAL_AMBER), 3.5)[0] == pytest.approx(
+        idm_accel(12.0, IDM, 40.0, 0.0))
+    # ... from 10 m it drives on, and keeps on when the same signal turns red 5 m later ...
+    driver.reset(obs)
+    free = idm_accel(12.0, IDM)
+    assert driver.accelerations(_signal(obs, 10.0, SIGNAL_AMBER), 3.5)[0] == pytest.approx(free)
+    assert driver.accelerations(_signal(obs, 5.0, SIGNAL_STOP), 3.5)[0] == pytest.approx(free)
+    # ... but the next signal, farther on, is obeyed again.
+    assert driver.accelerations(_signal(obs, 60.0, SIGNAL_STOP), 3.5)[0] == pytest.approx(
+        idm_accel(12.0, IDM, 60.0, 0.0))
+    # A red seen first from near is obeyed: it never chose to go.
+    driver.reset(obs)
+    assert driver.accelerations(_signal(obs, 5.0, SIGNAL_STOP), 3.5)[0] < -3.0
+    # No "signal" row (an older observation) or none present: IDM alone.
+    assert driver.accelerations(_signal(obs, None), 3.5)[0] == pytest.approx(free)
+
+
 def test_parameters_are_checked_naming_the_field():
     with pytest.raises(ValueError, match="desired_speed_mps"):
         IdmParams(desired_speed_mps=0.0)
@@ -123,6 +166,8 @@ def test_parameters_are_checked_naming_the_field():
         MobilParams(politeness=float("nan"))
     with pytest.raises(ValueError, match="dt_s"):
         ReferenceDriver(dt_s=0.0)
+    with pytest.raises(ValueError, match="amber_decel_mps2"):
+        ReferenceDriver(amber_decel_mps2=-1.0)
 
 
 @pytest.mark.slow
@@ -142,6 +187,39 @@ def test_the_reference_agent_drives_the_highway_without_collision():
                 break
         assert truncated and not terminated, info["reason"]  # a collision or leaving the road terminates
         assert np.mean(speeds) > 15.0  # it drives, at highway speed
+    finally:
+        env.close()
+
+
+@pytest.mark.slow
+def test_the_reference_agent_waits_at_red_in_the_city():
+    """Urban seed 4: its ego comes to junction A4 while its signal is red (before signals were observed it drove in
+    at 1.4 m/s and collided with a car turning in, 6.7 s later). Every step the observation's signal row is SUMO's
+    next signal on the ego's way, and the ego never enters a junction on a red light."""
+    import libsumo
+
+    import pipeline.envs  # noqa: F401  (registers the envs)
+
+    env = gym.make("roadsynth/Urban-v0", time_limit_s=12.0)
+    try:
+        obs, _ = env.reset(seed=4)
+        agent = ReferenceAgent(env)
+        agent.reset(obs)
+        ego = env.unwrapped.ego_id
+        reds, waited, before, lane = 0, 0, obs["signal"], libsumo.vehicle.getLaneID(ego)
+        while True:
+            waited += round(float(obs["signal"][2])) == SIGNAL_STOP and obs["ego"][0] < 0.1
+            nxt = libsumo.vehicle.getNextTLS(ego)
+            assert obs["signal"][0] == 1.0 and obs["signal"][1] == pytest.approx(nxt[0][2], abs=1e-3)
+            obs, _, terminated, truncated, info = env.step(agent.act(obs))
+            now = libsumo.vehicle.getLaneID(ego)
+            if now.startswith(":") and not lane.startswith(":"):  # it entered a junction
+                reds += round(float(before[2])) == SIGNAL_STOP
+            before, lane = obs["signal"], now
+            if terminated or truncated:
+                break
+        assert truncated and not terminated, info["reason"]
+        assert reds == 0 and waited > 10  # it stood at the red for more than a second
     finally:
         env.close()
 
