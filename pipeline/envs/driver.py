@@ -22,6 +22,15 @@ stack made (docs/closedloop.md): a difference in its driving is the perception's
   speed^2 / (2 x the distance to the line)); otherwise it drives on, and keeps driving on through that signal when it
   turns red: the amber dilemma of Gazis, Herman & Maradudin ("The problem of the amber signal light in traffic
   flow", Operations Research 8(1), 1960), decided once, so a driver who went at amber does not brake in the junction.
+- **Route** (map knowledge, as SUMO's strategic lane changes use it: how far each lane lets the ego follow its
+  route before it must change): a MOBIL change may not take the ego to a lane that leaves its route sooner than its
+  lane does, unless both go on for ``route_lookahead_m``; and where its lane leaves the route within
+  ``must_change_m`` (or the time it takes to drive ``must_change_s``), it changes to a neighbour lane that goes on
+  farther as soon as MOBIL's safety criterion allows and its own braking behind its new leader stays within
+  b_safe, whatever the incentive; until then it brakes for its lane's end as for a standing vehicle there (where
+  it can see the gaps beside it: with a front camera alone it cannot, and drives on).
+- **Desired speed**: the lower of IDM's ``desired_speed_mps`` and the road's speed limit (map knowledge; inside a
+  junction the limit of the road before it).
 - **Lateral control**: the target lane's centre is followed by the PD law of :class:`pipeline.envs.MetaActions`
   (a_lat = k_lat x lateral error - d_lat x lateral speed); a new change waits ``cooldown_s`` after the last one and
   until the ego is within ``settled_m`` of its lane centre.
@@ -35,7 +44,7 @@ limit is 13.9 m/s).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -126,13 +135,14 @@ def _neighbours(obs: dict[str, np.ndarray]) -> dict[str, Neighbour]:
 
 @dataclass(frozen=True)
 class LaneChoice:
-    """A MOBIL evaluation of one adjacent lane: ``safe``, the ``incentive`` (m/s^2, bias included) and whether it
-    beats the threshold (``change``)."""
+    """A MOBIL evaluation of one adjacent lane: ``safe``, the ``incentive`` (m/s^2, bias included), whether it
+    beats the threshold (``change``) and the ego's own IDM acceleration behind its new leader (``ego_accel_mps2``)."""
 
     side: int  # +1 left, -1 right
     safe: bool
     incentive: float
     change: bool
+    ego_accel_mps2: float = 0.0
 
 
 def mobil(speed_mps: float, ego_length_m: float, neighbours: dict[str, Neighbour], side: int, idm: IdmParams,
@@ -175,7 +185,7 @@ def mobil(speed_mps: float, ego_length_m: float, neighbours: dict[str, Neighbour
                       None if leader is None else leader.speed_mps)
         others += after - before
     incentive = gain + params.politeness * others - side * params.keep_right_bias_mps2
-    return LaneChoice(side, safe, incentive, safe and incentive > params.threshold_mps2)
+    return LaneChoice(side, safe, incentive, safe and incentive > params.threshold_mps2, a_ego_new)
 
 
 @dataclass
@@ -195,6 +205,7 @@ class ReferenceDriver:
             perception fills only the leaders): no change to a lane whose follower slot is not observed.
         amber_decel_mps2: at amber the ego stops where that needs no harder braking than this (see the module
             docstring), else drives on through the signal.
+        route_lookahead_m, must_change_m, must_change_s: the route rule's distances (see the module docstring).
     """
 
     idm: IdmParams = field(default_factory=IdmParams)
@@ -207,13 +218,17 @@ class ReferenceDriver:
     settled_m: float = 0.3
     observed_slots: tuple[str, ...] = NEIGHBOUR_SLOTS
     amber_decel_mps2: float = 4.0
+    route_lookahead_m: float = 150.0
+    must_change_m: float = 50.0
+    must_change_s: float = 5.0
     target_offset_m: float = 0.0
     since_change_s: float = math.inf
     last_offset_m: float = 0.0
     passing_m: float = math.nan  # the distance to the signal the ego decided to drive on through (NaN: none)
 
     def __post_init__(self) -> None:
-        for name in ("ego_length_m", "dt_s", "k_lat", "d_lat", "amber_decel_mps2"):
+        for name in ("ego_length_m", "dt_s", "k_lat", "d_lat", "amber_decel_mps2", "route_lookahead_m", "must_change_m",
+                     "must_change_s"):
             check_number("ReferenceDriver", name, getattr(self, name))
         for name in ("cooldown_s", "settled_m"):
             check_number("ReferenceDriver", name, getattr(self, name), allow_low=True)
@@ -243,10 +258,13 @@ class ReferenceDriver:
         return distance if state in (SIGNAL_AMBER, SIGNAL_STOP) else None
 
     def accelerations(self, obs: dict[str, np.ndarray], lane_width_m: float,
-                      lane_drivable=lambda side: True) -> tuple[float, float]:
+                      lane_drivable=lambda side: True, lane_reach=lambda side: math.inf,
+                      speed_limit_mps: float = math.inf) -> tuple[float, float]:
         """(longitudinal, lateral) acceleration, m/s^2, for the observation ``obs``; ``lane_width_m`` of the ego's
         lane; ``lane_drivable(side)`` whether the lane on ``side`` (+1 left, -1 right) of the target lane exists and
-        admits the ego (map knowledge, not perception)."""
+        admits the ego, ``lane_reach(side)`` how far the ego's route goes on it before a change (0: the target lane
+        itself; :meth:`pipeline.envs.RoadsynthEnv.lane_reach_m`), ``speed_limit_mps`` the road's limit (IDM's
+        desired speed is the lower of it and ``idm.desired_speed_mps``); map knowledge, not perception."""
         ego = obs["ego"]
         speed, offset = float(ego[_EGO["speed_mps"]]), float(ego[_EGO["lateral_offset_m"]])
         heading = float(ego[_EGO["heading_rel_rad"]])
@@ -255,18 +273,34 @@ class ReferenceDriver:
             self.target_offset_m -= lane_width_m * math.copysign(1.0, self.last_offset_m)
         self.last_offset_m = offset
         self.since_change_s += self.dt_s
+        idm = self.idm if speed_limit_mps >= self.idm.desired_speed_mps else replace(
+            self.idm, desired_speed_mps=speed_limit_mps)
         neighbours = _neighbours(obs)
         leader = neighbours.get("leader")
         gap = None if leader is None else leader.ds_m - 0.5 * (leader.length_m + self.ego_length_m)
-        lon = idm_accel(speed, self.idm, gap, None if leader is None else leader.speed_mps)
+        lon = idm_accel(speed, idm, gap, None if leader is None else leader.speed_mps)
         stop = self.stop_line_m(obs, speed)
         if stop is not None:  # the stop line as a standing vehicle of no length
-            lon = min(lon, idm_accel(speed, self.idm, max(stop, 1e-3), 0.0))
+            lon = min(lon, idm_accel(speed, idm, max(stop, 1e-3), 0.0))
+        here = lane_reach(0)
+        must_change = here < max(self.must_change_m, self.must_change_s * speed)  # its lane leaves the route soon
+        if must_change and lane_width_m > 0 and any(
+                lane_drivable(side) and lane_reach(side) > here
+                and ("left_follower" if side == 1 else "right_follower") in self.observed_slots for side in (1, -1)):
+            # A lane that goes on lies beside it and a gap there can be seen: wait for one before the lane's end.
+            lon = min(lon, idm_accel(speed, idm, max(here, 1e-3), 0.0))
         settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m
         if settled and self.since_change_s >= self.cooldown_s and lane_width_m > 0:
-            choices = [mobil(speed, self.ego_length_m, neighbours, side, self.idm, self.mobil, self.observed_slots)
-                       for side in (1, -1) if lane_drivable(side)]
-            best = max((c for c in choices if c.change), key=lambda c: c.incentive, default=None)
+            reach = {side: lane_reach(side) for side in (1, -1) if lane_drivable(side)}
+            choices = [mobil(speed, self.ego_length_m, neighbours, side, idm, self.mobil, self.observed_slots)
+                       for side in reach]
+            if must_change:
+                must = [c for c in choices if c.safe and c.ego_accel_mps2 >= -self.mobil.safe_decel_mps2
+                        and reach[c.side] > here]
+                best = max(must, key=lambda c: (reach[c.side], c.incentive), default=None)
+            else:
+                keeps = [c for c in choices if c.change and reach[c.side] >= min(here, self.route_lookahead_m)]
+                best = max(keeps, key=lambda c: c.incentive, default=None)
             if best is not None:
                 self.target_offset_m += best.side * lane_width_m
                 self.since_change_s = 0.0
@@ -276,13 +310,15 @@ class ReferenceDriver:
 
 class ReferenceAgent:
     """:class:`ReferenceDriver` as an agent of a :class:`pipeline.envs.RoadsynthEnv` (or a wrapper of one):
-    ``act(obs)`` gives the env's action. Lane widths and which lanes exist come from the env (map knowledge), and
+    ``act(obs)`` gives the env's action. Lane widths, which lanes exist and how far each goes along the ego's route
+    come from the env (map knowledge), and
     which neighbour slots its observation can fill from the env's ``observed_slots`` where a wrapper declares it
     (:class:`pipeline.envs.perception.PerceivedFeatures`: the leaders only), all six otherwise."""
 
     def __init__(self, env, driver: ReferenceDriver | None = None) -> None:
         self.env = env
         self.driver = driver if driver is not None else ReferenceDriver()
+        self.speed_limit_mps = math.inf  # the last road's limit (held through a junction)
 
     def reset(self, obs: dict[str, np.ndarray]) -> None:
         inner = self.env.unwrapped
@@ -293,6 +329,7 @@ class ReferenceAgent:
         except AttributeError:
             observed = NEIGHBOUR_SLOTS
         self.driver.observed_slots = tuple(observed)
+        self.speed_limit_mps = math.inf
         self.driver.reset(obs)
 
     def act(self, obs: dict[str, np.ndarray]) -> np.ndarray:
@@ -304,5 +341,12 @@ class ReferenceAgent:
             target = lane + (round(self.driver.target_offset_m / width) if width > 0 else 0)
             return inner.lane_drivable(target + side)
 
-        lon, lat = self.driver.accelerations(obs, width, drivable)
+        def reach(side: int) -> float:  # how far the route goes on the lane beside the target lane (0: on it)
+            target = lane + (round(self.driver.target_offset_m / width) if width > 0 else 0)
+            return inner.lane_reach_m(target + side)
+
+        limit = inner.speed_limit_mps()
+        if limit is not None:
+            self.speed_limit_mps = limit
+        lon, lat = self.driver.accelerations(obs, width, drivable, reach, self.speed_limit_mps)
         return inner.action_from_mps2(lon, lat)

@@ -371,6 +371,26 @@ class RoadsynthEnv(gym.Env):
                   or abs(lat) > 2 * half or not self._drivable(lane))
         return bool(beyond), half
 
+    def lane_reach_m(self, index: int) -> float:
+        """How far the ego's route lets it drive on lane ``index`` of its current edge, from the ego's position along
+        the edge, before it must change lanes (SUMO's best lanes for the ego: map and route knowledge); 0 for a lane
+        the edge does not have, and inf inside a junction (no lanes to choose there)."""
+        require_sumo(self._owner)
+        sumo, ego = self._sumo, self.ego_id
+        road = sumo.vehicle.getRoadID(ego)
+        if road.startswith(":"):
+            return math.inf
+        lane = f"{road}_{index}"
+        reach = next((float(row[1]) for row in sumo.vehicle.getBestLanes(ego) if row[0] == lane), 0.0)
+        return max(reach - sumo.vehicle.getLanePosition(ego), 0.0)
+
+    def speed_limit_mps(self) -> float | None:
+        """The speed limit of the ego's lane (map knowledge); None inside a junction, whose internal lanes carry
+        SUMO's turning speeds rather than a limit."""
+        require_sumo(self._owner)
+        lane = self._sumo.vehicle.getLaneID(self.ego_id)
+        return None if lane.startswith(":") else float(self._sumo.lane.getMaxSpeed(lane))
+
     def lane_drivable(self, index: int) -> bool:
         """Whether lane ``index`` of the ego's current edge exists and admits the ego's vehicle class."""
         require_sumo(self._owner)

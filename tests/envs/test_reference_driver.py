@@ -159,6 +159,46 @@ def test_at_amber_it_stops_where_it_comfortably_can_and_else_drives_on_through_t
     assert driver.accelerations(_signal(obs, None), 3.5)[0] == pytest.approx(free)
 
 
+def test_the_road_s_speed_limit_caps_the_desired_speed():
+    driver = ReferenceDriver(dt_s=0.1)
+    obs = _obs(13.0)
+    driver.reset(obs)
+    city = IdmParams(desired_speed_mps=13.89)
+    assert driver.accelerations(obs, 3.5, speed_limit_mps=13.89)[0] == pytest.approx(idm_accel(13.0, city))
+    assert driver.accelerations(obs, 3.5, speed_limit_mps=50.0)[0] == pytest.approx(idm_accel(13.0, IDM))
+
+
+def test_it_keeps_to_lanes_that_follow_its_route_and_leaves_one_that_does_not():
+    # A slow leader ahead, the left lane free: MOBIL would go left ...
+    obs = _obs(20.0, leader=(30.0, -10.0, 4.5))
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    driver.reset(obs)
+    driver.accelerations(obs, 3.5, lambda side: side == +1, lambda side: 500.0)
+    assert driver.target_offset_m == pytest.approx(3.5)
+    # ... but not when the left lane leaves the route within 60 m and its own goes on for 500 m.
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    driver.reset(obs)
+    driver.accelerations(obs, 3.5, lambda side: side == +1, lambda side: 60.0 if side == 1 else 500.0)
+    assert driver.target_offset_m == 0.0
+    # Its own lane leaves the route in 40 m (under 5 s at 20 m/s): it changes right, where nothing is gained ...
+    free = _obs(20.0)
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    driver.reset(free)
+    lon, _ = driver.accelerations(free, 3.5, lambda side: side == -1, lambda side: 40.0 if side == 0 else 500.0)
+    assert driver.target_offset_m == pytest.approx(-3.5)
+    # ... but not in front of a close follower there; it then brakes for its lane's end, 40 m ahead.
+    blocked = _obs(20.0, right_follower=(-6.0, 5.0, 4.5))
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0)
+    driver.reset(blocked)
+    lon, _ = driver.accelerations(blocked, 3.5, lambda side: side == -1, lambda side: 40.0 if side == 0 else 500.0)
+    assert driver.target_offset_m == 0.0 and lon == pytest.approx(idm_accel(20.0, IDM, 40.0, 0.0))
+    # With a front camera alone (no follower slots) it cannot see a gap: no change, and it drives on.
+    driver = ReferenceDriver(dt_s=0.1, cooldown_s=0.0, observed_slots=("left_leader", "leader", "right_leader"))
+    driver.reset(free)
+    lon, _ = driver.accelerations(free, 3.5, lambda side: side == -1, lambda side: 40.0 if side == 0 else 500.0)
+    assert driver.target_offset_m == 0.0 and lon == pytest.approx(idm_accel(20.0, IDM))
+
+
 def test_parameters_are_checked_naming_the_field():
     with pytest.raises(ValueError, match="desired_speed_mps"):
         IdmParams(desired_speed_mps=0.0)
@@ -168,6 +208,8 @@ def test_parameters_are_checked_naming_the_field():
         ReferenceDriver(dt_s=0.0)
     with pytest.raises(ValueError, match="amber_decel_mps2"):
         ReferenceDriver(amber_decel_mps2=-1.0)
+    with pytest.raises(ValueError, match="must_change_m"):
+        ReferenceDriver(must_change_m=float("nan"))
 
 
 @pytest.mark.slow
@@ -222,6 +264,30 @@ def test_the_reference_agent_waits_at_red_in_the_city():
         assert reds == 0 and waited > 10  # it stood at the red for more than a second
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_the_reference_agent_keeps_to_its_route_and_the_city_s_limit():
+    """Urban seed 6: its ego, on the lane that goes on along its route, was taken by MOBIL into a lane that turns off
+    it (the episode ended "left_route" 3.9 s in) before lanes were weighed by the route; and it drove at up to 33 m/s
+    (the motorway's desired speed) before the limit capped it."""
+    import pipeline.envs  # noqa: F401  (registers the envs)
+
+    env = gym.make("roadsynth/Urban-v0", time_limit_s=30.0)
+    try:
+        obs, _ = env.reset(seed=6)
+        agent = ReferenceAgent(env)
+        agent.reset(obs)
+        speeds = []
+        while True:
+            obs, _, terminated, truncated, info = env.step(agent.act(obs))
+            speeds.append(float(obs["ego"][0]))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert truncated and not terminated, info["reason"]
+    assert max(speeds) <= 13.89 + 0.05 and max(speeds) > 5.0  # it drives, within the city's 50 km/h
 
 
 def test_a_seed_sumo_cannot_take_is_refused_at_reset():
