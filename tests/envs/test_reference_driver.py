@@ -212,13 +212,13 @@ def test_parameters_are_checked_naming_the_field():
         ReferenceDriver(must_change_m=float("nan"))
 
 
-@pytest.mark.slow
-def test_the_reference_agent_drives_the_highway_without_collision():
+def _drive(env_id: str, seed: int, time_limit_s: float) -> tuple[list[float], bool, bool, dict]:
+    """One episode of the reference agent: the ego's speed per step, terminated, truncated and the last info."""
     import pipeline.envs  # noqa: F401  (registers the envs)
 
-    env = gym.make("roadsynth/Highway-v0", time_limit_s=20.0)
+    env = gym.make(env_id, time_limit_s=time_limit_s)
     try:
-        obs, _ = env.reset(seed=3)
+        obs, _ = env.reset(seed=seed)
         agent = ReferenceAgent(env)
         agent.reset(obs)
         speeds = []
@@ -226,11 +226,16 @@ def test_the_reference_agent_drives_the_highway_without_collision():
             obs, _, terminated, truncated, info = env.step(agent.act(obs))
             speeds.append(float(obs["ego"][0]))
             if terminated or truncated:
-                break
-        assert truncated and not terminated, info["reason"]  # a collision or leaving the road terminates
-        assert np.mean(speeds) > 15.0  # it drives, at highway speed
+                return speeds, terminated, truncated, info
     finally:
         env.close()
+
+
+@pytest.mark.slow
+def test_the_reference_agent_drives_the_highway_without_collision():
+    speeds, terminated, truncated, info = _drive("roadsynth/Highway-v0", 3, 20.0)
+    assert truncated and not terminated, info["reason"]  # a collision or leaving the road terminates
+    assert np.mean(speeds) > 15.0  # it drives, at highway speed
 
 
 @pytest.mark.slow
@@ -269,23 +274,9 @@ def test_the_reference_agent_waits_at_red_in_the_city():
 @pytest.mark.slow
 def test_the_reference_agent_keeps_to_its_route_and_the_city_s_limit():
     """Urban seed 6: its ego, on the lane that goes on along its route, was taken by MOBIL into a lane that turns off
-    it (the episode ended "left_route" 3.9 s in) before lanes were weighed by the route; and it drove at up to 33 m/s
-    (the motorway's desired speed) before the limit capped it."""
-    import pipeline.envs  # noqa: F401  (registers the envs)
-
-    env = gym.make("roadsynth/Urban-v0", time_limit_s=30.0)
-    try:
-        obs, _ = env.reset(seed=6)
-        agent = ReferenceAgent(env)
-        agent.reset(obs)
-        speeds = []
-        while True:
-            obs, _, terminated, truncated, info = env.step(agent.act(obs))
-            speeds.append(float(obs["ego"][0]))
-            if terminated or truncated:
-                break
-    finally:
-        env.close()
+    it (the episode ended "left_route" 3.9 s in) before lanes were weighed by the route; and the driver aimed at the
+    motorway's 120 km/h in the city before the road's limit capped its desired speed."""
+    speeds, terminated, truncated, info = _drive("roadsynth/Urban-v0", 6, 30.0)
     assert truncated and not terminated, info["reason"]
     assert max(speeds) <= 13.89 + 0.05 and max(speeds) > 5.0  # it drives, within the city's 50 km/h
 
