@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 
 KITTI_TYPE = {"car": "Car", "van": "Van", "truck": "Truck", "bus": "Misc", "motorcycle": "Misc",
               "bicycle": "Cyclist", "pedestrian": "Pedestrian", "stroller": "Misc"}
+"""Our class -> KITTI type. KITTI has no bus, motorcycle or stroller class; 'Misc' holds other objects there."""
 
 
 def kitti_type(cls: str, person: str) -> str:
@@ -47,7 +48,7 @@ def kitti_type(cls: str, person: str) -> str:
     ``Person_sitting``, as KITTI's annotators label a seated person (its evaluation neither counts nor punishes it
     for Pedestrian: a neighbouring class)."""
     return "Person_sitting" if cls == "pedestrian" and person == Person.WHEELCHAIR_USER.value else KITTI_TYPE[cls]
-"""Our class -> KITTI type. KITTI has no bus, motorcycle or stroller class; 'Misc' holds other objects there."""
+
 
 OCCLUSION_LEVEL_EDGES = (0.1, 0.5)
 """Occlusion fraction < 0.1: level 0 (fully visible); < 0.5: 1 (partly); otherwise 2 (largely)."""

@@ -37,8 +37,8 @@ stack made (docs/closedloop.md): a difference in its driving is the perception's
 
 Parameters default to Treiber & Kesting's motorway values ("Traffic Flow Dynamics", Springer 2013, table 11.2:
 v0 120 km/h, T 1.5 s, s0 2 m, a 1.0 m/s^2, b 1.5 m/s^2, delta 4; section 14.3: p 0.2-0.5, a_th 0.1 m/s^2,
-b_safe 4 m/s^2, a_bias 0.2-0.3 m/s^2), except the desired speed, which a scenario sets (the urban grid's speed
-limit is 13.9 m/s).
+b_safe 4 m/s^2, a_bias 0.2-0.3 m/s^2); the desired speed is capped by the road's limit (the urban grid's is 13.9
+m/s).
 """
 
 from __future__ import annotations
