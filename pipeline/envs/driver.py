@@ -284,22 +284,23 @@ class ReferenceDriver:
             lon = min(lon, idm_accel(speed, idm, max(stop, 1e-3), 0.0))
         here = lane_reach(0)
         must_change = here < max(self.must_change_m, self.must_change_s * speed)  # its lane leaves the route soon
-        if must_change and lane_width_m > 0 and any(
-                lane_drivable(side) and lane_reach(side) > here
-                and ("left_follower" if side == 1 else "right_follower") in self.observed_slots for side in (1, -1)):
+        settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m
+        ready = settled and self.since_change_s >= self.cooldown_s
+        beside = ({side: lane_reach(side) for side in (1, -1) if lane_drivable(side)}
+                  if lane_width_m > 0 and (must_change or ready) else {})  # the lanes beside: how far each goes on
+        if must_change and any(reach > here and ("left_follower" if side == 1 else "right_follower")
+                               in self.observed_slots for side, reach in beside.items()):
             # A lane that goes on lies beside it and a gap there can be seen: wait for one before the lane's end.
             lon = min(lon, idm_accel(speed, idm, max(here, 1e-3), 0.0))
-        settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m
-        if settled and self.since_change_s >= self.cooldown_s and lane_width_m > 0:
-            reach = {side: lane_reach(side) for side in (1, -1) if lane_drivable(side)}
+        if ready and lane_width_m > 0:
             choices = [mobil(speed, self.ego_length_m, neighbours, side, idm, self.mobil, self.observed_slots)
-                       for side in reach]
+                       for side in beside]
             if must_change:
                 must = [c for c in choices if c.safe and c.ego_accel_mps2 >= -self.mobil.safe_decel_mps2
-                        and reach[c.side] > here]
-                best = max(must, key=lambda c: (reach[c.side], c.incentive), default=None)
+                        and beside[c.side] > here]
+                best = max(must, key=lambda c: (beside[c.side], c.incentive), default=None)
             else:
-                keeps = [c for c in choices if c.change and reach[c.side] >= min(here, self.route_lookahead_m)]
+                keeps = [c for c in choices if c.change and beside[c.side] >= min(here, self.route_lookahead_m)]
                 best = max(keeps, key=lambda c: c.incentive, default=None)
             if best is not None:
                 self.target_offset_m += best.side * lane_width_m
@@ -337,13 +338,14 @@ class ReferenceAgent:
         width = inner.lane_width_m()
         lane = round(float(obs["ego"][_EGO["lane_index"]]))
 
-        def drivable(side: int) -> bool:  # beside the target lane, as the driver holds it when it decides
-            target = lane + (round(self.driver.target_offset_m / width) if width > 0 else 0)
-            return inner.lane_drivable(target + side)
+        def target() -> int:  # the target lane, as the driver holds it when it decides (read then, not now)
+            return lane + (round(self.driver.target_offset_m / width) if width > 0 else 0)
+
+        def drivable(side: int) -> bool:  # whether the lane beside the target lane exists and admits the ego
+            return inner.lane_drivable(target() + side)
 
         def reach(side: int) -> float:  # how far the route goes on the lane beside the target lane (0: on it)
-            target = lane + (round(self.driver.target_offset_m / width) if width > 0 else 0)
-            return inner.lane_reach_m(target + side)
+            return inner.lane_reach_m(target() + side)
 
         limit = inner.speed_limit_mps()
         if limit is not None:
