@@ -23,7 +23,7 @@ Conventions:
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -477,6 +477,19 @@ class ActorGeometry:
     vertex_on_hull: np.ndarray
 
 
+def code_groups(codes: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+    """(code, the positions (int64, ascending) that hold it) for each code >= 0 among ``codes``, codes ascending: the
+    groups ``np.flatnonzero(codes == code)`` gives, from one stable sort instead of one pass over every entry per
+    code (a frame's actors meet a few hundred models)."""
+    codes = np.asarray(codes, np.int64)
+    order = np.argsort(codes, kind="stable")
+    ordered = codes[order]
+    start = int(np.searchsorted(ordered, 0))
+    ends = np.flatnonzero(np.diff(ordered[start:])) + 1
+    for sel in np.split(order[start:], ends) if len(order) > start else ():
+        yield int(codes[sel[0]]), sel
+
+
 def _placed(vertices: np.ndarray, actors: Actors, idx: np.ndarray) -> np.ndarray:
     """(len(idx), V, 3) float64 the unit-frame ``vertices`` (V, 3) placed in each actor ``idx``'s box: vertex v of
     actor n at A_n @ v + t_n (:func:`unit_to_world`), as one stacked matmul (much faster than the same einsum)."""
@@ -497,10 +510,8 @@ def place_actors(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         codes = np.where(where, codes, -1)
     parts: list[tuple[np.ndarray, ...]] = []
     vertex_offset = 0
-    for code, mesh in enumerate(meshes.models):
-        idx = np.flatnonzero(codes == code)
-        if not len(idx):
-            continue
+    for code, idx in code_groups(codes):
+        mesh = meshes.models[code]
         verts = _placed(mesh.vertices, actors, idx)
         nv, nt = len(mesh.vertices), len(mesh.triangles)
         offsets = vertex_offset + nv * np.arange(len(idx), dtype=np.int64)
@@ -544,11 +555,10 @@ def place_riders(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np
         codes = np.where(np.asarray(where, bool), codes, -1)
     vertices, triangles, owner = [np.zeros((0, 3))], [np.zeros((0, 3), np.int64)], [np.zeros(0, np.int32)]
     count = 0
-    for code in np.unique(codes[codes >= 0]).tolist():
+    for code, idx in code_groups(codes):
         part = meshes.cycle(code) if cycles else meshes.rider(code)
         if part is None:
             continue
-        idx = np.flatnonzero(codes == code)
         verts, tris = part
         vertices.append(_placed(verts, actors, idx).reshape(-1, 3))
         triangles.append((tris[None] + (count + len(verts) * np.arange(len(idx)))[:, None, None]).reshape(-1, 3))
@@ -588,11 +598,8 @@ def place_hulls(actors: Actors, meshes: ActorMeshes = DEFAULT_MESHES, where: np.
     if where is not None:
         codes = np.where(np.asarray(where, bool), codes, -1)
     vertices, owner = [np.zeros((0, 3))], [np.zeros(0, np.int32)]
-    for code, mesh in enumerate(meshes.models):
-        idx = np.flatnonzero(codes == code)
-        if not len(idx):
-            continue
-        hull = np.ascontiguousarray(mesh.vertices[meshes.hull_mask(code)])
+    for code, idx in code_groups(codes):
+        hull = np.ascontiguousarray(meshes.models[code].vertices[meshes.hull_mask(code)])
         vertices.append(_placed(hull, actors, idx).reshape(-1, 3))  # row by row place_actors' numbers
         owner.append(np.repeat(idx, len(hull)).astype(np.int32))
     return np.concatenate(vertices), np.concatenate(owner)

@@ -60,6 +60,7 @@ from pipeline.world.actors import (
     ActorGeometry,
     ActorMeshes,
     Actors,
+    code_groups,
     place_actors,
     place_hulls,
     unit_to_world,
@@ -565,12 +566,7 @@ class FrameScene:
 
     def _pairs_by_model(self, pair_actor: np.ndarray):
         """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""
-        codes = self._model[pair_actor]
-        # One stable sort instead of a comparison of every entry per model (an urban frame's casts meet ~100 models).
-        order = np.argsort(codes, kind="stable")
-        ends = np.flatnonzero(np.diff(codes[order])) + 1
-        for sel in np.split(order, ends) if len(order) else ():
-            yield int(codes[sel[0]]), sel
+        return code_groups(self._model[pair_actor])
 
     def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray, near: bool = False
                ) -> tuple[np.ndarray, ...]:

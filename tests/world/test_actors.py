@@ -14,6 +14,7 @@ from pipeline.world.actors import (
     Model,
     actor_variants,
     canonical_mesh,
+    code_groups,
     family_extent,
     family_mesh,
     normalise_to_unit_box,
@@ -349,3 +350,23 @@ def test_mesh_overrides_must_fill_the_unit_box():
 
 def test_srgb8_to_linear():
     np.testing.assert_allclose(srgb8_to_linear([[0, 255, 188]]), [[0.0, 1.0, 0.5029]], atol=1e-3)
+
+
+@pytest.mark.parametrize("codes", [[], [-1, -1], [3], [2, 0, 2, -1, 5, 0, 0, 7, 2], list(range(9, -3, -1))])
+def test_code_groups_are_the_per_code_comparisons(codes):
+    """One stable sort gives, code by code ascending, the positions a comparison per code gives (negatives left out),
+    as int64 like ``np.flatnonzero``: the order in which the placed actors' vertices are stacked."""
+    codes = np.array(codes, np.int32)
+    got = list(code_groups(codes))
+    want = [(c, np.flatnonzero(codes == c)) for c in sorted(set(codes.tolist())) if c >= 0]
+    assert [c for c, _ in got] == [c for c, _ in want]
+    for (_, sel), (_, ref) in zip(got, want, strict=True):
+        assert sel.dtype == ref.dtype and np.array_equal(sel, ref)
+
+
+def test_code_groups_on_many_random_codes():
+    codes = np.random.default_rng(4).integers(-1, 600, 5000)
+    got = dict(code_groups(codes))
+    assert sorted(got) == sorted(set(codes[codes >= 0].tolist()))
+    for c, sel in got.items():
+        assert np.array_equal(sel, np.flatnonzero(codes == c))
