@@ -134,6 +134,7 @@ class RoadsynthEnv(gym.Env):
         self._classes: dict[int, dict[str, int]] = {}  # run seed -> vehicle id -> features.CLASS_ORDER index + 1
         self._sumo = None
         self.ego_id = ""
+        self._pose: tuple[float, float, float] | None = None
         # SUMO searches lanes within this radius of the moved ego (default 100 m): the ego moves at most
         # max_speed x dt a step, so a few metres beyond that is enough, and the search is the step's main cost.
         self._match_m = o.max_speed_mps * step + 10.0
@@ -297,6 +298,21 @@ class RoadsynthEnv(gym.Env):
         require_sumo(self._owner)
         return self._sumo.vehicle.getLength(self.ego_id)
 
+    def ego_height_m(self) -> float:
+        """The ego's height as its sensors' frame has it: the ego frame's origin (its box centre) lies half of it above
+        the road."""
+        if self._sumo is None:
+            raise RuntimeError(f"{self._owner}: ego_height_m() before reset()")
+        _, _, demand = self._demands[self._run_seed]
+        return float(demand.actor_table().at[self.ego_id, "height_m"])
+
+    def ego_pose(self) -> tuple[float, float, float]:
+        """The ego's box centre (x, y) and yaw (rad, CCW from +x) in the world frame, at the current observation
+        (the last one's after the ego has left): what a driving stack's localisation gives it."""
+        if self._pose is None:
+            raise RuntimeError(f"{self._owner}: ego_pose() before reset()")
+        return self._pose
+
     def lane_width_m(self) -> float:
         """Width of the ego's lane."""
         require_sumo(self._owner)
@@ -407,6 +423,7 @@ class RoadsynthEnv(gym.Env):
         sumo, ego = self._sumo, self.ego_id
         lane_yaw = self._lane_yaw()
         cx, cy, yaw = features.centre_xy(sumo, ego)
+        self._pose = (cx, cy, yaw)
         heading_rel = (yaw - lane_yaw + math.pi) % (2 * math.pi) - math.pi
         ego_row = np.array([self._speed, self._accel, sumo.vehicle.getLaneIndex(ego),
                             sumo.vehicle.getLateralLanePosition(ego), heading_rel, self._route_left or 0.0])

@@ -33,7 +33,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pipeline.envs.tracker import Detections, Tracker, TrackerParams, track_neighbour_rows
+from pipeline.envs.tracker import (
+    Detections,
+    EgoPose,
+    Tracker,
+    TrackerParams,
+    lane_frame_tracks,
+    track_neighbour_rows,
+)
 
 ROAD_USER_CATEGORIES = (2, 3, 4, 6, 8)  # COCO: bicycle, car, motorcycle, bus, truck
 # Typical (length, width) by COCO category, for tracks whose size the camera does not measure.
@@ -41,6 +48,8 @@ TYPICAL_SIZE_M = {2: (1.8, 0.6), 3: (4.5, 1.8), 4: (2.1, 0.8), 6: (12.0, 2.55), 
 # Typical height (m) by COCO category, riders included, for the range gate (a box's height -> its depth).
 TYPICAL_HEIGHT_M = {2: 1.7, 3: 1.5, 4: 1.4, 6: 3.0, 8: 3.0}
 RANGE_GATE = (0.4, 2.5)  # the LiDAR points that range a box lie at this share of the depth its height implies
+# LiDAR returns lower than this above the road are the road's (ground removal): they range no box.
+GROUND_CLEARANCE_M = 0.3
 
 
 @dataclass(frozen=True)
@@ -81,16 +90,21 @@ class Perception:
         categories: the COCO category ids kept (others are dropped, counted in :attr:`dropped`).
         range_gate: (near, far) shares of the depth a box's height implies between which its LiDAR points count, or
             None to count every point in the box (see the module docstring).
+        ground_z_m: the road's height in the ego frame (minus half the ego's height: the frame's origin is its box
+            centre), a calibration constant of the rig; points less than ``ground_clearance_m`` above it are the
+            road's and range no box. None: no ground removal.
     """
 
     def __init__(self, detector, camera, lidar_mount, categories=ROAD_USER_CATEGORIES,
-                 range_gate: tuple[float, float] | None = RANGE_GATE) -> None:
+                 range_gate: tuple[float, float] | None = RANGE_GATE, ground_z_m: float | None = None,
+                 ground_clearance_m: float = GROUND_CLEARANCE_M) -> None:
         from pipeline.core.geometry import Transform
 
         if range_gate is not None and not 0.0 <= range_gate[0] < range_gate[1]:
             raise ValueError(f"range_gate: expected (near, far) with 0 <= near < far, got {range_gate!r}")
         self.detector, self.camera = detector, camera
         self.lidar_mount, self.range_gate = lidar_mount, range_gate
+        self.ground_z_m, self.ground_clearance_m = ground_z_m, float(ground_clearance_m)
         self.ego_to_camera = camera.camera_to_world(Transform.identity()).inverse()
         self.categories = np.array(sorted(categories), np.int64)
         self.dropped = 0
@@ -107,6 +121,8 @@ class Perception:
         order = np.argsort(-scores[keep], kind="stable")
         boxes, scores, cats = boxes[keep][order], scores[keep][order], cats[keep][order]
         points_ego = self.lidar_mount.apply(np.asarray(lidar_xyz, np.float64)[np.asarray(lidar_mask) > 0])
+        if self.ground_z_m is not None:
+            points_ego = points_ego[points_ego[:, 2] >= self.ground_z_m + self.ground_clearance_m]
         points_cam = self.ego_to_camera.apply(points_ego)
         uv, in_front = self.camera.project(points_cam)
         position = np.full((len(boxes), 2), np.nan)
@@ -142,14 +158,6 @@ def centre_from_surface(position_m: np.ndarray, length_m: np.ndarray) -> np.ndar
     return position_m + (0.5 * np.asarray(length_m, np.float64) / norm)[:, None] * position_m
 
 
-def lane_frame(position_m: np.ndarray, heading_rel_rad: float) -> np.ndarray:
-    """(K, 2) ego-frame (x forward, y left) offsets -> (K, 2) (ds along the lane, dd to its left), for an ego whose
-    heading is ``heading_rel_rad`` from the lane's (CCW)."""
-    c, s = np.cos(heading_rel_rad), np.sin(heading_rel_rad)
-    x, y = position_m[:, 0], position_m[:, 1]
-    return np.column_stack([c * x - s * y, s * x + c * y])
-
-
 class PerceivedFeatures(gym.Wrapper):
     """Neighbour features from perception instead of ground truth (see the module docstring).
 
@@ -159,6 +167,9 @@ class PerceivedFeatures(gym.Wrapper):
         tracker: the tracker's parameters (``dt_s`` is set to the env's step).
         max_detections: K, the rows of the ``detections`` observation.
         range_gate: as :class:`Perception`'s (None: every LiDAR point in a box ranges it).
+        ground_clearance_m: LiDAR returns lower than this above the road are the road's and range no box (ground
+            removal, as a perception stack segments the ground before it ranges or clusters; without it a weak
+            detection on a road marking is ranged on the road and tracked); None or 0: no ground removal.
 
     ``observed_slots``: the neighbour slots this perception can fill at all. One front camera sees the leaders of
     the three lanes, never the followers: their slots stay empty whatever is behind, and an agent must not read
@@ -169,7 +180,8 @@ class PerceivedFeatures(gym.Wrapper):
     observed_slots = ("left_leader", "leader", "right_leader")
 
     def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
-                 max_detections: int = 32, range_gate: tuple[float, float] | None = RANGE_GATE) -> None:
+                 max_detections: int = 32, range_gate: tuple[float, float] | None = RANGE_GATE,
+                 ground_clearance_m: float | None = GROUND_CLEARANCE_M) -> None:
         super().__init__(env)
         inner = env.unwrapped
         live = getattr(inner, "sensors", None)
@@ -177,7 +189,9 @@ class PerceivedFeatures(gym.Wrapper):
             raise ValueError('PerceivedFeatures needs an env made with sensors=["camera", "lidar"]')
         if not isinstance(max_detections, int) or max_detections < 1:
             raise ValueError(f"max_detections: expected an integer >= 1, got {max_detections!r}")
-        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount, range_gate=range_gate)
+        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount, range_gate=range_gate,
+                                     ground_clearance_m=ground_clearance_m or 0.0)
+        self.ground_removal = bool(ground_clearance_m)
         params = tracker if tracker is not None else TrackerParams()
         self.tracker = Tracker(TrackerParams(**{**params.__dict__, "dt_s": inner.sim.step_length_s}))
         self.k = max_detections
@@ -194,6 +208,8 @@ class PerceivedFeatures(gym.Wrapper):
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
         self.tracker.reset()
+        # The road lies half the ego's height below its frame's origin (the rig's calibration to the ground).
+        self.perception.ground_z_m = -0.5 * self.env.unwrapped.ego_height_m() if self.ground_removal else None
         return self._perceive(obs, info)
 
     def step(self, action):
@@ -204,15 +220,17 @@ class PerceivedFeatures(gym.Wrapper):
     def _perceive(self, obs: dict, info: dict) -> tuple[dict, dict]:
         frame = self.perception(obs["camera"], obs["lidar"][:, :3], obs["lidar_mask"])
         ranged = np.isfinite(frame.position_m).all(axis=1)
-        heading = float(obs["ego"][4])
+        heading, speed = float(obs["ego"][4]), float(obs["ego"][0])
+        inner = self.env.unwrapped
+        pose = EgoPose.moving(*inner.ego_pose(), speed)  # the tracks live in the world frame (tracker.py)
         sizes = np.array([TYPICAL_SIZE_M.get(int(c), (4.5, 1.8)) for c in frame.category_ids[ranged]],
                          np.float64).reshape(-1, 2)
         centres = centre_from_surface(frame.position_m[ranged], sizes[:, 0])
-        tracks = self.tracker.update(Detections(lane_frame(centres, heading), frame.boxes_px[ranged],
-                                                frame.category_ids[ranged], sizes, frame.scores[ranged]))
-        inner = self.env.unwrapped
+        tracks = self.tracker.update(Detections(centres, frame.boxes_px[ranged], frame.category_ids[ranged], sizes,
+                                                frame.scores[ranged]), pose)
         space = inner.observation_space["neighbours"]
-        rows = track_neighbour_rows(tracks, float(obs["ego"][3]), inner.lane_width_m(), float(space.high[0, 1]))
+        rows = track_neighbour_rows(lane_frame_tracks(tracks, pose, heading, speed), float(obs["ego"][3]),
+                                    inner.lane_width_m(), float(space.high[0, 1]))
         out = dict(obs)
         info = {**info, "ground_truth": {"neighbours": obs["neighbours"]}, "tracks": len(tracks)}
         out["neighbours"] = np.clip(rows, space.low, space.high).astype(np.float32)
@@ -252,7 +270,8 @@ def detector_from(spec):
 
 
 def make_env(scenario=None, *, perception=None, max_detections: int = 32, tracker: TrackerParams | None = None,
-             range_gate: tuple[float, float] | None = RANGE_GATE, sensors=None, **kwargs) -> gym.Env:
+             range_gate: tuple[float, float] | None = RANGE_GATE, ground_clearance_m: float | None = GROUND_CLEARANCE_M,
+             sensors=None, **kwargs) -> gym.Env:
     """The registered envs' entry point: a :class:`pipeline.envs.RoadsynthEnv`, wrapped in
     :class:`PerceivedFeatures` when ``perception`` names a detector (see :func:`detector_from`; the camera and LiDAR
     are then rendered whatever ``sensors`` says)."""
@@ -265,4 +284,5 @@ def make_env(scenario=None, *, perception=None, max_detections: int = 32, tracke
     detector = detector_from(perception)
     sensors = tuple(dict.fromkeys([*(sensors or ()), "camera", "lidar"]))
     return PerceivedFeatures(RoadsynthEnv(scenario, sensors=sensors, **kwargs), detector, tracker=tracker,
-                             max_detections=max_detections, range_gate=range_gate)
+                             max_detections=max_detections, range_gate=range_gate,
+                             ground_clearance_m=ground_clearance_m)

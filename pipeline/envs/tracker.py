@@ -4,12 +4,18 @@ It turns per-frame detections (a position in the ego's lane frame, from a detect
 it, with the image box when there is one) into tracks with a velocity, and the tracks into the feature rows an
 agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.features`).
 
-- **State** per track: x = (ds, dd, vs, vd), the object's centre relative to the ego's centre along the lane (ds,
-  forward) and across it (dd, to the left), and its velocity relative to the ego's. Constant-velocity Kalman filter:
-  F = [[I, dt I], [0, I]]; process noise from white-noise acceleration of spectral density ``accel_psd`` (m^2/s^3),
-  Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]] (it also absorbs the ego's own acceleration, since the state is
-  relative); a measurement is the position, H = [I 0], with standard deviations growing with range (a LiDAR
-  median over a box: ``sigma_m`` + ``sigma_per_m`` x range, along and across alike).
+- **Frame**: tracks live in a fixed frame (a localisation's odometry frame; the world's in the env), so that the
+  ego's own turning does not move them. Each frame's detections come in the ego's frame (x forward, y left, origin
+  at its box centre) with the ego's pose there (:class:`EgoPose`), which places them in the fixed frame; the
+  agent's rows are read back in the ego's lane frame (:func:`lane_frame_tracks`). Tracked in the ego's own frame
+  instead, a parked car 20 m ahead of an ego turning at 0.5 rad/s through a junction sweeps sideways at 10 m/s,
+  which a constant-velocity model takes for the car's motion (and the lane frame's heading jumps where the ego
+  passes from a lane into a junction). Without a pose the detections' frame is taken as fixed.
+- **State** per track: x = (x, y, vx, vy), the object's centre and velocity in the fixed frame. Constant-velocity
+  Kalman filter: F = [[I, dt I], [0, I]]; process noise from white-noise acceleration of spectral density
+  ``accel_psd`` (m^2/s^3), Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]]; a measurement is the position, H = [I 0],
+  with standard deviations growing with the range from the ego (a LiDAR median over a box: ``sigma_m`` +
+  ``sigma_per_m`` x range, along and across alike).
 - **Association**, each frame: predicted tracks against detections by the Hungarian method
   (:func:`scipy.optimize.linear_sum_assignment`) on a cost that is the smaller of 1 - IoU of the image boxes (where
   both have one) and the squared Mahalanobis distance of the position over the gate (chi-square, 2 degrees of
@@ -19,11 +25,15 @@ agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.
   are first associated with the detections scoring at least ``birth_score``, then the tracks left over with the
   weaker ones; only a confident detection left over starts a track. A weak detection can keep a track alive (a car
   that fades into the dark or the fog) but never start one (glare, a far lamp, a shadow).
-- **Births and deaths**: an unmatched confident detection starts a tentative track (velocity 0, with the
-  uncertainty of ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at
+- **Births and deaths**: an unmatched confident detection starts a tentative track (moving as the ego does, with
+  the uncertainty of ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at
   its first miss before that; a confirmed track coasts on its prediction through up to ``max_misses`` consecutive
   misses and is dropped at the next. Only confirmed tracks are reported, so a detection that appears once never
-  becomes one.
+  becomes one, and, as SORT reports them (Bewley et al., "Simple Online and Realtime Tracking", ICIP 2016), only
+  while they have missed at most ``report_misses`` frames (0: matched in this one): a coasting track can take its
+  object back, but its prediction is not reported as a road user. In the city a parked car passed close by coasts
+  out of the camera's view on a velocity its last, cut-off boxes gave it, and reported, drifted into the ego's lane
+  as a leader closing at 10-40 m/s.
 
 Deterministic: track ids count up from 1 in the order tracks are born (detections in input order), and ties in
 the assignment resolve as scipy's solver does for a given matrix.
@@ -55,6 +65,7 @@ class TrackerParams:
     iou_gate: float = 0.1
     confirm_hits: int = 3
     max_misses: int = 5
+    report_misses: int = 0
     birth_score: float = 0.0
 
     def __post_init__(self) -> None:
@@ -64,7 +75,7 @@ class TrackerParams:
         check_number("TrackerParams", "gate_probability", self.gate_probability, high=1.0, allow_high=False)
         check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
         check_number("TrackerParams", "birth_score", self.birth_score, high=1.0, allow_low=True)
-        for name, least in (("confirm_hits", 1), ("max_misses", 0)):
+        for name, least in (("confirm_hits", 1), ("max_misses", 0), ("report_misses", 0)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < least:
                 raise ValueError(f"TrackerParams.{name}: expected an integer >= {least}, got {value!r}")
@@ -80,7 +91,8 @@ class Detections:
     """One frame's detections, K of them.
 
     Attributes:
-        position_m: (K, 2) float64 (ds, dd) of each object's centre in the ego's lane frame.
+        position_m: (K, 2) float64 each object's centre in the ego's frame (x forward, y left, from its box centre;
+            :meth:`Tracker.update` places them in the fixed frame by the ego's pose).
         box_px: (K, 4) float64 image boxes x1, y1, x2, y2; NaN rows where a detection has none.
         class_id: (K,) int64 category ids.
         size_m: (K, 2) float64 (length, width) of each object (its class's typical size when not measured).
@@ -107,10 +119,35 @@ class Detections:
             raise ValueError("Detections.position_m: expected finite positions (drop detections without a range)")
 
 
+@dataclass(frozen=True)
+class EgoPose:
+    """The ego in the tracker's fixed frame: its box centre (``x_m``, ``y_m``), heading ``yaw_rad`` (CCW from +x)
+    and velocity (``vx_mps``, ``vy_mps``). The default is the fixed frame itself, at rest."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+
+    @classmethod
+    def moving(cls, x_m: float, y_m: float, yaw_rad: float, speed_mps: float) -> EgoPose:
+        """A pose whose velocity is ``speed_mps`` along its heading."""
+        return cls(x_m, y_m, yaw_rad, speed_mps * math.cos(yaw_rad), speed_mps * math.sin(yaw_rad))
+
+    def to_fixed(self, position_m: np.ndarray) -> np.ndarray:
+        """(K, 2) ego-frame positions -> (K, 2) fixed-frame ones."""
+        position_m = np.asarray(position_m, np.float64).reshape(-1, 2)
+        c, s = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
+        return np.column_stack([self.x_m + c * position_m[:, 0] - s * position_m[:, 1],
+                                self.y_m + s * position_m[:, 0] + c * position_m[:, 1]])
+
+
 @dataclass
 class Track:
-    """One track: Kalman state ``x`` (4,) = (ds, dd, vs, vd) and covariance ``p`` (4, 4), the last image box,
-    class and size, and its hit and miss counts."""
+    """One track: Kalman state ``x`` (4,) = (x, y, vx, vy) in the fixed frame and covariance ``p`` (4, 4), the last
+    image box, class and size, and its hit and miss counts. :func:`lane_frame_tracks` gives it as (ds, dd, dvs,
+    dvd) relative to the ego."""
 
     track_id: int
     x: np.ndarray
@@ -140,7 +177,8 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 @dataclass
 class Tracker:
     """Tracks road users from frame to frame (see the module docstring). Call :meth:`update` once per frame with
-    that frame's :class:`Detections`; it returns the confirmed tracks."""
+    that frame's :class:`Detections`; it returns the tracks to report (confirmed, and missed at most
+    ``report_misses`` times)."""
 
     params: TrackerParams = field(default_factory=TrackerParams)
     tracks: list[Track] = field(default_factory=list)
@@ -157,8 +195,8 @@ class Tracker:
         qm = q * np.block([[dt ** 3 / 3 * i2, dt ** 2 / 2 * i2], [dt ** 2 / 2 * i2, dt * i2]])
         return f, qm
 
-    def _measurement_cov(self, position: np.ndarray) -> np.ndarray:
-        sigma = self.params.sigma_m + self.params.sigma_per_m * float(np.hypot(*position))
+    def _measurement_cov(self, range_m: float) -> np.ndarray:
+        sigma = self.params.sigma_m + self.params.sigma_per_m * range_m
         return np.eye(2) * sigma ** 2
 
     def predict(self) -> None:
@@ -168,15 +206,15 @@ class Tracker:
             t.x = f @ t.x
             t.p = f @ t.p @ f.T + q
 
-    def _costs(self, det: Detections) -> np.ndarray:
-        costs = np.full((len(self.tracks), len(det.position_m)), UNMATCHABLE)
-        if not len(self.tracks) or not len(det.position_m):
+    def _costs(self, det: Detections, fixed: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+        costs = np.full((len(self.tracks), len(fixed)), UNMATCHABLE)
+        if not len(self.tracks) or not len(fixed):
             return costs
         ious = box_iou(np.array([t.box_px for t in self.tracks]), det.box_px)
         gate = self.params.gate
         for i, t in enumerate(self.tracks):
-            for j, z in enumerate(det.position_m):
-                s = t.p[:2, :2] + self._measurement_cov(z)
+            for j, z in enumerate(fixed):
+                s = t.p[:2, :2] + self._measurement_cov(ranges[j])
                 r = z - t.x[:2]
                 d2 = float(r @ np.linalg.solve(s, r))
                 options = []
@@ -188,11 +226,16 @@ class Tracker:
                     costs[i, j] = min(options)
         return costs
 
-    def update(self, det: Detections) -> list[Track]:
+    def update(self, det: Detections, pose: EgoPose | None = None) -> list[Track]:
         """Predict, associate (confident detections first, then the weak ones with the tracks left over), correct,
-        and manage births and deaths; returns the confirmed tracks (by id)."""
+        and manage births and deaths; returns the confirmed tracks missed at most ``report_misses`` times (by id).
+        ``pose``: the ego's in the fixed frame at this frame (None: the detections' frame is the fixed one, the ego at
+        rest at its origin)."""
         self.predict()
-        costs = self._costs(det)
+        ranges = np.hypot(det.position_m[:, 0], det.position_m[:, 1])
+        fixed = det.position_m if pose is None else pose.to_fixed(det.position_m)
+        pose = pose or EgoPose()
+        costs = self._costs(det, fixed, ranges)
         k = len(det.position_m)
         confident = (np.ones(k, bool) if det.score is None
                      else np.asarray(det.score, np.float64) >= self.params.birth_score)
@@ -200,7 +243,7 @@ class Tracker:
         for dets in (np.flatnonzero(confident), np.flatnonzero(~confident)):
             rows = [i for i in range(len(self.tracks)) if i not in matched_tracks]
             for i, j in self._assign(costs, rows, dets):
-                self._correct(self.tracks[i], det, j)
+                self._correct(self.tracks[i], det, j, fixed[j], ranges[j])
                 matched_tracks.add(i)
                 matched_dets.add(j)
         kept = []
@@ -212,9 +255,10 @@ class Tracker:
             kept.append(t)
         for j in range(k):
             if j not in matched_dets and confident[j]:
-                kept.append(self._birth(det, j))
+                kept.append(self._birth(det, j, fixed[j], ranges[j], pose))
         self.tracks = kept
-        return sorted((t for t in self.tracks if t.confirmed), key=lambda t: t.track_id)
+        return sorted((t for t in self.tracks if t.confirmed and t.misses <= self.params.report_misses),
+                      key=lambda t: t.track_id)
 
     @staticmethod
     def _assign(costs: np.ndarray, rows: list[int], cols: np.ndarray) -> list[tuple[int, int]]:
@@ -228,11 +272,10 @@ class Tracker:
         found = linear_sum_assignment(sub)
         return [(rows[a], int(cols[b])) for a, b in zip(*found, strict=True) if sub[a, b] < UNMATCHABLE]
 
-    def _correct(self, t: Track, det: Detections, j: int) -> None:
-        z = det.position_m[j]
+    def _correct(self, t: Track, det: Detections, j: int, z: np.ndarray, range_m: float) -> None:
         h = np.zeros((2, 4))
         h[0, 0] = h[1, 1] = 1.0
-        s = h @ t.p @ h.T + self._measurement_cov(z)
+        s = h @ t.p @ h.T + self._measurement_cov(range_m)
         k = t.p @ h.T @ np.linalg.inv(s)
         t.x = t.x + k @ (z - h @ t.x)
         t.p = (np.eye(4) - k @ h) @ t.p
@@ -242,20 +285,38 @@ class Tracker:
         if t.hits >= self.params.confirm_hits:
             t.confirmed = True
 
-    def _birth(self, det: Detections, j: int) -> Track:
-        z = det.position_m[j]
+    def _birth(self, det: Detections, j: int, z: np.ndarray, range_m: float, pose: EgoPose) -> Track:
         p = np.zeros((4, 4))
-        p[:2, :2] = self._measurement_cov(z)
+        p[:2, :2] = self._measurement_cov(range_m)
         p[2, 2] = p[3, 3] = self.params.birth_speed_std_mps ** 2
-        track = Track(self.next_id, np.array([z[0], z[1], 0.0, 0.0]), p, det.box_px[j].copy(),
+        # Until measured, an object moves as the ego does (in its frame: at rest), the likeliest for road users ahead.
+        track = Track(self.next_id, np.array([z[0], z[1], pose.vx_mps, pose.vy_mps]), p, det.box_px[j].copy(),
                       int(det.class_id[j]), det.size_m[j].copy(), confirmed=self.params.confirm_hits <= 1)
         self.next_id += 1
         return track
 
 
+def lane_frame_tracks(tracks: list[Track], pose: EgoPose, heading_rel_rad: float, speed_mps: float
+                      ) -> list[Track]:
+    """The tracks relative to the ego, in its lane frame: each a copy whose state is (ds along the lane, dd to its
+    left, dvs, dvd), for an ego at ``pose`` whose heading is ``heading_rel_rad`` from its lane's (CCW) and whose
+    speed is ``speed_mps``. dvs is the object's velocity along the lane less the ego's speed (the ground-truth
+    features' dv, :func:`pipeline.envs.features.neighbour_rows`), dvd its velocity across the lane less the ego's."""
+    lane = pose.yaw_rad - heading_rel_rad
+    c, s = math.cos(lane), math.sin(lane)
+    ego_across = -s * pose.vx_mps + c * pose.vy_mps
+    out = []
+    for t in tracks:
+        dx, dy, vx, vy = t.x[0] - pose.x_m, t.x[1] - pose.y_m, t.x[2], t.x[3]
+        x = np.array([c * dx + s * dy, -s * dx + c * dy, c * vx + s * vy - speed_mps, -s * vx + c * vy - ego_across])
+        out.append(Track(t.track_id, x, t.p, t.box_px, t.class_id, t.size_m, t.hits, t.misses, t.confirmed))
+    return out
+
+
 def track_neighbour_rows(tracks: list[Track], ego_lateral_offset_m: float, lane_width_m: float,
                    range_m: float) -> np.ndarray:
-    """(6, 6) float32 rows in NEIGHBOUR_SLOTS x NEIGHBOUR_FIELDS order from tracks, as the ground-truth observation
+    """(6, 6) float32 rows in NEIGHBOUR_SLOTS x NEIGHBOUR_FIELDS order from tracks in the ego's lane frame
+    (:func:`lane_frame_tracks`), as the ground-truth observation
     gives them: each track's lane relative to the ego's is round((ego offset + dd) / lane width) (0 same lane, +1
     left, -1 right), the nearest ahead (ds > 0) and behind of each lane fill the slots; ds, dd and the velocity
     along the lane (dv) come from the track's state, length and width from its detection. Tracks beyond

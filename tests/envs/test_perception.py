@@ -13,7 +13,7 @@ import pipeline.envs  # noqa: F401  (registers the envs)
 from pipeline.core.config import RigConfig, load_config
 from pipeline.core.geometry import Transform
 from pipeline.detect.infer import Detections as ImageDetections
-from pipeline.envs.perception import PerceivedFeatures, Perception, centre_from_surface, lane_frame
+from pipeline.envs.perception import PerceivedFeatures, Perception, centre_from_surface
 from pipeline.stages.rig import build_sensors
 
 SMALL_RIG = """
@@ -59,11 +59,7 @@ def rig_path(tmp_path_factory):
     return path
 
 
-def test_lane_frame_and_surface_to_centre_in_closed_form():
-    p = np.array([[10.0, 0.0], [0.0, 5.0]])
-    assert lane_frame(p, 0.0) == pytest.approx(p)
-    # the ego turned 90 deg left of its lane: its x axis points to the lane's left
-    assert lane_frame(p, math.pi / 2) == pytest.approx(np.array([[0.0, 10.0], [-5.0, 0.0]]))
+def test_surface_to_centre_in_closed_form():
     assert centre_from_surface(np.array([[30.0, 40.0]]), np.array([10.0])) == pytest.approx(np.array([[33.0, 44.0]]))
 
 
@@ -136,6 +132,39 @@ def test_a_range_gate_from_the_box_height_keeps_fog_echoes_out(rig_path):
     assert short.points.tolist() == [0] and np.isnan(short.position_m).all()
     with pytest.raises(ValueError, match="range_gate"):
         Perception(FixedBoxes([], [], []), camera, lidar.mount, range_gate=(2.0, 1.0))
+
+
+def test_road_returns_range_no_box(rig_path):
+    """Ground removal: a flat box on the road 18 m ahead (a weak detection on a marking) holds only road returns
+    (0.75 m below the ego frame's origin, the centre of a 1.5 m tall ego) and is left unranged; a car's box that
+    also holds the road in front of it is ranged by the car alone (its median moves from the road's to the car's);
+    without a ground height nothing is removed."""
+    rig = load_config(RigConfig, rig_path, "rigs")[0]
+    cameras, lidars = build_sensors(rig)
+    camera, lidar = cameras[0], lidars[0]
+    to_cam = camera.camera_to_world(Transform.identity()).inverse()
+    ground = -0.75
+    xs, ys = np.meshgrid(np.linspace(14.0, 22.0, 17), np.linspace(-1.0, 1.0, 9))
+    road = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, ground + 0.02)])  # 153 returns
+    ys, zs = np.meshgrid(np.linspace(-0.8, 0.8, 5), np.linspace(ground + 0.4, ground + 1.4, 5))
+    car = np.column_stack([np.full(ys.size, 30.0), ys.ravel(), zs.ravel()])  # 25 returns on its back, 30 m ahead
+
+    def box(points):
+        uv, _ = camera.project(to_cam.apply(points))
+        return [*(uv.min(axis=0) - 1), *(uv.max(axis=0) + 1)]
+
+    marking, vehicle = box(road), box(np.vstack([car, road[road[:, 0] > 19.0]]))
+    points = lidar.mount.inverse().apply(np.vstack([road, car])).astype(np.float32)
+    mask = np.ones(len(points), np.int8)
+    image = np.zeros((240, 320, 3), np.uint8)
+    detector = FixedBoxes([marking, vehicle], [0.9, 0.8], [3, 3])
+    removed = Perception(detector, camera, lidar.mount, range_gate=None, ground_z_m=ground)(image, points, mask)
+    assert removed.points.tolist() == [0, len(car)]
+    assert np.isnan(removed.position_m[0]).all()
+    assert removed.position_m[1] == pytest.approx([30.0, 0.0], abs=1e-6)
+    kept = Perception(detector, camera, lidar.mount, range_gate=None)(image, points, mask)
+    assert kept.points[0] == len(road) and kept.position_m[0, 0] == pytest.approx(18.0, abs=0.5)
+    assert kept.points[1] > 2 * len(car) and kept.position_m[1, 0] < 23.0  # the road outnumbers the car there
 
 
 class GroundTruthBoxes:

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from pipeline.envs.features import NEIGHBOUR_FIELDS, NEIGHBOUR_SLOTS
-from pipeline.envs.tracker import Detections, Tracker, TrackerParams, box_iou, track_neighbour_rows
+from pipeline.envs.tracker import (
+    Detections,
+    EgoPose,
+    Tracker,
+    TrackerParams,
+    box_iou,
+    lane_frame_tracks,
+    track_neighbour_rows,
+)
 
 DT = 0.1
 
@@ -31,7 +41,7 @@ def test_a_constant_velocity_object_is_confirmed_and_its_velocity_found():
 
 
 def test_a_missed_frame_is_coasted_and_too_many_drop_the_track():
-    params = TrackerParams(dt_s=DT, max_misses=3)
+    params = TrackerParams(dt_s=DT, max_misses=3, report_misses=3)
     tracker = Tracker(params)
     for k in range(20):
         tracker.update(_dets((20.0 + 1.0 * DT * k, 0.0)))
@@ -43,6 +53,20 @@ def test_a_missed_frame_is_coasted_and_too_many_drop_the_track():
     for _ in range(params.max_misses):
         assert len(tracker.update(Detections.empty())) == 1
     assert tracker.update(Detections.empty()) == []  # one miss more than max_misses
+    assert tracker.tracks == []
+
+
+def test_a_coasting_track_is_kept_but_reported_only_within_report_misses():
+    """By default (report_misses 0, as SORT) a track that missed this frame is not reported, yet it coasts and takes
+    its object back under its own id; with report_misses 1 it is reported through one miss, not two."""
+    for report, shown in ((0, [1, 0, 0, 1]), (1, [1, 1, 0, 1])):
+        tracker = Tracker(TrackerParams(dt_s=DT, max_misses=3, report_misses=report))
+        for k in range(10):
+            tracker.update(_dets((20.0 + DT * k, 0.0)))
+        out = [tracker.update(_dets((21.0, 0.0))), tracker.update(Detections.empty()),
+               tracker.update(Detections.empty()), tracker.update(_dets((21.0 + 3 * DT, 0.0)))]
+        assert [len(o) for o in out] == shown
+        assert len(tracker.tracks) == 1 and out[-1][0].track_id == 1
 
 
 def test_two_crossing_objects_keep_their_identities():
@@ -78,7 +102,7 @@ def test_image_boxes_associate_when_positions_jump():
     (first,) = tracker.update(_dets((30.0, 0.0), boxes=[box]))
     (second,) = tracker.update(_dets((45.0, 0.0), boxes=[[102.0, 100.0, 162.0, 140.0]]))
     assert second.track_id == first.track_id
-    tracker2 = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+    tracker2 = Tracker(TrackerParams(dt_s=DT, confirm_hits=1, report_misses=1))
     tracker2.update(_dets((30.0, 0.0)))
     coasting, new = tracker2.update(_dets((45.0, 0.0)))  # without boxes: a new track beside the coasting one
     assert (coasting.track_id, coasting.misses, new.track_id, new.misses) == (1, 1, 2, 0)
@@ -180,3 +204,58 @@ def test_birth_score_is_checked():
         TrackerParams(birth_score=1.5)
     with pytest.raises(ValueError, match="score"):
         Detections(np.zeros((2, 2)), np.zeros((2, 4)), np.zeros(2, np.int64), np.zeros((2, 2)), np.zeros(3))
+
+
+def _circle_pose(k: int, radius_m: float = 20.0, speed_mps: float = 5.0) -> EgoPose:
+    """The ego driving a left-hand circle about the origin, at (radius, 0) heading +y at k = 0."""
+    theta = speed_mps / radius_m * DT * k
+    return EgoPose.moving(radius_m * math.cos(theta), radius_m * math.sin(theta), theta + math.pi / 2, speed_mps)
+
+
+def _ego_frame(pose: EgoPose, point: tuple[float, float]) -> tuple[float, float]:
+    dx, dy = point[0] - pose.x_m, point[1] - pose.y_m
+    c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+    return c * dx + s * dy, -s * dx + c * dy
+
+
+def test_tracks_are_read_in_the_ego_lane_frame_in_closed_form():
+    """An ego at (10, 5) heading +y at 5 m/s, turned 90 deg left of its lane (the lane runs along +x): a car at rest
+    10 m ahead of it lies 10 m to the lane's left, and closes at 5 m/s across it, none along it."""
+    pose = EgoPose.moving(10.0, 5.0, math.pi / 2, 5.0)
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+    (track,) = tracker.update(_dets((10.0, 0.0)), pose)
+    assert track.x[:2] == pytest.approx([10.0, 15.0])  # the fixed frame
+    track.x[2:] = 0.0  # at rest there
+    (rel,) = lane_frame_tracks([track], pose, heading_rel_rad=math.pi / 2, speed_mps=5.0)
+    assert rel.x == pytest.approx([0.0, 10.0, -5.0, -5.0])
+    assert rel.track_id == track.track_id and track.x[:2] == pytest.approx([10.0, 15.0])  # the track is untouched
+
+
+def test_a_turning_ego_sees_a_parked_car_at_rest_and_a_leader_on_its_circle():
+    """The ego drives a 20 m circle at 5 m/s (0.25 rad/s, a junction's turn); a parked car stands 25 m ahead of its
+    start, and a leader drives the same circle 15 m of arc ahead at the same speed. With the ego's pose the tracker
+    finds the parked car at rest and the leader at its own speed along its way, and reads both as the ground-truth
+    features would (dv along the ego's lane less its speed); in the ego's own turning frame, taken as fixed, the
+    parked car seems to slide sideways at 2 m/s."""
+    parked = (20.0, 25.0)
+    lead = 15.0 / 20.0  # the leader's angle ahead on the circle
+    with_pose, turning = Tracker(TrackerParams(dt_s=DT)), Tracker(TrackerParams(dt_s=DT))
+    for k in range(30):
+        pose = _circle_pose(k)
+        theta = 5.0 / 20.0 * DT * k + lead
+        seen = [_ego_frame(pose, parked), _ego_frame(pose, (20.0 * math.cos(theta), 20.0 * math.sin(theta)))]
+        tracks = with_pose.update(_dets(*seen), pose)
+        naive = turning.update(_dets(*seen))
+    car, leader = sorted(tracks, key=lambda t: t.track_id)
+    assert np.hypot(*car.x[2:]) < 0.3
+    assert np.hypot(*leader.x[2:]) == pytest.approx(5.0, abs=0.3)
+    rel_car, rel_leader = lane_frame_tracks([car, leader], pose, heading_rel_rad=0.0, speed_mps=5.0)
+    assert rel_car.x[2:] == pytest.approx([-5.0, 0.0], abs=0.3)
+    # the leader's heading is 0.75 rad from the ego's: along the ego's lane it moves at 5 cos(0.75); a constant-
+    # velocity filter lags the turn of its velocity (1.25 m/s^2 towards the circle's centre) by a few tenths of m/s
+    assert rel_leader.x[2] == pytest.approx(5.0 * math.cos(lead) - 5.0, abs=0.5)
+    assert rel_leader.x[:2] == pytest.approx(_ego_frame(pose, (20.0 * math.cos(theta), 20.0 * math.sin(theta))),
+                                             abs=0.1)
+    naive_car = min(naive, key=lambda t: t.track_id)
+    # the parked car "moves" across the ego's frame at the turn rate times its distance ahead (~2 m/s here)
+    assert abs(naive_car.x[3]) > 1.5
