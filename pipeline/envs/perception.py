@@ -11,8 +11,12 @@ LiDAR's strongest return on a beam towards a car beyond its fog range is the dro
 (:mod:`pipeline.sensors.backscatter`), and without the gate such a box was ranged at 4 m. A box that touches the
 image's top or bottom edge may show a nearer object cut by the frame, so it keeps the points nearer than its gate.
 The gate is wide (0.4-2.5 d by default): it allows for boxes cut by occlusion and classes of other heights; ``None``
-turns it off. The tracker gets each object's centre: the surfaces the LiDAR sees lie in front of it, so the
-median is moved half the class's typical length further along the line of sight (:func:`centre_from_surface`).
+turns it off. Returns less than ``ground_clearance_m`` (0.3 m) above the road range no box (ground removal, as a
+perception stack segments the ground before it ranges or clusters: a weak box on a road marking would otherwise be
+ranged on the road); the road's height in the ego frame is a calibration of the rig (``ground_z_m``; in
+:class:`PerceivedFeatures`, half the ego's height below its box centre). The tracker gets each object's centre:
+the surfaces the LiDAR sees lie in front of it, so the median is moved half the class's typical length further
+along the line of sight (:func:`centre_from_surface`); it tracks them in the world frame from the ego's pose.
 :class:`PerceivedFeatures` wraps an environment rendering ``sensors=["camera", "lidar"]``: it adds
 the detections to the observation and replaces the ground-truth neighbour slots with those of the
 :mod:`pipeline.envs.tracker`'s tracks, so an agent written for features runs on perceived features unchanged; the
@@ -102,6 +106,8 @@ class Perception:
 
         if range_gate is not None and not 0.0 <= range_gate[0] < range_gate[1]:
             raise ValueError(f"range_gate: expected (near, far) with 0 <= near < far, got {range_gate!r}")
+        if not (np.isfinite(ground_clearance_m) and ground_clearance_m >= 0.0):
+            raise ValueError(f"ground_clearance_m: expected a finite height >= 0, got {ground_clearance_m!r}")
         self.detector, self.camera = detector, camera
         self.lidar_mount, self.range_gate = lidar_mount, range_gate
         self.ground_z_m, self.ground_clearance_m = ground_z_m, float(ground_clearance_m)

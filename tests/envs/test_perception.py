@@ -165,6 +165,8 @@ def test_road_returns_range_no_box(rig_path):
     kept = Perception(detector, camera, lidar.mount, range_gate=None)(image, points, mask)
     assert kept.points[0] == len(road) and kept.position_m[0, 0] == pytest.approx(18.0, abs=0.5)
     assert kept.points[1] > 2 * len(car) and kept.position_m[1, 0] < 23.0  # the road outnumbers the car there
+    with pytest.raises(ValueError, match="ground_clearance_m"):
+        Perception(detector, camera, lidar.mount, ground_z_m=ground, ground_clearance_m=-0.3)
 
 
 class GroundTruthBoxes:
