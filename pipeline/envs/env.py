@@ -303,8 +303,8 @@ class RoadsynthEnv(gym.Env):
         the road."""
         if self._sumo is None:
             raise RuntimeError(f"{self._owner}: ego_height_m() before reset()")
-        _, _, demand = self._demands[self._run_seed]
-        return float(demand.actor_table().at[self.ego_id, "height_m"])
+        actors, _ = self._actor_tables()  # cached per run seed; the sensors read it every step
+        return float(actors.at[self.ego_id, "height_m"])
 
     def ego_pose(self) -> tuple[float, float, float]:
         """The ego's box centre (x, y) and yaw (rad, CCW from +x) in the world frame, at the current observation
