@@ -99,9 +99,10 @@ def _leader(env, neighbours: np.ndarray) -> tuple[str, float, float]:
 
 
 def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: str, detector=None,
-                record: Path | None = None) -> tuple[EpisodeLog, str]:
+                record: Path | None = None) -> tuple[EpisodeLog, str, dict | None]:
     """One episode of the reference agent: on ground-truth features (``detector`` None) or on perceived ones.
-    Returns its log and how it ended (the env's ``reason``)."""
+    Returns its log, how it ended (the env's ``reason``) and, if it ended in a collision, what the ego hit (the env's
+    ``info["collision"]``, with ``time_s`` added)."""
     import gymnasium as gym
 
     import pipeline.envs  # noqa: F401  (registers the envs)
@@ -133,7 +134,8 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
             episode.add_slots(truth[_AHEAD][:, columns], obs["neighbours"][_AHEAD][:, columns])
             if terminated or truncated:
                 episode.collided = info.get("reason") == "collision"
-                return episode, str(info.get("reason"))
+                hit = {**info["collision"], "time_s": float(info["time_s"])} if "collision" in info else None
+                return episode, str(info.get("reason")), hit
     finally:
         env.close()
 
@@ -145,9 +147,9 @@ def episode_row(config: ClosedLoopConfig, config_file: Path, scenario: str, seed
     detector = load_detector(config.detector, config_file) if mode == "perceived" else None
     if record is not None and record.exists():  # what an interrupted attempt at this episode left
         shutil.rmtree(record)
-    episode, reason = run_episode(config, scenario, seed, condition, detector, record)
+    episode, reason, hit = run_episode(config, scenario, seed, condition, detector, record)
     return {"scenario": Path(scenario).stem, "seed": seed, "condition": Path(condition).stem, "mode": mode,
-            "end": reason, "steps": len(episode.speed_mps), "metrics": episode_metrics(episode)}
+            "end": reason, "steps": len(episode.speed_mps), "metrics": episode_metrics(episode), "collision": hit}
 
 
 def episode_fingerprint(config: ClosedLoopConfig, config_file: Path) -> str:
@@ -287,6 +289,17 @@ def _report(config: ClosedLoopConfig, rows: list[dict], comparisons: dict[str, l
         ends.setdefault((r["mode"], r["end"]), 0)
         ends[(r["mode"], r["end"])] += 1
     lines += ["Episode ends: " + ", ".join(f"{mode} {end}: {n}" for (mode, end), n in sorted(ends.items())), ""]
+    hits = [r for r in rows if r.get("collision")]
+    if hits:
+        lines += ["Collisions (SUMO's record of each: the other party, SUMO's collision type, the lane):", "",
+                  "| scenario | condition | seed | mode | s into the episode | hit | its type | ego m/s | its m/s | "
+                  "SUMO type | lane |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in sorted(hits, key=lambda r: (r["scenario"], r["condition"], r["seed"], r["mode"])):
+            c = r["collision"]
+            lines.append(f"| {r['scenario']} | {r['condition']} | {r['seed']} | {r['mode']} | {c['time_s']:.1f} | "
+                         f"{c['other_kind']} {c['other']} | {c['other_type']} | {c['ego_speed_mps']:.1f} | "
+                         f"{c['other_speed_mps']:.1f} | {c['type']} | {c['lane']} |")
+        lines.append("")
     for key, table in comparisons.items():
         lines += [f"## {key}", "", "| metric | perceived | ground truth | difference | 95 % interval | seeds |",
                   "|---|---|---|---|---|---|"]

@@ -59,6 +59,25 @@ _INVALID_DISTANCE = -1.0e8  # SUMO answers about -2^30 when a distance along the
 _owners = itertools.count()
 
 
+
+def collision_record(collision, ego: str, sumo) -> dict:
+    """What the ego hit, from SUMO's collision record (``simulation.getCollisions()``): the other party's id, whether
+    it is a ``person`` or a ``vehicle``, its type id and speed, the ego's speed, which of the two SUMO calls the
+    collider, SUMO's collision type (its collision output's ``type``; e.g. ``collision`` for two vehicles on one
+    lane, ``junction`` for overlapping shapes on a junction, ``crossing`` for a person on a pedestrian crossing) and
+    the lane and position along it where SUMO saw it. ``other_kind`` is ``unknown`` when SUMO's
+    ``collision.action`` removed the other party in this step."""
+    ego_first = collision.collider == ego
+    other = collision.victim if ego_first else collision.collider
+    kind = ("person" if other in sumo.person.getIDList() else
+            "vehicle" if other in sumo.vehicle.getIDList() else "unknown")
+    return {"other": other, "other_kind": kind,
+            "other_type": collision.victimType if ego_first else collision.colliderType,
+            "other_speed_mps": float(collision.victimSpeed if ego_first else collision.colliderSpeed),
+            "ego_speed_mps": float(collision.colliderSpeed if ego_first else collision.victimSpeed),
+            "ego_is_collider": ego_first, "type": collision.type, "lane": collision.lane, "pos_m": float(collision.pos)}
+
+
 class RoadsynthEnv(gym.Env):
     """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours", "signal") (pipeline.envs.features);
     action: Box(2,) float32 (longitudinal, lateral) acceleration, normalised or in m/s^2 (EnvOptions).
@@ -222,7 +241,8 @@ class RoadsynthEnv(gym.Env):
             self._recorder.subscribe_departed()
         self._speed, self._accel, self._lat_speed = speed, accel, lat_speed
 
-        collided = any(ego in (col.collider, col.victim) for col in sumo.simulation.getCollisions())
+        collision = next((col for col in sumo.simulation.getCollisions() if ego in (col.collider, col.victim)), None)
+        collided = collision is not None
         gone = ego in sumo.simulation.getArrivedIDList() or ego in sumo.simulation.getStartingTeleportIDList()
         reason = None
         if collided:
@@ -261,6 +281,8 @@ class RoadsynthEnv(gym.Env):
         info["reward_terms"] = terms
         if reason is not None:
             info["reason"] = reason
+        if collision is not None:
+            info["collision"] = collision_record(collision, ego, sumo)
         if (terminated or truncated) and self._recorder is not None:
             written = self._write_record(reason)
             if written is not None:

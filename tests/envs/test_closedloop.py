@@ -10,6 +10,8 @@ import pytest
 import yaml
 
 import pipeline.envs  # noqa: F401  (registers the envs)
+from pipeline.core.config.closedloop import ClosedLoopConfig
+from pipeline.envs.closedloop import _report
 from pipeline.envs.driver import ReferenceAgent
 from pipeline.stages.cli import main as cli_main
 from tests.detect.test_onnx_heads import constant_model, yolox_output
@@ -37,7 +39,7 @@ def test_it_writes_every_episode_the_comparisons_a_report_and_plots(run):
     metrics = json.loads((out / "metrics.json").read_text())
     assert sorted((e["seed"], e["mode"]) for e in metrics["episodes"]) == [
         (1, "ground_truth"), (1, "perceived"), (2, "ground_truth"), (2, "perceived")]
-    assert all(e["steps"] == 15 and e["end"] == "time_limit" for e in metrics["episodes"])
+    assert all(e["steps"] == 15 and e["end"] == "time_limit" and e["collision"] is None for e in metrics["episodes"])
     assert sorted(metrics["comparisons"]) == ["highway/morning", "morning"]
     assert [c["metric"] for c in metrics["comparisons"]["morning"]] == metrics["metric_names"]
     speed = next(c for c in metrics["comparisons"]["morning"] if c["metric"] == "mean_speed_mps")
@@ -47,6 +49,7 @@ def test_it_writes_every_episode_the_comparisons_a_report_and_plots(run):
     assert (out / "plots" / "morning.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert (out / "plots" / "leader_by_range.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "plots/leader_by_range.png" in report
+    assert "Collisions" not in report
     assert json.loads((out / "meta.json").read_text())["stage"] == "closedloop"
 
 
@@ -149,3 +152,19 @@ def test_on_ray_the_episodes_give_the_local_runs_metrics(run):
         ray.shutdown()
     local, remote = (json.loads((d / "metrics.json").read_text()) for d in (out, on_ray))
     assert remote["episodes"] == local["episodes"] and remote["comparisons"] == local["comparisons"]
+
+
+def test_the_report_lists_what_each_collision_hit():
+    config = ClosedLoopConfig(**{**TINY, "conditions": ["night"]})
+    hit = {"other": "ped0067", "other_kind": "person", "other_type": "DEFAULT_PEDTYPE", "other_speed_mps": 0.0,
+           "ego_speed_mps": 7.61, "ego_is_collider": True, "type": "crossing", "lane": ":E1_18_0", "pos_m": 2.3,
+           "time_s": 7.4}
+    rows = [{"scenario": "urban", "seed": 3, "condition": "night", "mode": "perceived", "end": "collision",
+             "collision": hit},
+            {"scenario": "urban", "seed": 3, "condition": "night", "mode": "ground_truth", "end": "time_limit",
+             "collision": None}]
+    report = _report(config, rows, {})
+    assert "Episode ends: ground_truth time_limit: 1, perceived collision: 1" in report
+    assert ("| urban | night | 3 | perceived | 7.4 | person ped0067 | DEFAULT_PEDTYPE | 7.6 | 0.0 | crossing | "
+            ":E1_18_0 |") in report
+    assert report.count("| urban | night | 3 |") == 1

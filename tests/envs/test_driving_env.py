@@ -106,14 +106,21 @@ def test_full_throttle_into_the_leader_is_a_collision_that_terminates():
         obs, _ = env.reset(seed=1)
         assert obs["neighbours"][LEADER, 0] == 1.0
         gap_start = obs["neighbours"][LEADER, 1]
+        leader, _ = env.unwrapped._sumo.vehicle.getLeader(env.unwrapped.ego_id, 200.0)
         for _ in range(200):
             obs, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
             if terminated or truncated:
                 break
+            assert "collision" not in info
     finally:
         env.close()
     assert terminated and not truncated
     assert info["reason"] == "collision"
+    # What was hit, from SUMO's own record: the leader, rear-ended on its lane by the ego, which was the faster.
+    hit = info["collision"]
+    assert (hit["other"], hit["other_kind"], hit["type"], hit["ego_is_collider"]) == (leader, "vehicle", "collision",
+                                                                                        True)
+    assert hit["ego_speed_mps"] > hit["other_speed_mps"] >= 0.0
     assert info["reward_terms"]["collision"] == -env.unwrapped.options.reward.collision
     assert reward < 0
     assert gap_start > 0
