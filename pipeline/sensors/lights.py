@@ -177,13 +177,35 @@ def _beam_axes(yaw_rad: np.ndarray, pitch_down_deg: float) -> tuple[np.ndarray, 
 
 def _headlight_spots(position: np.ndarray, axis: np.ndarray, up: np.ndarray, lamps: np.ndarray,
                      cfg: HeadlightConfig, shadows: bool) -> SpotLights:
-    """One light per vehicle carrying ``lamps`` (n,) lamps' worth of intensity."""
+    """One light per vehicle carrying ``lamps`` (n,) lamps' worth of intensity, and with ``cfg.above_cutoff_share``
+    a second one for the light above its cut-off (:func:`above_cutoff_lights`)."""
     rgb = cfg.intensity * np.asarray(cfg.color_rgb)[None, :] * np.asarray(lamps, np.float64)[:, None]
     spread = np.inf if cfg.horizontal_falloff_deg is None else np.radians(cfg.horizontal_falloff_deg)
-    return _spots(position, axis, up, rgb, np.tan(np.radians(cfg.half_angle_h_deg)),
-                  np.tan(np.radians(cfg.half_angle_v_deg)), np.tan(np.radians(cfg.half_angle_up_deg)), cfg.soft_edge,
-                  cfg.range_m, shadows, np.radians(cfg.peak_band_deg), cfg.vertical_falloff, spread,
-                  cfg.horizontal_floor)
+    beams = _spots(position, axis, up, rgb, np.tan(np.radians(cfg.half_angle_h_deg)),
+                   np.tan(np.radians(cfg.half_angle_v_deg)), np.tan(np.radians(cfg.half_angle_up_deg)), cfg.soft_edge,
+                   cfg.range_m, shadows, np.radians(cfg.peak_band_deg), cfg.vertical_falloff, spread,
+                   cfg.horizontal_floor)
+    if cfg.above_cutoff_share <= 0 or not len(beams):
+        return beams
+    return SpotLights.concatenate([beams, above_cutoff_lights(beams, cfg)])
+
+
+def above_cutoff_lights(beams: SpotLights, cfg: HeadlightConfig) -> SpotLights:
+    """The light low ``beams`` send above their cut-off: for each, a uniform cone of ``cfg.above_cutoff_share`` of
+    its peak intensity, as wide as the beam, from the beam's axis (so that it overlaps the beam's top, where the
+    beam fades out over its soft edge) to ``cfg.above_cutoff_deg`` over the cut-off (fading out over its own soft
+    edge). A real low beam is not dark above its cut-off: ECE R112 caps that zone at 625 cd (1 lx at 25 m; 2 % of a
+    30,000 cd beam) and asks for some light there to read signs by; it is what lights the back of a van or the body
+    of a person standing a few metres ahead above the height of the lamps, which a beam cut off to nothing left
+    black at night."""
+    # Tilt each beam's axis up, about its left direction, to the middle of that band.
+    half = 0.5 * (np.arctan(beams.tan_up) + np.radians(cfg.above_cutoff_deg))
+    c, s = np.cos(half)[:, None], np.sin(half)[:, None]
+    axis, up = beams.axis * c + beams.up * s, beams.up * c - beams.axis * s
+    tan_v = np.tan(half)
+    # The beams' colour and strength, scaled down to the share (rgb is the peak's irradiance at 1 m).
+    return _spots(beams.position_m, axis, up, beams.rgb * np.float32(cfg.above_cutoff_share), beams.tan_h, tan_v,
+                  tan_v, beams.soft, beams.range_m, beams.shadows)
 
 
 def ego_headlights(ego_pose: Transform, cfg: HeadlightConfig, ego_size_m=DEFAULT_EGO_SIZE_M, *,

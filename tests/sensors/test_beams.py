@@ -102,17 +102,20 @@ def test_low_beams_in_fog_match_a_dense_quadrature_of_the_same_integrand():
     tables = inscatter_tables(origin, directions, lights, beta, edges)
     g, cos_min = 0.85, np.cos(np.radians(20.0))
     s = (np.arange(400000) + 0.5) * (130.0 / 400000)
+    assert len(lights) == 2  # the beam and the light above its cut-off, both at the lamps
     for d, table in zip(directions, tables, strict=True):
         x = origin + s[:, None] * d
-        v = (lights.position_m[0] - x).astype(np.float32)
-        d2 = (v * v).sum(axis=1)
-        axial = -(v @ lights.axis[0].astype(np.float32))
-        e = np.zeros(len(s), np.float64)
-        front = np.flatnonzero((axial > 0) & (d2 < lights.range_m[0] ** 2))
-        e[front] = spot_strength(lights, 0, [v[front, c] for c in range(3)], d2[front], axial[front])
-        cos_theta = (v @ d.astype(np.float32)) / np.sqrt(d2)
-        phase = np.where(cos_theta < cos_min, henyey_greenstein(cos_theta, g), 0.0)
-        f = np.pi * beta * phase * e * np.exp(-beta * (s + np.sqrt(d2))) * float(lights.rgb[0, 0])
+        f = np.zeros(len(s), np.float64)
+        for k in range(len(lights)):
+            v = (lights.position_m[k] - x).astype(np.float32)
+            d2 = (v * v).sum(axis=1)
+            axial = -(v @ lights.axis[k].astype(np.float32))
+            e = np.zeros(len(s), np.float64)
+            front = np.flatnonzero((axial > 0) & (d2 < lights.range_m[k] ** 2))
+            e[front] = spot_strength(lights, k, [v[front, c] for c in range(3)], d2[front], axial[front])
+            cos_theta = (v @ d.astype(np.float32)) / np.sqrt(d2)
+            phase = np.where(cos_theta < cos_min, henyey_greenstein(cos_theta, g), 0.0)
+            f += np.pi * beta * phase * e * np.exp(-beta * (s + np.sqrt(d2))) * float(lights.rgb[k, 0])
         reference = np.concatenate([[0.0], np.cumsum(f) * (130.0 / 400000)])
         for k in (30, 45, 64):
             want = reference[round(float(edges[k]) / 130.0 * 400000)]

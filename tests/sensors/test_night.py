@@ -70,7 +70,8 @@ def test_headlight_on_axis_irradiance_is_closed_form():
     cfg = night.headlights
     assert cfg.vertical_falloff > 0 and cfg.horizontal_falloff_deg is not None  # the shipped night has a pattern
     light = ego_headlights(EGO, cfg)
-    assert len(light) == 1
+    # The beam, and the light above its cut-off, whose cone starts at the beam's axis (adds nothing there).
+    assert len(light) == 2 and cfg.above_cutoff_share > 0
     p = np.radians(cfg.pitch_down_deg)
     s = light.position_m[0, 2] / np.sin(p)
     on_axis = light.position_m[0] + light.axis[0] * s
@@ -90,6 +91,41 @@ def test_headlight_on_axis_irradiance_is_closed_form():
     rays = down_ray(outside)
     out = shade(scene, rays, scene.cast_rays(rays), night, light)
     np.testing.assert_allclose(out[0], ALBEDO * ambient * night.exposure, rtol=1e-5)
+
+
+def test_the_light_above_the_cut_off_is_closed_form_on_a_wall_ahead():
+    # A matte wall 8 m ahead of the lamps, facing them (the back of a van). On the axis of the light above the
+    # cut-off (half way from the beam's axis to above_cutoff_deg over the cut-off), well above the cut-off, the
+    # beam itself gives nothing and that light E = share 2 I rgb cos(i) window(d) / d^2; without it (share 0) the
+    # wall there has the ambient light only. At the foot of the wall the beam lights it as before.
+    night = night_without_others()
+    cfg = night.headlights
+    no_stray = cfg.model_copy(update={"above_cutoff_share": 0.0})
+    beam = ego_headlights(EGO, no_stray)
+    lamp = beam.position_m[0]
+    cutoff_deg = cfg.half_angle_up_deg - cfg.pitch_down_deg  # the cut-off above the horizontal
+    tilt = np.radians(-cfg.pitch_down_deg + 0.5 * (cfg.half_angle_up_deg + cfg.above_cutoff_deg))
+    ahead = 8.0
+    point = lamp + [ahead, 0.0, ahead * np.tan(tilt)]
+    assert np.degrees(tilt) > cutoff_deg + 2.0  # well above the cut-off
+    scene = FrameScene(StaticScene([wall_mesh(point[0])]), Actors.empty())
+    rays = np.array([[0.0, 0.0, point[2], 1.0, 0.0, 0.0]], np.float32)
+    hits = scene.cast_rays(rays)
+    ambient = ALBEDO * np.asarray(night.ambient_rgb) * night.exposure
+    np.testing.assert_allclose(shade(scene, rays, hits, night, beam)[0], ambient, rtol=1e-5)
+    d = ahead / np.cos(tilt)
+    window = (1.0 - (d / cfg.range_m) ** 4) ** 2
+    stray = cfg.above_cutoff_share * 2.0 * cfg.intensity * np.asarray(cfg.color_rgb) * np.cos(tilt) * window / d**2
+    out = shade(scene, rays, hits, night, ego_headlights(EGO, cfg))[0]
+    np.testing.assert_allclose(out, ambient + ALBEDO * stray * night.exposure, rtol=1e-4)
+    assert (out > 3.0 * ambient).all()  # far more than the ambient light: the wall reads at night
+    # On the ground in front of the wall, in the beam: the beam's light, the light above the cut-off adding < 1 %.
+    low = np.array([[0.0, 0.0, lamp[2] - 0.2, 1.0, 0.0, 0.0]], np.float32)
+    low_hits = scene.cast_rays(low)
+    with_stray = shade(scene, low, low_hits, night, ego_headlights(EGO, cfg))[0]
+    beam_only = shade(scene, low, low_hits, night, beam)[0]
+    assert (beam_only > 100.0 * ambient).all() and (with_stray >= beam_only).all()
+    np.testing.assert_allclose(with_stray, beam_only, rtol=cfg.above_cutoff_share)
 
 
 def test_road_in_the_ego_headlight_cone_is_brighter_than_outside():
@@ -129,7 +165,7 @@ def test_oncoming_headlights_light_the_road_in_front_of_them(actors_factory):
     night = get_condition("night")
     oncoming = actors_factory([[30.0, 0.0, 0.75]], [[4.5, 1.8, 1.5]], yaws=np.array([np.pi]))
     lights = vehicle_headlights(oncoming, night.headlights, np.array([0.0, 0.0, 1.4]), np.array([1.0, 0.0, 0.0]))
-    assert len(lights) == 1 and lights.axis[0, 0] < -0.99
+    assert len(lights) == 2 and lights.axis[0, 0] < -0.99  # its beam and the light above its cut-off
     scene = FrameScene(StaticScene([ground()]), oncoming)
     rays = np.concatenate([down_ray(np.array([15.0, 0.0, 0.0])), down_ray(np.array([45.0, 0.0, 0.0]))])
     hits = scene.cast_rays(rays)
@@ -150,7 +186,8 @@ def test_parked_vehicles_lamps_and_beams_are_off(actors_factory):
                             [[4.5, 1.8, 1.5]] * 4, yaws=np.array([np.pi, np.pi, 0.0, 0.0]),
                             lights_on=[True, False, True, False])
     lights = vehicle_headlights(actors, night.headlights, np.array([0.0, 0.0, 1.4]), np.array([1.0, 0.0, 0.0]))
-    np.testing.assert_allclose(np.sort(lights.position_m[:, 1]), [-6.0, -2.0])  # the two with their lights on
+    # The two with their lights on (each a beam and the light above its cut-off).
+    np.testing.assert_allclose(np.sort(lights.position_m[:, 1]), [-6.0, -6.0, -2.0, -2.0])
     scene = FrameScene(StaticScene([]), actors)
     geo = scene.geometry
     for name in ("headlight", "taillight", "plate_rear"):
@@ -180,7 +217,8 @@ def test_lights_per_frame_are_bounded(actors_factory):
                             [[4.5, 1.8, 1.5]] * n, yaws=np.full(n, np.pi))
     lamps = np.column_stack([np.arange(200) * 5.0, np.full(200, 6.0), np.full(200, 7.0)])
     lights = night.frame_lights(actors, EGO, np.array([0.6, 0.0, 1.4]), lamps)
-    assert len(lights) == 1 + night.headlights.max_other_vehicles + night.street_lamps.max_lamps
+    # Each vehicle's beam and the light above its cut-off (two lights), the lamps.
+    assert len(lights) == 2 * (1 + night.headlights.max_other_vehicles) + night.street_lamps.max_lamps
 
 
 def test_low_beam_pattern_is_closed_form_across_and_down_the_beam():

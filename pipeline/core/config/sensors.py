@@ -337,6 +337,14 @@ class HeadlightConfig(_Light):
                     " across it, degrees (None: uniform across)")
     horizontal_floor: float = Field(
         1.0, ge=0.0, le=1.0, description="share of the peak intensity the beam keeps far to the sides")
+    # Above the cut-off (pipeline/sensors/lights.py, above_cutoff_lights). The defaults give none.
+    above_cutoff_share: float = Field(
+        0.0, ge=0.0, le=0.1,
+        description="intensity above the cut-off, uniform up to above_cutoff_deg over it, as a share of the peak "
+                    "intensity: the light a real low beam sends over its cut-off (ECE R112 allows up to 625 cd, "
+                    "1 lx at 25 m), which lights what stands in front of the car above its lamps (0: none)")
+    above_cutoff_deg: float = Field(8.0, gt=0.0, le=45.0,
+                                    description="how far above the cut-off that light reaches, degrees")
 
 
 class StreetLampConfig(_Light):
