@@ -9,7 +9,8 @@ pitched slightly down with a beam pattern inside (:func:`beam_pattern`): a real 
 below its cut-off (ECE R112 asks >= 10,100 cd at 0.57-0.86 deg below the horizon and only >= 1,700 cd at 1.72 deg
 down and 9 deg to the side), so that the road far ahead is lit and the road just in front of the car is not glaring;
 a uniform cone, whose light on the road falls as 1/d^3, lit a bright pool a few metres ahead and left the road
-beyond it dark.
+beyond it dark. Above its cut-off a low beam is faint, not dark: a second, uniform cone of a small share of its peak
+(:func:`above_cutoff_lights`) lights what stands a few metres ahead above the lamps' height.
 
 Shading is vectorised over (light, hit) pairs: hit points are bucketed once per call in a 2D grid
 (:class:`PointGrid`, radix-sorted cell ids), and each light only visits the points in the cells its range
