@@ -59,7 +59,6 @@ _INVALID_DISTANCE = -1.0e8  # SUMO answers about -2^30 when a distance along the
 _owners = itertools.count()
 
 
-
 def collision_record(collision, ego: str, sumo) -> dict:
     """What the ego hit, from SUMO's collision record (``simulation.getCollisions()``): the other party's id, whether
     it is a ``person`` or a ``vehicle``, its type id and speed, the ego's speed, which of the two SUMO calls the
