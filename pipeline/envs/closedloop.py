@@ -132,6 +132,7 @@ def run_episode(config: ClosedLoopConfig, scenario: str, seed: int, condition: s
             episode.add(float(obs["ego"][0]), float(obs["ego"][1]), lid, gap, closing,
                         holds_leader(truth[_LEADER], obs["neighbours"][_LEADER]))
             episode.add_slots(truth[_AHEAD][:, columns], obs["neighbours"][_AHEAD][:, columns])
+            episode.add_path(info["ground_truth"]["path"] if detector is not None else obs["path"], obs["path"])
             if terminated or truncated:
                 episode.collided = info.get("reason") == "collision"
                 hit = {**info["collision"], "time_s": float(info["time_s"])} if "collision" in info else None

@@ -27,7 +27,13 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
   ``slot_missed_share`` (slots the ground truth fills and the observation leaves empty, over those it fills),
   ``slot_false_share`` (filled in the observation, empty in the ground truth, over those filled in the
   observation), and over slots filled in both the median absolute errors ``slot_ds_error_m`` and
-  ``slot_dv_error_mps`` (0 and 0 for a ground-truth run, whose observation is the ground truth).
+  ``slot_dv_error_mps`` (0 and 0 for a ground-truth run, whose observation is the ground truth);
+- the same for the "path" row, the nearest person in the ego's path (:meth:`EpisodeLog.add_path`):
+  ``person_missed_share`` (steps on which the ground truth has a person in the path and the observation has none,
+  over the steps the ground truth has one: the perceived row holds only people in the path now, the ground truth's
+  also those about to walk into it, so some of these steps are missed by design), ``person_false_share`` (steps
+  the observation has a person in the path and the ground truth none, over the steps it has one) and
+  ``person_steps_share`` (the share of steps the ground truth has a person in the path).
 
 :func:`compare` pairs perceived and ground-truth episodes of the same seeds: for each metric the mean of each and
 the mean of their differences with a percentile bootstrap confidence interval over seeds (Efron & Tibshirani 1993),
@@ -57,7 +63,8 @@ LEADER_RANGE_BINS_M = (0.0, 20.0, 40.0, 60.0, 100.0)
 LEADER_HELD = tuple(f"leader_held_{lo:g}_{hi:g}m" for lo, hi in itertools.pairwise(LEADER_RANGE_BINS_M))
 METRICS = ("collisions_per_100km", "min_ttc_s", "share_ttc_below_1_5s", "hard_brakes", "first_tracked_range_m",
            "steady_tracked_range_m", *LEADER_HELD, "mean_speed_mps", "progress_m", "slot_missed_share",
-           "slot_false_share", "slot_ds_error_m", "slot_dv_error_mps")
+           "slot_false_share", "slot_ds_error_m", "slot_dv_error_mps", "person_steps_share", "person_missed_share",
+           "person_false_share")
 
 
 @dataclass
@@ -73,12 +80,17 @@ class EpisodeLog:
     leader_seen: list[bool]  # the agent's observation had a leader this step
     collided: bool = False
     slots: list[np.ndarray] | None = None  # per step (S, 2, 3): [truth, observed] x (present, ds, dv) per slot
+    path: list[tuple[bool, bool]] | None = None  # per step: (truth, observed) has a person in the ego's path
 
     @classmethod
     def empty(cls, dt_s: float) -> EpisodeLog:
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s: expected a finite number > 0, got {dt_s!r}")
-        return cls(dt_s, [], [], [], [], [], [], slots=[])
+        return cls(dt_s, [], [], [], [], [], [], slots=[], path=[])
+
+    def add_path(self, truth: np.ndarray, observed: np.ndarray) -> None:
+        """One step's "path" rows (features.PATH_FIELDS): ground truth and observation."""
+        self.path.append((bool(truth[0] > 0.5), bool(observed[0] > 0.5)))
 
     def add_slots(self, truth: np.ndarray, observed: np.ndarray) -> None:
         """One step's (S, 3) (present, ds, dv) of the compared neighbour slots: ground truth and observation."""
@@ -155,6 +167,8 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
     truth, seen = slots[:, 0, 0] > 0.5, slots[:, 1, 0] > 0.5
     both = truth & seen
     errors = np.abs(slots[both, 1, 1:] - slots[both, 0, 1:])
+    path = np.array(log.path, bool).reshape(-1, 2) if log.path else np.zeros((0, 2), bool)
+    person, person_seen = path[:, 0], path[:, 1]
     return {
         "collisions_per_100km": (100.0 * int(log.collided) / km) if km > 0 else (math.inf if log.collided else 0.0),
         "min_ttc_s": float(ttc.min()) if len(ttc) else math.inf,
@@ -169,6 +183,9 @@ def episode_metrics(log: EpisodeLog) -> dict[str, float]:
         "slot_false_share": float(np.mean(~truth[seen])) if seen.any() else math.nan,
         "slot_ds_error_m": float(np.median(errors[:, 0])) if len(errors) else math.nan,
         "slot_dv_error_mps": float(np.median(errors[:, 1])) if len(errors) else math.nan,
+        "person_steps_share": float(np.mean(person)) if len(person) else math.nan,
+        "person_missed_share": float(np.mean(~person_seen[person])) if person.any() else math.nan,
+        "person_false_share": float(np.mean(~person[person_seen])) if person_seen.any() else math.nan,
     }
 
 

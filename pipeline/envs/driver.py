@@ -1,8 +1,8 @@
 """A reference driver for the environment: IDM car following and MOBIL lane changes on the feature observation.
 
-It reads only what an agent reads — the ego row and the six neighbour slots of the feature observation
-(:mod:`pipeline.envs.features`) — so the same driver runs on ground-truth features and on features a perception
-stack made (docs/closedloop.md): a difference in its driving is the perception's doing.
+It reads only what an agent reads — the ego row, the six neighbour slots, the signal and path rows of the feature
+observation (:mod:`pipeline.envs.features`) — so the same driver runs on ground-truth features and on features a
+perception stack made (docs/closedloop.md): a difference in its driving is the perception's doing.
 
 - **IDM** (Treiber, Hennecke & Helbing 2000, "Congested traffic states in empirical observations and microscopic
   simulations", Phys. Rev. E 62): a = a_max [1 - (v / v0)^delta - (s* / s)^2] with the desired gap
@@ -22,6 +22,10 @@ stack made (docs/closedloop.md): a difference in its driving is the perception's
   speed^2 / (2 x the distance to the line)); otherwise it drives on, and keeps driving on through that signal when it
   turns red: the amber dilemma of Gazis, Herman & Maradudin ("The problem of the amber signal light in traffic
   flow", Operations Research 8(1), 1960), decided once, so a driver who went at amber does not brake in the junction.
+- **People in the path** (the observation's "path" row, :func:`pipeline.envs.features.path_row`: the nearest person
+  on the centre line of the lanes the ego's route takes, within half its width, or walking into it before the ego
+  gets there): a standing obstacle at the person's place for IDM, as a red light is, so the ego yields to people on
+  a crossing it turns across, or on the road, and stops IDM's s0 short of them.
 - **Route** (map knowledge, as SUMO's strategic lane changes use it: how far each lane lets the ego follow its
   route before it must change): a MOBIL change may not take the ego to a lane that leaves its route sooner than its
   lane does, unless both go on for ``route_lookahead_m``; and where its lane leaves the route within
@@ -53,6 +57,7 @@ from pipeline.envs.features import (
     EGO_FIELDS,
     NEIGHBOUR_FIELDS,
     NEIGHBOUR_SLOTS,
+    PATH_FIELDS,
     SIGNAL_AMBER,
     SIGNAL_FIELDS,
     SIGNAL_STOP,
@@ -62,6 +67,7 @@ _EGO = {name: k for k, name in enumerate(EGO_FIELDS)}
 _COL = {name: k for k, name in enumerate(NEIGHBOUR_FIELDS)}
 _SLOT = {name: k for k, name in enumerate(NEIGHBOUR_SLOTS)}
 _SIG = {name: k for k, name in enumerate(SIGNAL_FIELDS)}
+_PATH = {name: k for k, name in enumerate(PATH_FIELDS)}
 
 
 @dataclass(frozen=True)
@@ -282,6 +288,9 @@ class ReferenceDriver:
         stop = self.stop_line_m(obs, speed)
         if stop is not None:  # the stop line as a standing vehicle of no length
             lon = min(lon, idm_accel(speed, idm, max(stop, 1e-3), 0.0))
+        person = obs.get("path")
+        if person is not None and person[_PATH["present"]] >= 0.5:  # a person in the path: standing, for IDM
+            lon = min(lon, idm_accel(speed, idm, max(float(person[_PATH["distance_m"]]), 1e-3), 0.0))
         here = lane_reach(0)
         must_change = here < max(self.must_change_m, self.must_change_s * speed)  # its lane leaves the route soon
         settled = abs(self.target_offset_m - offset) < self.settled_m and abs(self.target_offset_m) < self.settled_m

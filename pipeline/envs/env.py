@@ -78,7 +78,7 @@ def collision_record(collision, ego: str, sumo) -> dict:
 
 
 class RoadsynthEnv(gym.Env):
-    """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours", "signal") (pipeline.envs.features);
+    """One ego in one SUMO scenario. Observation: Dict("ego", "neighbours", "signal", "path") (pipeline.envs.features);
     action: Box(2,) float32 (longitudinal, lateral) acceleration, normalised or in m/s^2 (EnvOptions).
 
     Args:
@@ -153,6 +153,7 @@ class RoadsynthEnv(gym.Env):
         self._sumo = None
         self.ego_id = ""
         self._pose: tuple[float, float, float] | None = None
+        self._path = np.zeros((0, 2))
         # SUMO searches lanes within this radius of the moved ego (default 100 m): the ego moves at most
         # max_speed x dt a step, so a few metres beyond that is enough, and the search is the step's main cost.
         self._match_m = o.max_speed_mps * step + 10.0
@@ -186,6 +187,11 @@ class RoadsynthEnv(gym.Env):
         sumo.vehicle.setLaneChangeMode(ego, 0)
         self._vclass = sumo.vehicle.getVehicleClass(ego)
         self._lane_ok: dict[str, bool] = {}
+        self._lane_shapes: dict[str, tuple[np.ndarray, float]] = {}
+        self._ego_width_m = float(sumo.vehicle.getWidth(ego))
+        # The persons around the ego, for the "path" row (features.path_row).
+        sumo.vehicle.subscribeContext(ego, features.CMD_GET_PERSON_VARIABLE, self.options.neighbour_range_m,
+                                      features.PERSON_CONTEXT_VARS)
         if self.options.nearby_k > 0:
             # Collecting every vehicle in range each step costs about as much as the rest of the features: only
             # when "nearby" asks for it (the slots then read their vehicles from it too).
@@ -319,6 +325,11 @@ class RoadsynthEnv(gym.Env):
         require_sumo(self._owner)
         return self._sumo.vehicle.getLength(self.ego_id)
 
+    def ego_width_m(self) -> float:
+        """The ego's width (the "path" row's corridor is as wide, plus a person's reach on each side)."""
+        require_sumo(self._owner)
+        return self._ego_width_m
+
     def ego_height_m(self) -> float:
         """The ego's height as its sensors' frame has it: the ego frame's origin (its box centre) lies half of it above
         the road."""
@@ -440,6 +451,50 @@ class RoadsynthEnv(gym.Env):
             self._lane_ok[lane] = self._vclass not in self._sumo.lane.getDisallowed(lane)
         return self._lane_ok[lane]
 
+    def path_xy(self) -> np.ndarray:
+        """(N, 2) world vertices of the ego's path as of the last observation: its front bumper, then the centre
+        lines of the lanes its route takes, up to ``neighbour_range_m`` (features.path_polyline; map knowledge);
+        empty before the first reset."""
+        self._require_open("path_xy")
+        return self._path
+
+    def _lane_shape(self, lane: str) -> tuple[np.ndarray, float]:
+        if lane not in self._lane_shapes:
+            self._lane_shapes[lane] = (np.array(self._sumo.lane.getShape(lane), np.float64).reshape(-1, 2),
+                                       float(self._sumo.lane.getLength(lane)))
+        return self._lane_shapes[lane]
+
+    def _path_polyline(self) -> np.ndarray:
+        sumo, ego, reach = self._sumo, self.ego_id, self.options.neighbour_range_m
+        shape, length = self._lane_shape(sumo.vehicle.getLaneID(ego))
+        shapes, ahead = [shape], length - sumo.vehicle.getLanePosition(ego)
+        for link in sumo.vehicle.getNextLinks(ego):  # (lane, prio, open, foe, via lane, state, direction, length)
+            if ahead >= reach:
+                break
+            for lane in (link[4], link[0]):
+                if lane:
+                    shape, length = self._lane_shape(lane)
+                    shapes.append(shape)
+                    ahead += length
+        return features.path_polyline(sumo.vehicle.getPosition(ego), shapes, reach)
+
+    def _people(self, context: dict[str, dict[int, object]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M, 2) positions and velocities of the persons on foot in the ego's context subscription, by id, and (M,)
+        whether each is on the carriageway (a lane the ego may drive on) or a crossing."""
+        ids = sorted(pid for pid, values in context.items()
+                     if features.VAR_VEHICLE in values and not values[features.VAR_VEHICLE])
+        if not ids:
+            return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0, bool)
+        values = np.array([(*context[p][features.VAR_POSITION], context[p][features.VAR_ANGLE],
+                            context[p][features.VAR_SPEED]) for p in ids], np.float64)
+        yaw = np.radians(90.0 - values[:, 2])
+        # A person who stands (a stop, not a walk) has no lane, only an edge: on a crossing, or taken as off the road.
+        lanes = [str(context[p][features.VAR_LANE_ID]) for p in ids]
+        edges = [str(context[p][features.VAR_ROAD_ID]) for p in ids]
+        on_road = np.array([features.is_crossing(lane or edge) or (bool(lane) and self._drivable(lane))
+                            for lane, edge in zip(lanes, edges, strict=True)], bool)
+        return values[:, :2], values[:, 3:4] * np.column_stack([np.cos(yaw), np.sin(yaw)]), on_road
+
     def _observe(self) -> dict[str, np.ndarray]:
         sumo, ego = self._sumo, self.ego_id
         lane_yaw = self._lane_yaw()
@@ -449,12 +504,19 @@ class RoadsynthEnv(gym.Env):
         ego_row = np.array([self._speed, self._accel, sumo.vehicle.getLaneIndex(ego),
                             sumo.vehicle.getLateralLanePosition(ego), heading_rel, self._route_left or 0.0])
         space = self.observation_space
-        context = sumo.vehicle.getContextSubscriptionResults(ego) if self.options.nearby_k > 0 else {}
+        # Both context subscriptions' results in one dict: the persons' entries (features.VAR_VEHICLE) apart.
+        results = sumo.vehicle.getContextSubscriptionResults(ego)
+        context = {vid: values for vid, values in results.items() if features.VAR_VEHICLE not in values}
+        self._path = self._path_polyline()
+        people_xy, people_velocity, on_road = self._people(results)
         obs = {
             "ego": np.clip(ego_row, space["ego"].low, space["ego"].high).astype(np.float32),
             "neighbours": features.neighbour_rows(sumo, ego, self._speed, lane_yaw, self.options.neighbour_range_m,
                                                   context, space["neighbours"]),
             "signal": features.signal_row(sumo.vehicle.getNextTLS(ego), self.options.neighbour_range_m),
+            "path": np.clip(features.path_row(self._path, people_xy, people_velocity, self._speed,
+                                              0.5 * self._ego_width_m, on_road=on_road),
+                            space["path"].low, space["path"].high),
         }
         if "nearby" in space.spaces:
             obs["nearby"] = features.nearby_rows(context, ego, (cx, cy), lane_yaw, self._speed,

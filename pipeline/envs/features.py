@@ -1,10 +1,17 @@
-"""Feature observations: the ego's lane-frame state and its six SUMO-Gym neighbour slots.
+"""Feature observations: the ego's lane-frame state, its six SUMO-Gym neighbour slots, the next traffic signal and
+the nearest person in its path.
 
 Conventions: SUMO gives a vehicle's front-bumper position and its angle in degrees clockwise from north;
 centres are front - length/2 x heading (DESIGN.md). s runs along the road, d to the left. The six slots are
 road-aligned through SUMO's lane model (gaps along the lanes, lane indices and lateral offsets). The "nearby"
 rows are centre-to-centre offsets in the ego's local lane frame (x along the lane direction at the ego):
 exact on straight roads; on a curve of radius R the error in d is about ds^2 / 2R.
+
+The ego's *path* is the centre line of the lanes its route takes from its front bumper on (its lane, then each
+junction's internal lane and the next lane, as SUMO's ``vehicle.getNextLinks`` lists them), map knowledge as the
+route rule's; the "path" row holds the nearest person who is in it, or walks into it before the ego gets there
+(:func:`path_row`): on a pedestrian crossing, or on the road. The lane-based slots hold vehicles only, so without
+it a driver on features could not see a person crossing its way (docs/closedloop.md).
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ NEIGHBOUR_SLOTS = ("left_leader", "leader", "right_leader", "left_follower", "fo
 NEIGHBOUR_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m")
 NEARBY_FIELDS = ("present", "ds_m", "dd_m", "dv_mps", "length_m", "width_m", "heading_rel_rad", "class_index")
 SIGNAL_FIELDS = ("present", "distance_m", "state")
+PATH_FIELDS = ("present", "distance_m", "lateral_m")
 # A signal's state: what its light for the ego's lane says (SUMO's link state letters).
 SIGNAL_GO, SIGNAL_AMBER, SIGNAL_STOP = 0, 1, 2
 _SIGNAL_STATE = {**dict.fromkeys("GgOo", SIGNAL_GO), **dict.fromkeys("yYu", SIGNAL_AMBER),
@@ -33,6 +41,13 @@ CMD_GET_VEHICLE_VARIABLE, VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_LENGTH, VAR_WI
 VAR_ROAD_ID, VAR_LANE_INDEX, VAR_MINGAP, VAR_LANEPOSITION_LAT = 0x50, 0x52, 0x4C, 0xB8
 CONTEXT_VARS = (VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_LENGTH, VAR_WIDTH, VAR_ROAD_ID, VAR_LANE_INDEX, VAR_MINGAP,
                 VAR_LANEPOSITION_LAT)
+# The ego's context subscription of the persons around it (the "path" row). SUMO merges the results of both
+# subscriptions into one dict by object id; a person's entry is the one with VAR_VEHICLE (the vehicle it rides in,
+# "" on foot), which CONTEXT_VARS does not ask for.
+CMD_GET_PERSON_VARIABLE, VAR_VEHICLE, VAR_LANE_ID = 0xAE, 0xC3, 0x51
+PERSON_CONTEXT_VARS = (VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_VEHICLE, VAR_LANE_ID, VAR_ROAD_ID)
+PERSON_RADIUS_M = 0.3  # a person's reach around their position, for the path's width and the distance to them
+PATH_HORIZON_S = 3.0  # a person counts who walks into the path within this time, or before the ego gets there
 # getNeighbors mode bits (traci's getLeftLeaders etc.): 1 = right (else left), 2 = leaders (else followers).
 _NEIGHBOUR_MODE = {"left_leader": 2, "right_leader": 3, "left_follower": 0, "right_follower": 1}
 MAX_LANES = 16
@@ -45,7 +60,8 @@ def observation_space(max_speed_mps: float, accel_min_mps2: float, accel_max_mps
                       range_m: float, nearby_k: int) -> spaces.Dict:
     """The Dict space: "ego" (6,) float32 in EGO_FIELDS order, "neighbours" (6, 6) float32 (NEIGHBOUR_SLOTS x
     NEIGHBOUR_FIELDS), "signal" (3,) float32 (SIGNAL_FIELDS: the next traffic signal on the ego's way within
-    ``range_m``) and, if ``nearby_k`` > 0, "nearby" (nearby_k, 8) float32 (the nearest vehicles, nearest first, x
+    ``range_m``), "path" (3,) float32 (PATH_FIELDS: the nearest person in the ego's path within ``range_m``,
+    :func:`path_row`) and, if ``nearby_k`` > 0, "nearby" (nearby_k, 8) float32 (the nearest vehicles, nearest first, x
     NEARBY_FIELDS); an absent row is all zeros (``present`` is the mask)."""
     ego_low = np.array([0.0, accel_min_mps2, 0.0, -MAX_LATERAL_M, -math.pi, 0.0], dtype=np.float32)
     ego_high = np.array([max_speed_mps, accel_max_mps2, MAX_LANES - 1, MAX_LATERAL_M, math.pi, MAX_ROUTE_M],
@@ -58,6 +74,8 @@ def observation_space(max_speed_mps: float, accel_min_mps2: float, accel_max_mps
         "neighbours": spaces.Box(np.tile(row_low, (n, 1)), np.tile(row_high, (n, 1)), dtype=np.float32),
         "signal": spaces.Box(np.zeros(3, np.float32), np.array([1.0, range_m, SIGNAL_STOP], np.float32),
                              dtype=np.float32),
+        "path": spaces.Box(np.array([0.0, 0.0, -MAX_LATERAL_M], np.float32),
+                           np.array([1.0, range_m, MAX_LATERAL_M], np.float32), dtype=np.float32),
     }
     if nearby_k > 0:
         near_low = np.append(row_low, [-math.pi, 0.0]).astype(np.float32)
@@ -176,4 +194,100 @@ def signal_row(next_signals: list[tuple], range_m: float) -> np.ndarray:
                                  f"({''.join(sorted(_SIGNAL_STATE))})")
             row[:] = 1.0, distance, _SIGNAL_STATE[state]
             break
+    return row
+
+
+def path_polyline(start_xy: tuple[float, float], shapes: list[np.ndarray], range_m: float) -> np.ndarray:
+    """(N, 2) float64 vertices of the ego's path: ``start_xy`` (its front bumper) and then the lane centre lines
+    ``shapes`` in driving order ((K, 2) each; the first cut at the point nearest the start, so it begins where the
+    ego is), until ``range_m`` of path; a gap between two shapes (a junction's internal lanes SUMO does not list) is
+    crossed in a straight line."""
+    out = [np.asarray(start_xy, np.float64).reshape(1, 2)]
+    length = 0.0
+    for k, shape in enumerate(shapes):
+        shape = np.asarray(shape, np.float64).reshape(-1, 2)
+        if k == 0 and len(shape) >= 2:
+            seg = project_on_path(shape, out[0])[3]
+            shape = shape[int(seg[0]) + 1:]
+        for point in shape:
+            step = float(np.hypot(*(point - out[-1][0])))
+            if step < 1e-6:
+                continue
+            if length + step >= range_m:
+                out.append((out[-1][0] + (point - out[-1][0]) * ((range_m - length) / step)).reshape(1, 2))
+                return np.concatenate(out)
+            out.append(point.reshape(1, 2))
+            length += step
+    return np.concatenate(out)
+
+
+def project_on_path(path_xy: np.ndarray, points_xy: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each of the (M, 2) points on the (N, 2) polyline, N >= 2: (s along it from its start, d its signed distance,
+    left positive, whether its nearest point lies within the path (not at its start or end vertex, from behind or
+    beyond), the index of the nearest segment), nearest segment first by distance, then by order."""
+    path_xy = np.asarray(path_xy, np.float64)
+    points_xy = np.asarray(points_xy, np.float64).reshape(-1, 2)
+    a, b = path_xy[:-1], path_xy[1:]
+    ab = b - a
+    seg_len = np.hypot(ab[:, 0], ab[:, 1])
+    start_s = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
+    ap = points_xy[:, None, :] - a[None, :, :]
+    t = np.clip((ap * ab[None]).sum(axis=2) / np.maximum(seg_len, 1e-12)[None] ** 2, 0.0, 1.0)
+    near = a[None] + t[..., None] * ab[None]
+    dist = np.hypot(points_xy[:, None, 0] - near[..., 0], points_xy[:, None, 1] - near[..., 1])
+    seg = np.argmin(dist, axis=1)
+    rows = np.arange(len(points_xy))
+    tt = t[rows, seg]
+    cross = ab[seg, 0] * ap[rows, seg, 1] - ab[seg, 1] * ap[rows, seg, 0]
+    d = np.copysign(dist[rows, seg], cross)
+    s = start_s[seg] + tt * seg_len[seg]
+    inside = ~(((seg == 0) & (tt <= 0.0)) | ((seg == len(ab) - 1) & (tt >= 1.0)))
+    return s, d, inside, seg
+
+
+def is_crossing(road: str) -> bool:
+    """Whether a SUMO edge or lane id is a pedestrian crossing's (netconvert names them ":JUNCTION_cN", their lanes
+    ":JUNCTION_cN_0"; walking areas ":JUNCTION_wN")."""
+    if not road.startswith(":"):
+        return False
+    parts = road.split("_")
+    return any(p[:1] == "c" and p[1:].isdigit() for p in parts[-2:]) and len(parts) >= 2
+
+
+def path_row(path_xy: np.ndarray, people_xy: np.ndarray, people_velocity: np.ndarray, ego_speed_mps: float,
+             half_width_m: float, horizon_s: float = PATH_HORIZON_S, radius_m: float = PERSON_RADIUS_M,
+             on_road: np.ndarray | None = None) -> np.ndarray:
+    """The "path" row (PATH_FIELDS): the nearest of the (M, 2) people (world positions, velocities in m/s) who is in
+    the ego's path (:func:`path_polyline`), or walks into it, straight on at their velocity, before the ego gets to
+    them at its speed (at least 1 m/s) or within ``horizon_s``, whichever is first: within ``half_width_m`` (half the
+    ego's width) + ``radius_m`` of the path's centre line, at some place along it between the front bumper and its
+    end. ``on_road`` (M,) bool: whether each stands on the carriageway or a crossing now (None: all do); one who
+    does not (on a sidewalk or a junction's walking area, which a turning lane's centre line may pass within a metre
+    of) counts only once walking into the path, not for standing where they are. distance_m: along the path from
+    the front bumper to the person's reach (their place along it, less ``radius_m``, at least 0) where they first
+    enter it; lateral_m: their offset from the centre line then. All zeros when nobody is (a path shorter than 2
+    vertices holds nobody)."""
+    row = np.zeros(len(PATH_FIELDS), np.float32)
+    people_xy = np.asarray(people_xy, np.float64).reshape(-1, 2)
+    if len(people_xy) == 0 or len(path_xy) < 2:
+        return row
+    velocity = np.asarray(people_velocity, np.float64).reshape(-1, 2)
+    s_now, _d, _inside, _seg = project_on_path(path_xy, people_xy)
+    until = np.minimum(horizon_s, np.maximum(s_now, 0.0) / max(ego_speed_mps, 1.0))
+    steps = np.linspace(0.0, 1.0, 7)
+    samples = people_xy[:, None, :] + (until[:, None] * steps[None, :])[..., None] * velocity[:, None, :]
+    s, d, inside = (v.reshape(len(people_xy), len(steps)) for v in project_on_path(path_xy, samples.reshape(-1, 2))[:3])
+    hit = inside & (np.abs(d) < half_width_m + radius_m) & (s > 0.0)
+    if on_road is not None:
+        hit[:, 0] &= np.asarray(on_road, bool).reshape(-1)
+        hit[:, 1:] &= np.hypot(velocity[:, 0], velocity[:, 1])[:, None] > 0.0
+    entered = hit.any(axis=1)
+    if not entered.any():
+        return row
+    first = np.argmax(hit, axis=1)  # the first sample in the path, per person
+    idx = np.flatnonzero(entered)
+    distance = np.maximum(s[idx, first[idx]] - radius_m, 0.0)
+    k = int(np.argmin(distance))  # ties: the first listed (callers list people by id)
+    row[:] = 1.0, distance[k], d[idx[k], first[idx[k]]]
     return row

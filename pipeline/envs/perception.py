@@ -26,7 +26,13 @@ Observation entries added: ``detections`` (K, 6) float32 [x1, y1, x2, y2, score,
 ``detections_mask`` (K,) int8, ``detection_range_m`` and ``detection_bearing_rad`` (K,) float32 (ego frame; 0 where
 ``detection_ranged`` (K,) int8 is 0: no LiDAR point fell in the box, or no detection). Only detections of the
 categories in ``categories`` (default: COCO's car, bus, truck, motorcycle, bicycle) are kept, and only ranged ones
-are tracked.
+are tracked; :class:`PerceivedFeatures` keeps people too.
+
+People are not tracked: :class:`PerceivedFeatures` fills the "path" row (:func:`pipeline.envs.features.path_row`)
+with the nearest ranged person detection scoring at least ``person_score`` whose estimated place lies in the ego's
+path (the route's lanes, map knowledge), once some person has been seen there ``person_hits`` steps on end (a
+single weak box on a pole does not stop the car). Unlike the ground truth's row it has no velocity, so it holds
+people who are in the path, not those about to walk into it.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from pipeline.envs.features import path_row
 from pipeline.envs.tracker import (
     Detections,
     EgoPose,
@@ -47,10 +54,13 @@ from pipeline.envs.tracker import (
 )
 
 ROAD_USER_CATEGORIES = (2, 3, 4, 6, 8)  # COCO: bicycle, car, motorcycle, bus, truck
+PERSON_CATEGORY = 1  # COCO: person
 # Typical (length, width) by COCO category, for tracks whose size the camera does not measure.
-TYPICAL_SIZE_M = {2: (1.8, 0.6), 3: (4.5, 1.8), 4: (2.1, 0.8), 6: (12.0, 2.55), 8: (8.0, 2.5)}
+TYPICAL_SIZE_M = {1: (0.5, 0.5), 2: (1.8, 0.6), 3: (4.5, 1.8), 4: (2.1, 0.8), 6: (12.0, 2.55), 8: (8.0, 2.5)}
 # Typical height (m) by COCO category, riders included, for the range gate (a box's height -> its depth).
-TYPICAL_HEIGHT_M = {2: 1.7, 3: 1.5, 4: 1.4, 6: 3.0, 8: 3.0}
+TYPICAL_HEIGHT_M = {1: 1.7, 2: 1.7, 3: 1.5, 4: 1.4, 6: 3.0, 8: 3.0}
+PERSON_SCORE = 0.3  # a person detection this confident, in the path two steps on end, fills the "path" row
+PERSON_HITS = 2
 RANGE_GATE = (0.4, 2.5)  # the LiDAR points that range a box lie at this share of the depth its height implies
 # LiDAR returns lower than this above the road are the road's (ground removal): they range no box.
 GROUND_CLEARANCE_M = 0.3
@@ -176,6 +186,8 @@ class PerceivedFeatures(gym.Wrapper):
         ground_clearance_m: LiDAR returns lower than this above the road are the road's and range no box (ground
             removal, as a perception stack segments the ground before it ranges or clusters; without it a weak
             detection on a road marking is ranged on the road and tracked); None or 0: no ground removal.
+        person_score, person_hits: a person detection scoring at least ``person_score`` in the ego's path fills the
+            "path" row once people have been seen in the path ``person_hits`` steps on end (module docstring).
 
     ``observed_slots``: the neighbour slots this perception can fill at all. One front camera sees the leaders of
     the three lanes, never the followers: their slots stay empty whatever is behind, and an agent must not read
@@ -187,7 +199,8 @@ class PerceivedFeatures(gym.Wrapper):
 
     def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
                  max_detections: int = 32, range_gate: tuple[float, float] | None = RANGE_GATE,
-                 ground_clearance_m: float | None = GROUND_CLEARANCE_M) -> None:
+                 ground_clearance_m: float | None = GROUND_CLEARANCE_M, person_score: float = PERSON_SCORE,
+                 person_hits: int = PERSON_HITS) -> None:
         super().__init__(env)
         inner = env.unwrapped
         live = getattr(inner, "sensors", None)
@@ -195,8 +208,14 @@ class PerceivedFeatures(gym.Wrapper):
             raise ValueError('PerceivedFeatures needs an env made with sensors=["camera", "lidar"]')
         if not isinstance(max_detections, int) or max_detections < 1:
             raise ValueError(f"max_detections: expected an integer >= 1, got {max_detections!r}")
-        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount, range_gate=range_gate,
+        if not (isinstance(person_score, (int, float)) and 0.0 <= person_score <= 1.0):
+            raise ValueError(f"person_score: expected a score in [0, 1], got {person_score!r}")
+        if isinstance(person_hits, bool) or not isinstance(person_hits, int) or person_hits < 1:
+            raise ValueError(f"person_hits: expected an integer >= 1, got {person_hits!r}")
+        self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount,
+                                     categories=(PERSON_CATEGORY, *ROAD_USER_CATEGORIES), range_gate=range_gate,
                                      ground_clearance_m=ground_clearance_m or 0.0)
+        self.person_score, self.person_hits, self._person_streak = float(person_score), person_hits, 0
         self.ground_removal = bool(ground_clearance_m)
         params = tracker if tracker is not None else TrackerParams()
         self.tracker = Tracker(TrackerParams(**{**params.__dict__, "dt_s": inner.sim.step_length_s}))
@@ -214,6 +233,7 @@ class PerceivedFeatures(gym.Wrapper):
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)
         self.tracker.reset()
+        self._person_streak = 0
         # The road lies half the ego's height below its frame's origin (the rig's calibration to the ground).
         self.perception.ground_z_m = -0.5 * self.env.unwrapped.ego_height_m() if self.ground_removal else None
         return self._perceive(obs, info)
@@ -226,20 +246,25 @@ class PerceivedFeatures(gym.Wrapper):
     def _perceive(self, obs: dict, info: dict) -> tuple[dict, dict]:
         frame = self.perception(obs["camera"], obs["lidar"][:, :3], obs["lidar_mask"])
         ranged = np.isfinite(frame.position_m).all(axis=1)
+        person = frame.category_ids == PERSON_CATEGORY
         heading, speed = float(obs["ego"][4]), float(obs["ego"][0])
         inner = self.env.unwrapped
         pose = EgoPose.moving(*inner.ego_pose(), speed)  # the tracks live in the world frame (tracker.py)
-        sizes = np.array([TYPICAL_SIZE_M.get(int(c), (4.5, 1.8)) for c in frame.category_ids[ranged]],
+        sizes = np.array([TYPICAL_SIZE_M.get(int(c), (4.5, 1.8)) for c in frame.category_ids],
                          np.float64).reshape(-1, 2)
-        centres = centre_from_surface(frame.position_m[ranged], sizes[:, 0])
-        tracks = self.tracker.update(Detections(centres, frame.boxes_px[ranged], frame.category_ids[ranged], sizes,
-                                                frame.scores[ranged]), pose)
+        centres = centre_from_surface(frame.position_m, sizes[:, 0])
+        vehicles = ranged & ~person
+        tracks = self.tracker.update(Detections(centres[vehicles], frame.boxes_px[vehicles],
+                                                frame.category_ids[vehicles], sizes[vehicles],
+                                                frame.scores[vehicles]), pose)
         space = inner.observation_space["neighbours"]
         rows = track_neighbour_rows(lane_frame_tracks(tracks, pose, heading, speed), float(obs["ego"][3]),
                                     inner.lane_width_m(), float(space.high[0, 1]))
         out = dict(obs)
-        info = {**info, "ground_truth": {"neighbours": obs["neighbours"]}, "tracks": len(tracks)}
+        info = {**info, "ground_truth": {"neighbours": obs["neighbours"], "path": obs["path"]}, "tracks": len(tracks)}
         out["neighbours"] = np.clip(rows, space.low, space.high).astype(np.float32)
+        people = ranged & person & (frame.scores >= self.person_score)
+        out["path"] = self._path_row(pose.to_fixed(centres[people]), inner)
         n = min(len(frame.scores), self.k)
         detections = np.zeros((self.k, 6), np.float32)
         detections[:n] = np.column_stack([frame.boxes_px, frame.scores, frame.category_ids])[:n]
@@ -252,6 +277,17 @@ class PerceivedFeatures(gym.Wrapper):
         bearing[:n] = np.where(ranged[:n], frame.bearing_rad[:n], 0.0)
         out["detection_range_m"], out["detection_bearing_rad"], out["detection_ranged"] = rng, bearing, ranged_k
         return out, info
+
+
+    def _path_row(self, people_xy: np.ndarray, inner) -> np.ndarray:
+        """The perceived "path" row from the (M, 2) world places of this step's confident person detections: the
+        nearest in the ego's path (features.path_row without velocities), held back until people have been seen in
+        the path ``person_hits`` steps on end."""
+        row = path_row(inner.path_xy(), people_xy, np.zeros_like(people_xy), 0.0, 0.5 * inner.ego_width_m())
+        self._person_streak = self._person_streak + 1 if row[0] else 0
+        space = inner.observation_space["path"]
+        return (np.clip(row, space.low, space.high) if self._person_streak >= self.person_hits
+                else np.zeros_like(row))
 
 
 def detector_from(spec):

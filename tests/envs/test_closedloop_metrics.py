@@ -77,7 +77,8 @@ def test_compare_gives_the_mean_difference_with_a_bootstrap_interval():
            "first_tracked_range_m": 80.0, "steady_tracked_range_m": 80.0, "leader_held_0_20m": 1.0,
            "leader_held_20_40m": 1.0,
            "leader_held_40_60m": 1.0, "leader_held_60_100m": 1.0, "mean_speed_mps": 25.0, "progress_m": 750.0,
-           "slot_missed_share": 0.0, "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0}
+           "slot_missed_share": 0.0, "slot_false_share": 0.0, "slot_ds_error_m": 0.0, "slot_dv_error_mps": 0.0,
+           "person_steps_share": 0.0, "person_missed_share": math.nan, "person_false_share": math.nan}
           for _ in range(5)]
     perceived = [{**m, "first_tracked_range_m": 80.0 - d, "min_ttc_s": math.inf if d == 30 else 2.0}
                  for m, d in zip(gt, (10, 20, 30, 40, 50), strict=True)]
@@ -137,3 +138,22 @@ def test_steady_tracked_range_needs_the_leader_held_for_a_second():
     # A run across a change of leader does not count for the new one.
     switch = [("a", 20.0, 0.0, True), ("b", 35.0, 0.0, True), ("b", 34.0, 0.0, False)]
     assert math.isnan(episode_metrics(_log([10.0] * 3, leader=switch, dt=0.5))["steady_tracked_range_m"])
+
+
+def test_the_person_in_the_path_is_scored_as_the_leader_slots_are():
+    log = EpisodeLog.empty(0.1)
+    present, absent = np.array([1.0, 10.0, 0.0]), np.zeros(3)
+    # 10 steps: a person in the true path on 4 (the observation holds 3 of them), and 2 false ones.
+    steps = [(present, present)] * 3 + [(present, absent)] + [(absent, present)] * 2 + [(absent, absent)] * 4
+    for truth, seen in steps:
+        log.add(10.0, 0.0, "", math.nan, math.nan, False)
+        log.add_path(truth, seen)
+    m = episode_metrics(log)
+    assert m["person_steps_share"] == pytest.approx(0.4)
+    assert m["person_missed_share"] == pytest.approx(0.25)
+    assert m["person_false_share"] == pytest.approx(0.4)
+    quiet = EpisodeLog.empty(0.1)
+    quiet.add(10.0, 0.0, "", math.nan, math.nan, False)
+    quiet.add_path(absent, absent)
+    q = episode_metrics(quiet)
+    assert q["person_steps_share"] == 0.0 and np.isnan(q["person_missed_share"]) and np.isnan(q["person_false_share"])

@@ -73,10 +73,11 @@ def test_observations_are_finite_and_inside_the_declared_spaces():
         observations, rewards = rollout(env, seed=3, steps=30)
     finally:
         env.close()
-    assert set(env.observation_space.spaces) == {"ego", "neighbours", "signal", "nearby"}
+    assert set(env.observation_space.spaces) == {"ego", "neighbours", "signal", "path", "nearby"}
     for obs in observations:
         assert obs in env.observation_space
         assert (obs["signal"] == 0).all()  # the highway has no traffic signal
+        assert (obs["path"] == 0).all()  # nor people
         assert obs["ego"].dtype == obs["neighbours"].dtype == np.float32
         assert np.isfinite(obs["ego"]).all() and np.isfinite(obs["neighbours"]).all()
         absent = obs["neighbours"][:, 0] == 0
