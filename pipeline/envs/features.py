@@ -48,6 +48,7 @@ CMD_GET_PERSON_VARIABLE, VAR_VEHICLE, VAR_LANE_ID = 0xAE, 0xC3, 0x51
 PERSON_CONTEXT_VARS = (VAR_POSITION, VAR_ANGLE, VAR_SPEED, VAR_VEHICLE, VAR_LANE_ID, VAR_ROAD_ID)
 PERSON_RADIUS_M = 0.3  # a person's reach around their position, for the path's width and the distance to them
 PATH_HORIZON_S = 3.0  # a person counts who walks into the path within this time, or before the ego gets there
+_WALK_STEPS = np.linspace(0.0, 1.0, 7)  # where along that time a walking person's place is tested
 # getNeighbors mode bits (traci's getLeftLeaders etc.): 1 = right (else left), 2 = leaders (else followers).
 _NEIGHBOUR_MODE = {"left_leader": 2, "right_leader": 3, "left_follower": 0, "right_follower": 1}
 MAX_LANES = 16
@@ -273,15 +274,21 @@ def path_row(path_xy: np.ndarray, people_xy: np.ndarray, people_velocity: np.nda
     if len(people_xy) == 0 or len(path_xy) < 2:
         return row
     velocity = np.asarray(people_velocity, np.float64).reshape(-1, 2)
-    s_now, _d, _inside, _seg = project_on_path(path_xy, people_xy)
+    s_now, d_now, _inside, _seg = project_on_path(path_xy, people_xy)
     until = np.minimum(horizon_s, np.maximum(s_now, 0.0) / max(ego_speed_mps, 1.0))
-    steps = np.linspace(0.0, 1.0, 7)
-    samples = people_xy[:, None, :] + (until[:, None] * steps[None, :])[..., None] * velocity[:, None, :]
-    s, d, inside = (v.reshape(len(people_xy), len(steps)) for v in project_on_path(path_xy, samples.reshape(-1, 2))[:3])
+    # Only those who can reach the corridor in that time are followed along their walk (most people are far off).
+    speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    near = np.flatnonzero(np.abs(d_now) < half_width_m + radius_m + speed * until + 1e-9)
+    if len(near) == 0:
+        return row
+    people_xy, velocity, until, speed = people_xy[near], velocity[near], until[near], speed[near]
+    samples = people_xy[:, None, :] + (until[:, None] * _WALK_STEPS[None, :])[..., None] * velocity[:, None, :]
+    s, d, inside = (v.reshape(len(near), len(_WALK_STEPS))
+                    for v in project_on_path(path_xy, samples.reshape(-1, 2))[:3])
     hit = inside & (np.abs(d) < half_width_m + radius_m) & (s > 0.0)
     if on_road is not None:
-        hit[:, 0] &= np.asarray(on_road, bool).reshape(-1)
-        hit[:, 1:] &= np.hypot(velocity[:, 0], velocity[:, 1])[:, None] > 0.0
+        hit[:, 0] &= np.asarray(on_road, bool).reshape(-1)[near]
+        hit[:, 1:] &= speed[:, None] > 0.0
     entered = hit.any(axis=1)
     if not entered.any():
         return row
