@@ -1,6 +1,8 @@
 """The "path" row (pipeline/envs/features.py): the nearest person in the ego's path, in closed form; the reference
 driver yielding to it; and in the real urban scenario, a person on the crossing the ego's route takes stops the
-reference agent short of them, where a driver blind to the row runs them down (SUMO's own collision record)."""
+reference agent short of them, where a driver blind to the row runs them down (SUMO's own collision record); the
+perceived row (pipeline/envs/perception.py) from LiDAR-ranged boxes of the labelled people, against the ground
+truth's."""
 
 from __future__ import annotations
 
