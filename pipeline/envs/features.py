@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from pipeline.core.classes import ObjectClass
+from pipeline.world.polygons import cumulative_length, interpolate
 
 EGO_FIELDS = ("speed_mps", "accel_mps2", "lane_index", "lateral_offset_m", "heading_rel_rad", "route_left_m")
 NEIGHBOUR_SLOTS = ("left_leader", "leader", "right_leader", "left_follower", "follower", "right_follower")
@@ -203,23 +204,20 @@ def path_polyline(start_xy: tuple[float, float], shapes: list[np.ndarray], range
     ``shapes`` in driving order ((K, 2) each; the first cut at the point nearest the start, so it begins where the
     ego is), until ``range_m`` of path; a gap between two shapes (a junction's internal lanes SUMO does not list) is
     crossed in a straight line."""
-    out = [np.asarray(start_xy, np.float64).reshape(1, 2)]
-    length = 0.0
+    start = np.asarray(start_xy, np.float64).reshape(1, 2)
+    pieces = [start]
     for k, shape in enumerate(shapes):
         shape = np.asarray(shape, np.float64).reshape(-1, 2)
         if k == 0 and len(shape) >= 2:
-            seg = project_on_path(shape, out[0])[3]
-            shape = shape[int(seg[0]) + 1:]
-        for point in shape:
-            step = float(np.hypot(*(point - out[-1][0])))
-            if step < 1e-6:
-                continue
-            if length + step >= range_m:
-                out.append((out[-1][0] + (point - out[-1][0]) * ((range_m - length) / step)).reshape(1, 2))
-                return np.concatenate(out)
-            out.append(point.reshape(1, 2))
-            length += step
-    return np.concatenate(out)
+            shape = shape[int(project_on_path(shape, start)[3][0]) + 1:]
+        pieces.append(shape)
+    points = np.concatenate(pieces)
+    points = points[np.concatenate([[True], np.hypot(*np.diff(points, axis=0).T) >= 1e-6])]
+    arc = cumulative_length(points)
+    if len(points) < 2 or arc[-1] < range_m:
+        return points
+    end, _direction = interpolate(points, np.array([range_m]))
+    return np.concatenate([points[arc < range_m], end])
 
 
 def project_on_path(path_xy: np.ndarray, points_xy: np.ndarray
