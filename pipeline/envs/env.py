@@ -39,10 +39,11 @@ from pipeline.core.config.resolve import resolve_scenario
 from pipeline.envs import features
 from pipeline.envs.options import EnvOptions, RewardWeights
 from pipeline.envs.reward import reward_terms
+from pipeline.envs.walkways import Walkways
 from pipeline.traffic import networks
 from pipeline.traffic.demand import Demand, build_demand, network_bus_stops
 from pipeline.traffic.parking import place_parked, with_parked
-from pipeline.traffic.roadgeometry import write_road_geometry
+from pipeline.traffic.roadgeometry import load_road_geometry, read_network_geometry, write_road_geometry
 from pipeline.traffic.simulation import (
     RunRecorder,
     choose_ego,
@@ -108,6 +109,7 @@ class RoadsynthEnv(gym.Env):
             raise ValueError(f"dt: expected the seconds of one step, a number in (0, 1], got {dt!r}")
         self._closed = False
         self._work: Path | None = None
+        self._walkways: Walkways | None = None  # built on first use (on_road) from the network's road geometry
         self._work_cleanup: weakref.finalize | None = None
         self.render_mode = render_mode
         self.options = _options(options, option_kwargs)
@@ -314,6 +316,7 @@ class RoadsynthEnv(gym.Env):
         if self._work_cleanup is not None:
             self._work_cleanup()
         self._work, self._work_cleanup, self._net_file, self._demands, self._classes = None, None, None, {}, {}
+        self._walkways = None
         self._closed = True
 
     def _require_open(self, call: str) -> None:
@@ -457,6 +460,18 @@ class RoadsynthEnv(gym.Env):
         empty before the first reset."""
         self._require_open("path_xy")
         return self._path
+
+    def on_road(self, xy: np.ndarray) -> np.ndarray:
+        """(M,) bool for (M, 2) world places: whether each lies on the carriageway or a crossing rather than a
+        sidewalk or a junction's walking area, from the network's road geometry (:class:`walkways.Walkways`; map
+        knowledge, for places estimated from the sensors: the ground truth asks SUMO which lane a person is on)."""
+        self._require_open("on_road")
+        if self._walkways is None:
+            roads = self._work / "roads"
+            geometry = (load_road_geometry(roads) if (roads / "lanes.parquet").is_file()
+                        else read_network_geometry(self._net_file))
+            self._walkways = Walkways.from_geometry(geometry)
+        return self._walkways.on_road(xy)
 
     def _lane_shape(self, lane: str) -> tuple[np.ndarray, float]:
         if lane not in self._lane_shapes:

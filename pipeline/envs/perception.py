@@ -30,9 +30,11 @@ are tracked; :class:`PerceivedFeatures` keeps people too.
 
 People are not tracked: :class:`PerceivedFeatures` fills the "path" row (:func:`pipeline.envs.features.path_row`)
 with the nearest ranged person detection scoring at least ``person_score`` whose estimated place lies in the ego's
-path (the route's lanes, map knowledge), once some person has been seen there ``person_hits`` steps on end (a
-single weak box on a pole does not stop the car). Unlike the ground truth's row it has no velocity, so it holds
-people who are in the path, not those about to walk into it.
+path (the route's lanes, map knowledge) on the carriageway or a crossing, by the road geometry's map of sidewalks,
+walking areas and crossings (:mod:`pipeline.envs.walkways`; the ground truth asks SUMO which lane a person is on):
+people waiting on a corner beside a turning lane do not stop the car. The row is filled once some person has been
+seen there ``person_hits`` steps on end (a single weak box on a pole does not stop the car). Unlike the ground
+truth's row it has no velocity, so it holds people who are in the path, not those about to walk into it.
 """
 
 from __future__ import annotations
@@ -281,9 +283,11 @@ class PerceivedFeatures(gym.Wrapper):
 
     def _path_row(self, people_xy: np.ndarray, inner) -> np.ndarray:
         """The perceived "path" row from the (M, 2) world places of this step's confident person detections: the
-        nearest in the ego's path (features.path_row without velocities), held back until people have been seen in
-        the path ``person_hits`` steps on end."""
-        row = path_row(inner.path_xy(), people_xy, np.zeros_like(people_xy), 0.0, 0.5 * inner.ego_width_m())
+        nearest standing in the ego's path on the carriageway or a crossing (features.path_row without velocities;
+        the map test of where each stands is the env's ``on_road``), held back until people have been seen in the
+        path ``person_hits`` steps on end."""
+        row = path_row(inner.path_xy(), people_xy, np.zeros_like(people_xy), 0.0, 0.5 * inner.ego_width_m(),
+                       on_road=inner.on_road(people_xy) if len(people_xy) else None)
         self._person_streak = self._person_streak + 1 if row[0] else 0
         space = inner.observation_space["path"]
         return (np.clip(row, space.low, space.high) if self._person_streak >= self.person_hits
