@@ -19,21 +19,24 @@ agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.
 - **Association**, each frame: predicted tracks against detections by the Hungarian method
   (:func:`scipy.optimize.linear_sum_assignment`) on a cost that is the smaller of 1 - IoU of the image boxes (where
   both have one) and the squared Mahalanobis distance of the position over the gate (chi-square, 2 degrees of
-  freedom, ``gate_probability``); a pair inside neither gate cannot be matched.
+  freedom, ``gate_probability``); a pair inside neither gate cannot be matched. ``iou_gate`` None: positions only
+  (people: a person's box cut to a sliver by an occluder keeps most of its IoU with the last one while the LiDAR
+  ranges it on the background 20 m behind, and a match by the box would move the track there).
 - **Confident and weak detections** (``birth_score``, 0 by default: every detection is confident), as ByteTrack
   does (Zhang et al., "ByteTrack: Multi-Object Tracking by Associating Every Detection Box", ECCV 2022): the tracks
   are first associated with the detections scoring at least ``birth_score``, then the tracks left over with the
   weaker ones; only a confident detection left over starts a track. A weak detection can keep a track alive (a car
   that fades into the dark or the fog) but never start one (glare, a far lamp, a shadow).
-- **Births and deaths**: an unmatched confident detection starts a tentative track (moving as the ego does, with
-  the uncertainty of ``birth_speed_std_mps``); it is confirmed after ``confirm_hits`` consecutive hits and dropped at
-  its first miss before that; a confirmed track coasts on its prediction through up to ``max_misses`` consecutive
-  misses and is dropped at the next. Only confirmed tracks are reported, so a detection that appears once never
-  becomes one, and, as SORT reports them (Bewley et al., "Simple Online and Realtime Tracking", ICIP 2016), only
-  while they have missed at most ``report_misses`` frames (0: matched in this one): a coasting track can take its
-  object back, but its prediction is not reported as a road user. In the city a parked car passed close by coasts
-  out of the camera's view on a velocity its last, cut-off boxes gave it, and reported, drifted into the ego's lane
-  as a leader closing at 10-40 m/s.
+- **Births and deaths**: an unmatched confident detection starts a tentative track (moving as the ego does, or at
+  rest with ``birth_with_ego`` False, as for people; with the uncertainty of ``birth_speed_std_mps``); it is
+  confirmed after ``confirm_hits`` consecutive hits and dropped at its first miss before that; a confirmed track
+  coasts on its prediction through up to ``max_misses`` consecutive misses and is dropped at the next. Only
+  confirmed tracks are reported, so a detection that appears once never becomes one, and, as SORT reports them
+  (Bewley et al., "Simple Online and Realtime Tracking", ICIP 2016), only while they have missed at most
+  ``report_misses`` frames (0: matched in this one): a coasting track can take its object back, but its prediction
+  is not reported as a road user. In the city a parked car passed close by coasts out of the camera's view on a
+  velocity its last, cut-off boxes gave it, and reported, drifted into the ego's lane as a leader closing at 10-40
+  m/s.
 
 Deterministic: track ids count up from 1 in the order tracks are born (detections in input order), and ties in
 the assignment resolve as scipy's solver does for a given matrix.
@@ -62,19 +65,23 @@ class TrackerParams:
     sigma_per_m: float = 0.02
     birth_speed_std_mps: float = 15.0
     gate_probability: float = 0.99
-    iou_gate: float = 0.1
+    iou_gate: float | None = 0.1
     confirm_hits: int = 3
     max_misses: int = 5
     report_misses: int = 0
     birth_score: float = 0.0
+    birth_with_ego: bool = True
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "accel_psd", "sigma_m", "birth_speed_std_mps"):
             check_number("TrackerParams", name, getattr(self, name))
         check_number("TrackerParams", "sigma_per_m", self.sigma_per_m, allow_low=True)
         check_number("TrackerParams", "gate_probability", self.gate_probability, high=1.0, allow_high=False)
-        check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
+        if self.iou_gate is not None:
+            check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
         check_number("TrackerParams", "birth_score", self.birth_score, high=1.0, allow_low=True)
+        if not isinstance(self.birth_with_ego, bool):
+            raise ValueError(f"TrackerParams.birth_with_ego: expected True or False, got {self.birth_with_ego!r}")
         for name, least in (("confirm_hits", 1), ("max_misses", 0), ("report_misses", 0)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < least:
@@ -210,7 +217,8 @@ class Tracker:
         costs = np.full((len(self.tracks), len(fixed)), UNMATCHABLE)
         if not len(self.tracks) or not len(fixed):
             return costs
-        ious = box_iou(np.array([t.box_px for t in self.tracks]), det.box_px)
+        ious = (box_iou(np.array([t.box_px for t in self.tracks]), det.box_px) if self.params.iou_gate is not None
+                else np.zeros((len(self.tracks), len(fixed))))
         gate = self.params.gate
         for i, t in enumerate(self.tracks):
             for j, z in enumerate(fixed):
@@ -220,7 +228,7 @@ class Tracker:
                 options = []
                 if d2 < gate:
                     options.append(d2 / gate)
-                if ious[i, j] >= self.params.iou_gate:
+                if self.params.iou_gate is not None and ious[i, j] >= self.params.iou_gate:
                     options.append(1.0 - ious[i, j])
                 if options:
                     costs[i, j] = min(options)
@@ -289,8 +297,10 @@ class Tracker:
         p = np.zeros((4, 4))
         p[:2, :2] = self._measurement_cov(range_m)
         p[2, 2] = p[3, 3] = self.params.birth_speed_std_mps ** 2
-        # Until measured, an object moves as the ego does (in its frame: at rest), the likeliest for road users ahead.
-        track = Track(self.next_id, np.array([z[0], z[1], pose.vx_mps, pose.vy_mps]), p, det.box_px[j].copy(),
+        # Until measured, a road user ahead moves as the ego does (in its frame: at rest), the likeliest for traffic;
+        # a person (birth_with_ego False) stands.
+        v = (pose.vx_mps, pose.vy_mps) if self.params.birth_with_ego else (0.0, 0.0)
+        track = Track(self.next_id, np.array([z[0], z[1], *v]), p, det.box_px[j].copy(),
                       int(det.class_id[j]), det.size_m[j].copy(), confirmed=self.params.confirm_hits <= 1)
         self.next_id += 1
         return track

@@ -20,6 +20,8 @@ from pipeline.envs.features import (
     path_row,
     project_on_path,
 )
+from pipeline.envs.perception import PERSON_CATEGORY, PERSON_TRACKER, perceived_path_row
+from pipeline.envs.tracker import Detections, Tracker
 
 # An L-shaped path: 20 m east along y = 0, then 20 m north along x = 20.
 L_PATH = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]])
@@ -80,6 +82,45 @@ def test_off_the_road_a_person_counts_only_once_walking_into_the_path():
     assert path_row(L_PATH, [[12.0, -1.0]], [[0.0, 0.0]], 5.0, HALF, on_road=[True])[0] == 1.0
     walking = path_row(L_PATH, [[12.0, -2.5]], [[0.0, 1.2]], 5.0, HALF, on_road=[False])
     assert walking[0] == 1.0 and abs(walking[2]) < HALF + PERSON_RADIUS_M
+
+
+def _tracked(places: np.ndarray, *, ego_speed: float, on_road=lambda xy: np.zeros(len(xy), bool)) -> list:
+    """Feed one person's places frame by frame (0.1 s apart, the ego at rest at the fixed frame's origin) to a
+    person tracker; the perceived path row after each frame."""
+    tracker = Tracker(PERSON_TRACKER)
+    rows = []
+    for place in places:
+        tracks = tracker.update(Detections(np.array([place]), np.full((1, 4), np.nan), np.array([PERSON_CATEGORY]),
+                                           np.array([[0.5, 0.5]])))
+        rows.append(perceived_path_row(tracks, L_PATH, HALF, ego_speed, on_road))
+    return rows
+
+
+def test_a_tracked_person_walking_off_the_road_fills_the_row_once_their_walk_is_known():
+    """Off the road (the map says so), a person 4 m beside the path 10 m ahead walks towards it at 1.4 m/s, the ego
+    at 5 m/s: not in the row while the track's velocity is unknown (born standing, 2 m/s of doubt), then in it, at
+    the place they will step in, long before they do (after 2.2 s)."""
+    t = np.arange(25) * 0.1
+    places = np.column_stack([np.full_like(t, 10.0), 4.0 - 1.4 * t])
+    rows = _tracked(places, ego_speed=5.0)
+    assert not rows[0].any() and not rows[1].any()  # one frame: no track; two: confirmed, but standing, off the road
+    first = next(k for k, row in enumerate(rows) if row[0])
+    assert 2 < first < 17  # filled once the speed is 3 standard deviations clear of 0, before they reach the corridor
+    assert places[first, 1] > HALF + PERSON_RADIUS_M + 0.5
+    for row in rows[first:]:
+        assert row[0] == 1.0 and row[1] == pytest.approx(10.0 - PERSON_RADIUS_M, abs=0.05)
+
+
+def test_a_tracked_person_standing_beside_the_path_never_fills_the_row_through_ranging_noise():
+    """Standing 1.5 m beyond the corridor's edge, 10 m ahead, ranged with 0.5 m of noise (the tracker's own model at
+    that range) for 20 s: the filtered speed never looks like a walk into the path (3 standard deviations)."""
+    rng = np.random.default_rng(7)
+    places = np.array([10.0, -(HALF + PERSON_RADIUS_M + 1.5)]) + rng.normal(0.0, 0.5, (200, 2))
+    assert not any(row.any() for row in _tracked(places, ego_speed=1.0))
+    # A person standing on the carriageway (the map says so) 0.2 m from the centre line: in the row once confirmed.
+    near = np.array([10.0, 0.2]) + rng.normal(0.0, 0.05, (5, 2))
+    rows = _tracked(near, ego_speed=1.0, on_road=lambda xy: np.ones(len(xy), bool))
+    assert not rows[0].any() and all(row[0] == 1.0 for row in rows[1:])
 
 
 def test_crossings_are_told_from_walking_areas_and_lanes():
@@ -221,8 +262,9 @@ class LabelledPeople:
 @pytest.mark.slow
 def test_perceived_a_person_crossing_the_ego_s_way_fills_the_path_row_where_the_ground_truth_has_them(tmp_path):
     """Urban seed 3: a person walks over the crossing the ego turns across (YOLOX-nano missed him at night and the
-    ego ran him down). Seen by a detector of the labelled people and ranged by the LiDAR, the perceived row holds him
-    from the second step he is in the path on (``person_hits`` 2), where the ground truth's row has him."""
+    ego ran him down). Seen by a detector of the labelled people, ranged by the LiDAR and tracked, the perceived row
+    holds him for at least 1 s, always where the ground truth's row has him (the ground truth's holds him earlier:
+    walking in, on SUMO's velocity, before his track's is known)."""
     from pathlib import Path
 
     import yaml

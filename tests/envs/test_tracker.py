@@ -259,3 +259,30 @@ def test_a_turning_ego_sees_a_parked_car_at_rest_and_a_leader_on_its_circle():
     naive_car = min(naive, key=lambda t: t.track_id)
     # the parked car "moves" across the ego's frame at the turn rate times its distance ahead (~2 m/s here)
     assert abs(naive_car.x[3]) > 1.5
+
+
+def test_a_track_is_born_moving_as_the_ego_or_standing():
+    """From a moving ego (10 m/s along +x), a first sighting is born at the ego's velocity (traffic ahead), or at
+    rest with birth_with_ego False (a person), in the fixed frame."""
+    pose = EgoPose.moving(0.0, 0.0, 0.0, 10.0)
+    for with_ego, velocity in ((True, [10.0, 0.0]), (False, [0.0, 0.0])):
+        tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1, birth_with_ego=with_ego))
+        (track,) = tracker.update(_dets((12.0, 1.0)), pose)
+        assert track.x.tolist() == [12.0, 1.0, *velocity]
+    with pytest.raises(ValueError, match="birth_with_ego"):
+        TrackerParams(birth_with_ego=1)
+
+
+def test_without_the_iou_gate_a_box_does_not_drag_a_track_to_a_jumped_range():
+    """iou_gate None (people): the same box ranged 15 m farther (the background behind a sliver of a person) starts
+    a tentative track of its own; the person's track coasts and takes its object back the frame after."""
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1, iou_gate=None, report_misses=1))
+    box = [100.0, 100.0, 110.0, 140.0]
+    (first,) = tracker.update(_dets((12.0, 0.0), boxes=[box]))
+    (coasting, jumped) = tracker.update(_dets((27.0, 0.0), boxes=[box]))
+    assert (coasting.track_id, coasting.misses, coasting.x[0]) == (first.track_id, 1, 12.0)
+    assert jumped.track_id != first.track_id
+    back = [t for t in tracker.update(_dets((12.0, 0.0), boxes=[box])) if t.track_id == first.track_id]
+    assert len(back) == 1 and back[0].misses == 0
+    with pytest.raises(ValueError, match="iou_gate"):
+        TrackerParams(iou_gate=1.5)
