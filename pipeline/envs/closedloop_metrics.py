@@ -30,8 +30,8 @@ range of the ground-truth leader when it was first tracked. The metrics (:func:`
   ``slot_dv_error_mps`` (0 and 0 for a ground-truth run, whose observation is the ground truth);
 - the same for the "path" row, the nearest person in the ego's path (:meth:`EpisodeLog.add_path`):
   ``person_missed_share`` (steps on which the ground truth has a person in the path and the observation has none,
-  over the steps the ground truth has one: the perceived row holds only people in the path now, the ground truth's
-  also those about to walk into it, so some of these steps are missed by design), ``person_false_share`` (steps
+  over the steps the ground truth has one: the perceived row holds people about to walk into the path only once
+  their track's velocity is known, the ground truth's on SUMO's velocity at once), ``person_false_share`` (steps
   the observation has a person in the path and the ground truth none, over the steps it has one) and
   ``person_steps_share`` (the share of steps the ground truth has a person in the path).
 

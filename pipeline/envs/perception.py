@@ -19,8 +19,9 @@ the surfaces the LiDAR sees lie in front of it, so the median is moved half the 
 along the line of sight (:func:`centre_from_surface`); it tracks them in the world frame from the ego's pose.
 :class:`PerceivedFeatures` wraps an environment rendering ``sensors=["camera", "lidar"]``: it adds
 the detections to the observation and replaces the ground-truth neighbour slots with those of the
-:mod:`pipeline.envs.tracker`'s tracks, so an agent written for features runs on perceived features unchanged; the
-ground truth moves to ``info["ground_truth"]``.
+:mod:`pipeline.envs.tracker`'s tracks, so an agent written for features runs on perceived features unchanged (the
+slots of a lane the ego cannot drive, which SUMO's ground truth has no lane for, stay empty: parked cars beside the
+ego's lane are no right leaders); the ground truth moves to ``info["ground_truth"]``.
 
 Observation entries added: ``detections`` (K, 6) float32 [x1, y1, x2, y2, score, category id] sorted by score,
 ``detections_mask`` (K,) int8, ``detection_range_m`` and ``detection_bearing_rad`` (K,) float32 (ego frame; 0 where
@@ -49,7 +50,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pipeline.envs.features import PATH_FIELDS, path_row
+from pipeline.envs.features import NEIGHBOUR_SLOTS, PATH_FIELDS, path_row
 from pipeline.envs.tracker import (
     Detections,
     EgoPose,
@@ -279,6 +280,10 @@ class PerceivedFeatures(gym.Wrapper):
         space = inner.observation_space["neighbours"]
         rows = track_neighbour_rows(lane_frame_tracks(tracks, pose, heading, speed), float(obs["ego"][3]),
                                     inner.lane_width_m(), float(space.high[0, 1]))
+        lane = round(float(obs["ego"][2]))
+        for side, step in (("left", 1), ("right", -1)):
+            if not inner.lane_drivable(lane + step):  # map knowledge: no lane there (parking, kerb, oncoming)
+                rows[[NEIGHBOUR_SLOTS.index(f"{side}_{role}") for role in ("leader", "follower")]] = 0.0
         out = dict(obs)
         info = {**info, "ground_truth": {"neighbours": obs["neighbours"], "path": obs["path"]}, "tracks": len(tracks)}
         out["neighbours"] = np.clip(rows, space.low, space.high).astype(np.float32)

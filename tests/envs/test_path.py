@@ -260,28 +260,18 @@ class LabelledPeople:
 
 
 @pytest.mark.slow
-def test_perceived_a_person_crossing_the_ego_s_way_fills_the_path_row_where_the_ground_truth_has_them(tmp_path):
+def test_perceived_a_person_crossing_the_ego_s_way_fills_the_path_row_where_the_ground_truth_has_them(
+        small_default_rig):
     """Urban seed 3: a person walks over the crossing the ego turns across (YOLOX-nano missed him at night and the
     ego ran him down). Seen by a detector of the labelled people, ranged by the LiDAR and tracked, the perceived row
     holds him for at least 1 s, always where the ground truth's row has him (the ground truth's holds him earlier:
     walking in, on SUMO's velocity, before his track's is known)."""
-    from pathlib import Path
-
-    import yaml
-
     import pipeline.envs  # noqa: F401  (registers the envs)
     from pipeline.envs.perception import PerceivedFeatures
 
-    # The default rig, smaller, to keep the test short.
-    rig = yaml.safe_load((Path(__file__).parents[2] / "configs" / "rigs" / "default.yaml").read_text())
-    rig["name"] = "small"
-    rig["cameras"][0].update(width_px=400, height_px=300, samples_per_pixel=1, quality="fast")
-    rig["lidars"][0].update(channels=32, horizontal_resolution_deg=0.4, dropout=0.0)
-    rig.pop("radars")
-    (tmp_path / "small.yaml").write_text(yaml.safe_dump(rig))
     # The closed loop's episode (its traffic depends on the episode's length: 30 s), driven for its first 7 s:
     # he walks into the path ~4.4 s in, 18 m ahead, and is past it at 6.7 s.
-    env = gym.make("roadsynth/Urban-v0", time_limit_s=30.0, sensors=["camera", "lidar"], rig=tmp_path / "small.yaml")
+    env = gym.make("roadsynth/Urban-v0", time_limit_s=30.0, sensors=["camera", "lidar"], rig=small_default_rig)
     wrapped = PerceivedFeatures(env, LabelledPeople(env))
     try:
         obs, info = wrapped.reset(seed=3)

@@ -269,3 +269,37 @@ def _chain(env):
     while hasattr(env, "env"):
         yield env
         env = env.env
+
+
+@pytest.mark.slow
+def test_parked_cars_beside_the_ego_s_lane_fill_no_lane_slot(small_default_rig):
+    """Urban seed 1's ego drives in the rightmost lane, parked cars in the parking lane beside it (no class may drive
+    there; SUMO has no lane for the ground truth's right slots). Seen exactly (the labelled vehicles' boxes) they are
+    tracked in the band of a right lane on nearly every step; the perceived right slots stay empty, as the ground
+    truth's do: the map says there is no lane to the right."""
+    from pipeline.envs.driver import ReferenceAgent
+    from pipeline.envs.features import NEIGHBOUR_SLOTS
+    from pipeline.envs.tracker import EgoPose, lane_frame_tracks, track_neighbour_rows
+
+    env = gym.make("roadsynth/Urban-v0", time_limit_s=30.0, sensors=["camera", "lidar"], rig=small_default_rig)
+    wrapped = PerceivedFeatures(env, GroundTruthBoxes(env))
+    inner, right = env.unwrapped, NEIGHBOUR_SLOTS.index("right_leader")
+    try:
+        obs, info = wrapped.reset(seed=1)
+        agent = ReferenceAgent(wrapped)
+        agent.reset(obs)
+        in_the_band = 0
+        for _ in range(20):
+            obs, _, terminated, truncated, info = wrapped.step(agent.act(obs))
+            assert not (terminated or truncated)
+            assert not inner.lane_drivable(round(float(obs["ego"][2])) - 1)
+            speed = float(obs["ego"][0])
+            reported = [t for t in wrapped.tracker.tracks if t.confirmed and t.misses == 0]
+            rows = track_neighbour_rows(lane_frame_tracks(reported, EgoPose.moving(*inner.ego_pose(), speed),
+                                                          float(obs["ego"][4]), speed),
+                                        float(obs["ego"][3]), inner.lane_width_m(), 100.0)
+            in_the_band += bool(rows[right, 0])
+            assert obs["neighbours"][right, 0] == 0.0 and info["ground_truth"]["neighbours"][right, 0] == 0.0
+        assert in_the_band >= 15
+    finally:
+        wrapped.close()
