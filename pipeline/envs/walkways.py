@@ -3,11 +3,14 @@
 The ground truth's "path" row (:func:`pipeline.envs.features.path_row`) counts a standing person only on the
 carriageway or a crossing: SUMO says which lane a person is on. A perceived person has only a place, estimated from
 a camera box ranged by the LiDAR; :class:`Walkways` answers the same question for a place from the road geometry
-tables (:mod:`pipeline.traffic.roadgeometry`: map knowledge, as a driving stack's HD map): a place on a crossing (its
-centre line's strip, the lane's width across) is on the road; so is a place on a carriageway lane (driving or bike,
-normal or inside a junction) unless it also lies on a sidewalk or in a junction's walking area (its polygon), which
-a turning lane's strip may overlap at a corner, or lies within ``margin_m`` (:data:`WALKWAY_MARGIN_M`) of either;
-anywhere else (a parking lane, beyond the kerb) is not.
+tables (:mod:`pipeline.traffic.roadgeometry`: map knowledge, as a driving stack's HD map): a place on a carriageway
+lane (driving or bike, normal or inside a junction) or a crossing (each its centre line's strip, the lane's width
+across) is on the road unless it lies on a sidewalk or in a junction's walking area (its polygon), or within
+``margin_m`` (:data:`WALKWAY_MARGIN_M`) of either; anywhere else (a parking lane, beyond the kerb) is not. The
+walkways win where they overlap: a turning lane's strip crosses a corner's walking area, and a crossing begins at
+the walking area's edge, where SUMO's people wait for the green standing up to 0.7 m inside the crossing's strip
+(on the walking area's lane): the kerb's band of a crossing, ``margin_m`` deep, counts as the walkway (a person
+walking over it is in the path by their walk: :func:`pipeline.envs.features.path_row`).
 """
 
 from __future__ import annotations
@@ -53,6 +56,19 @@ def in_strips(xy: np.ndarray, starts: np.ndarray, ends: np.ndarray, half_width: 
     return (inside & (length2 > 0.0)[None]).any(axis=1)
 
 
+def near_segments(xy: np.ndarray, starts: np.ndarray, ends: np.ndarray, radius: float) -> np.ndarray:
+    """(M,) whether each point lies within ``radius`` of some segment (its ends included: capsules)."""
+    xy = np.asarray(xy, np.float64).reshape(-1, 2)
+    if len(starts) == 0 or len(xy) == 0:
+        return np.zeros(len(xy), bool)
+    seg = ends - starts
+    length2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-18)
+    rel = xy[:, None, :] - starts[None, :, :]
+    t = np.clip(np.einsum("mij,ij->mi", rel, seg) / length2, 0.0, 1.0)
+    off = rel - t[..., None] * seg[None]
+    return (np.einsum("mij,mij->mi", off, off) <= radius * radius).any(axis=1)
+
+
 def in_rings(xy: np.ndarray, starts: np.ndarray, ends: np.ndarray, ring_of_edge: np.ndarray, rings: int) -> np.ndarray:
     """(M,) whether each point lies inside some ring (even-odd rule per ring), the rings given by their edges."""
     xy = np.asarray(xy, np.float64).reshape(-1, 2)
@@ -96,14 +112,14 @@ class Walkways:
         return cls(geometry.lanes)
 
     def on_road(self, xy: np.ndarray) -> np.ndarray:
-        """(M,) bool for (M, 2) world places: on a crossing, or on a carriageway lane and neither a sidewalk nor a
-        walking area."""
+        """(M,) bool for (M, 2) world places: on a carriageway lane or a crossing, and neither on nor within
+        ``margin_m`` of a sidewalk or a walking area."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
-        road = in_strips(xy, *self._carriageways)
+        road = in_strips(xy, *self._carriageways) | in_strips(xy, *self._crossings)
         if road.any():
             near, (starts, ends, owner) = xy[road], self._ring_edges
             side_start, side_end, side_half = self._sidewalks
             road[road] = ~(in_strips(near, side_start, side_end, side_half + self.margin_m)
                            | in_rings(near, starts, ends, owner, self._rings)
-                           | in_strips(near, starts, ends, np.full(len(starts), self.margin_m)))
-        return in_strips(xy, *self._crossings) | road
+                           | near_segments(near, starts, ends, self.margin_m))
+        return road
