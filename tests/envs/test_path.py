@@ -21,7 +21,7 @@ from pipeline.envs.features import (
     project_on_path,
 )
 from pipeline.envs.perception import PERSON_CATEGORY, PERSON_TRACKER, perceived_path_row
-from pipeline.envs.tracker import Detections, Tracker
+from pipeline.envs.tracker import Detections, Track, Tracker
 
 # An L-shaped path: 20 m east along y = 0, then 20 m north along x = 20.
 L_PATH = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 20.0]])
@@ -121,6 +121,22 @@ def test_a_tracked_person_standing_beside_the_path_never_fills_the_row_through_r
     near = np.array([10.0, 0.2]) + rng.normal(0.0, 0.05, (5, 2))
     rows = _tracked(near, ego_speed=1.0, on_road=lambda xy: np.ones(len(xy), bool))
     assert not rows[0].any() and all(row[0] == 1.0 for row in rows[1:])
+
+
+def test_a_track_s_velocity_counts_only_when_known_and_a_walk_s():
+    """Off the road 3 m beside the path 10 m ahead, heading for it: a track at 1.4 m/s known to 0.3 m/s walks in; the
+    same at 4 m/s (no walk: a step between two people), or known only to 0.8 m/s (a young track), stands."""
+    def row(speed_mps: float, sigma_mps: float):
+        p = np.diag([0.1, 0.1, sigma_mps ** 2, sigma_mps ** 2])
+        track = Track(1, np.array([10.0, 3.0, 0.0, -speed_mps]), p, np.full(4, np.nan), PERSON_CATEGORY,
+                      np.array([0.5, 0.5]), confirmed=True)
+        return perceived_path_row([track], L_PATH, HALF, 5.0, lambda xy: np.zeros(len(xy), bool))
+
+    assert row(1.4, 0.3)[0] == 1.0
+    assert not row(4.0, 0.3).any()
+    assert not row(1.4, 0.8).any()
+    assert not row(0.8, 0.3).any()  # known, but 3 sigma is 0.9 m/s
+    assert not perceived_path_row([], L_PATH, HALF, 5.0, lambda xy: np.zeros(len(xy), bool)).any()
 
 
 def test_crossings_are_told_from_walking_areas_and_lanes():
