@@ -86,6 +86,11 @@ WALKING_SIGMAS = 3.0
 # driver braked hard for it 11 times in 30 s. The simulated walk above counts as early with both limits.
 WALKING_SIGMA_MAX_MPS = 0.6
 WALKING_MAX_MPS = 3.0
+# ... and only where the track's places moved as its velocity says: over its last WALK_WINDOW places (1 s at 0.1 s
+# steps) at least WALK_MOVED_SHARE of that speed. In the same city a box on a group of people standing on a corner,
+# ranged now on one and now on another, gave a track 2.7 m/s (sigma 0.46 m/s, 9 hits) whose places moved 0.7 m/s.
+WALK_WINDOW = 10
+WALK_MOVED_SHARE = 0.5
 RANGE_GATE = (0.4, 2.5)  # the LiDAR points that range a box lie at this share of the depth its height implies
 # LiDAR returns lower than this above the road are the road's (ground removal): they range no box.
 GROUND_CLEARANCE_M = 0.3
@@ -241,6 +246,7 @@ class PerceivedFeatures(gym.Wrapper):
                                      categories=(PERSON_CATEGORY, *ROAD_USER_CATEGORIES), range_gate=range_gate,
                                      ground_clearance_m=ground_clearance_m or 0.0)
         self.person_score, self.person_hits = float(person_score), person_hits
+        self._places = RecentPlaces()
         self.people = Tracker(TrackerParams(**{**PERSON_TRACKER.__dict__, "dt_s": inner.sim.step_length_s,
                                                "confirm_hits": person_hits}))
         self.ground_removal = bool(ground_clearance_m)
@@ -261,6 +267,7 @@ class PerceivedFeatures(gym.Wrapper):
         obs, info = self.env.reset(**kwargs)
         self.tracker.reset()
         self.people.reset()
+        self._places.clear()
         # The road lies half the ego's height below its frame's origin (the rig's calibration to the ground).
         self.perception.ground_z_m = -0.5 * self.env.unwrapped.ego_height_m() if self.ground_removal else None
         return self._perceive(obs, info)
@@ -298,7 +305,8 @@ class PerceivedFeatures(gym.Wrapper):
         person_tracks = self.people.update(Detections(centres[people], frame.boxes_px[people],
                                                       frame.category_ids[people], sizes[people]), pose)
         info["person_tracks"] = len(person_tracks)
-        row = perceived_path_row(person_tracks, inner.path_xy(), 0.5 * inner.ego_width_m(), speed, inner.on_road)
+        row = perceived_path_row(person_tracks, inner.path_xy(), 0.5 * inner.ego_width_m(), speed, inner.on_road,
+                                 self._places.moved_mps(person_tracks, inner.sim.step_length_s))
         space = inner.observation_space["path"]
         out["path"] = np.clip(row, space.low, space.high).astype(np.float32)
         n = min(len(frame.scores), self.k)
@@ -315,13 +323,37 @@ class PerceivedFeatures(gym.Wrapper):
         return out, info
 
 
+class RecentPlaces:
+    """Each person track's last :data:`WALK_WINDOW` reported places, for :func:`perceived_path_row`'s ``moved_mps``."""
+
+    def __init__(self) -> None:
+        self._places: dict[int, list[np.ndarray]] = {}
+
+    def clear(self) -> None:
+        self._places.clear()
+
+    def moved_mps(self, tracks: list[Track], dt_s: float) -> np.ndarray:
+        """Record this step's reported tracks; (M,) each one's net displacement over its recent places per second (0
+        with one place). Tracks no longer reported are forgotten."""
+        self._places = {t.track_id: [*self._places.get(t.track_id, []), t.x[:2].copy()][-WALK_WINDOW:]
+                        for t in tracks}
+        moved = np.zeros(len(tracks))
+        for k, t in enumerate(tracks):
+            seen = self._places[t.track_id]
+            if len(seen) > 1:
+                moved[k] = float(np.hypot(*(seen[-1] - seen[0]))) / ((len(seen) - 1) * dt_s)
+        return moved
+
+
 def perceived_path_row(tracks: list[Track], path_xy: np.ndarray, half_width_m: float, ego_speed_mps: float,
-                       on_road) -> np.ndarray:
+                       on_road, moved_mps: np.ndarray | None = None) -> np.ndarray:
     """The perceived "path" row (features.PATH_FIELDS) from the people's confirmed tracks (fixed-frame places and
     velocities, listed by id): :func:`pipeline.envs.features.path_row` with ``on_road(xy) -> (M,) bool`` the map
     test of where each stands, and each track's velocity only where it walks: at least :data:`WALKING_MPS` and
     :data:`WALKING_SIGMAS` standard deviations of its velocity along its most uncertain axis, that deviation at most
-    :data:`WALKING_SIGMA_MAX_MPS`, and at most :data:`WALKING_MAX_MPS` (zero otherwise: standing)."""
+    :data:`WALKING_SIGMA_MAX_MPS`, at most :data:`WALKING_MAX_MPS`, and where ``moved_mps`` ((M,): each track's
+    net displacement over its recent places per second; None: not checked) is at least :data:`WALK_MOVED_SHARE` of
+    that speed (zero otherwise: standing)."""
     if not tracks:
         return np.zeros(len(PATH_FIELDS), np.float32)
     xy = np.array([t.x[:2] for t in tracks], np.float64)
@@ -330,6 +362,8 @@ def perceived_path_row(tracks: list[Track], path_xy: np.ndarray, half_width_m: f
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
     walking = ((speed >= WALKING_MPS) & (speed >= WALKING_SIGMAS * sigma) & (sigma <= WALKING_SIGMA_MAX_MPS)
                & (speed <= WALKING_MAX_MPS))
+    if moved_mps is not None:
+        walking &= np.asarray(moved_mps, np.float64) >= WALK_MOVED_SHARE * speed
     velocity[~walking] = 0.0
     return path_row(path_xy, xy, velocity, ego_speed_mps, half_width_m, on_road=on_road(xy))
 

@@ -20,7 +20,7 @@ from pipeline.envs.features import (
     path_row,
     project_on_path,
 )
-from pipeline.envs.perception import PERSON_CATEGORY, PERSON_TRACKER, perceived_path_row
+from pipeline.envs.perception import PERSON_CATEGORY, PERSON_TRACKER, RecentPlaces, perceived_path_row
 from pipeline.envs.tracker import Detections, Track, Tracker
 
 # An L-shaped path: 20 m east along y = 0, then 20 m north along x = 20.
@@ -87,12 +87,12 @@ def test_off_the_road_a_person_counts_only_once_walking_into_the_path():
 def _tracked(places: np.ndarray, *, ego_speed: float, on_road=lambda xy: np.zeros(len(xy), bool)) -> list:
     """Feed one person's places frame by frame (0.1 s apart, the ego at rest at the fixed frame's origin) to a
     person tracker; the perceived path row after each frame."""
-    tracker = Tracker(PERSON_TRACKER)
+    tracker, recent = Tracker(PERSON_TRACKER), RecentPlaces()
     rows = []
     for place in places:
         tracks = tracker.update(Detections(np.array([place]), np.full((1, 4), np.nan), np.array([PERSON_CATEGORY]),
                                            np.array([[0.5, 0.5]])))
-        rows.append(perceived_path_row(tracks, L_PATH, HALF, ego_speed, on_road))
+        rows.append(perceived_path_row(tracks, L_PATH, HALF, ego_speed, on_road, recent.moved_mps(tracks, 0.1)))
     return rows
 
 
@@ -136,6 +136,21 @@ def test_a_track_s_velocity_counts_only_when_known_and_a_walk_s():
     assert not row(4.0, 0.3).any()
     assert not row(1.4, 0.8).any()
     assert not row(0.8, 0.3).any()  # known, but 3 sigma is 0.9 m/s
+    # Its places moved at 0.7 m/s over the last second (a box on a group, ranged on one and then another): stands.
+    def moved(speed_mps: float, moved_mps: float):
+        p = np.diag([0.1, 0.1, 0.09, 0.09])
+        track = Track(1, np.array([10.0, 3.0, 0.0, -speed_mps]), p, np.full(4, np.nan), PERSON_CATEGORY,
+                      np.array([0.5, 0.5]), confirmed=True)
+        return perceived_path_row([track], L_PATH, HALF, 5.0, lambda xy: np.zeros(len(xy), bool), [moved_mps])
+
+    assert moved(1.4, 0.7)[0] == 1.0 and not moved(1.4, 0.69).any()
+    recent = RecentPlaces()
+    tracks = [Track(7, np.array([0.0, 0.0, 0.0, 0.0]), np.eye(4), np.full(4, np.nan), 1, np.ones(2))]
+    assert recent.moved_mps(tracks, 0.1).tolist() == [0.0]  # one place
+    for k in range(1, 15):
+        tracks[0].x = np.array([0.1 * k, 0.0, 0.0, 0.0])
+        assert recent.moved_mps(tracks, 0.1) == pytest.approx([1.0])  # 0.1 m a step, over up to 9 steps
+    assert recent.moved_mps([], 0.1).shape == (0,) and recent.moved_mps(tracks, 0.1).tolist() == [0.0]  # forgot it
     assert not perceived_path_row([], L_PATH, HALF, 5.0, lambda xy: np.zeros(len(xy), bool)).any()
 
 
