@@ -77,13 +77,14 @@ PERSON_TRACKER = TrackerParams(accel_psd=0.1, birth_speed_std_mps=2.0, confirm_h
 # A person's track walks (its velocity counts) at this speed or more and this many standard deviations of it.
 # Simulated at 10 m (0.5 m of ranging noise, the tracker's model there; 20 seeds each): a walk at 1.4 m/s towards the
 # path from 4 m beside it counts after a median 1.2 s (at most 1.6 s; it enters after 2.0 s), and a person standing
-# 1 m beyond the corridor's edge walks into it, falsely, in 0.03 % of 4,000 frames (2 sigma: 0.4 %, after 0.85 s).
+# 1 m beyond the corridor's edge walks into it, falsely, in 0.03 % of 4,000 frames (2 sigma: 0.4 %, after 0.85 s);
+# with the limits below too, the same walk counts as early and the person standing never.
 WALKING_MPS = 0.5
 WALKING_SIGMAS = 3.0
 # ... and only once the velocity is known to this standard deviation (a young track's is not), and up to a plausible
 # walking speed: in the city by morning (urban seed 5) a track born among people standing 1-2 m apart on a corner
 # took a step between two of them for a walk at 4.0 m/s (sigma 0.81 m/s) into the ego's path, and the reference
-# driver braked hard for it 11 times in 30 s. The simulated walk above counts as early with both limits.
+# driver braked hard for it 11 times in 30 s.
 WALKING_SIGMA_MAX_MPS = 0.6
 WALKING_MAX_MPS = 3.0
 # ... and only where the track's places moved as its velocity says: over its last WALK_WINDOW places (1 s at 0.1 s
