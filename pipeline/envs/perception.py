@@ -308,8 +308,8 @@ class PerceivedFeatures(gym.Wrapper):
         info["person_tracks"] = len(person_tracks)
         row = perceived_path_row(person_tracks, inner.path_xy(), 0.5 * inner.ego_width_m(), speed, inner.on_road,
                                  self._places.moved_mps(person_tracks, inner.sim.step_length_s))
-        space = inner.observation_space["path"]
-        out["path"] = np.clip(row, space.low, space.high).astype(np.float32)
+        path_space = inner.observation_space["path"]
+        out["path"] = np.clip(row, path_space.low, path_space.high).astype(np.float32)
         n = min(len(frame.scores), self.k)
         detections = np.zeros((self.k, 6), np.float32)
         detections[:n] = np.column_stack([frame.boxes_px, frame.scores, frame.category_ids])[:n]

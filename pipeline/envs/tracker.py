@@ -217,8 +217,8 @@ class Tracker:
         costs = np.full((len(self.tracks), len(fixed)), UNMATCHABLE)
         if not len(self.tracks) or not len(fixed):
             return costs
-        ious = (box_iou(np.array([t.box_px for t in self.tracks]), det.box_px) if self.params.iou_gate is not None
-                else np.zeros((len(self.tracks), len(fixed))))
+        iou_gate = self.params.iou_gate
+        ious = box_iou(np.array([t.box_px for t in self.tracks]), det.box_px) if iou_gate is not None else None
         gate = self.params.gate
         for i, t in enumerate(self.tracks):
             for j, z in enumerate(fixed):
@@ -228,7 +228,7 @@ class Tracker:
                 options = []
                 if d2 < gate:
                     options.append(d2 / gate)
-                if self.params.iou_gate is not None and ious[i, j] >= self.params.iou_gate:
+                if ious is not None and ious[i, j] >= iou_gate:
                     options.append(1.0 - ious[i, j])
                 if options:
                     costs[i, j] = min(options)

@@ -91,9 +91,8 @@ class Walkways:
 
     def __init__(self, lanes: pd.DataFrame, margin_m: float = WALKWAY_MARGIN_M) -> None:
         self.margin_m = float(margin_m)
-        self._carriageways = _strips(lanes[lanes["kind"].isin(CARRIAGEWAY_KINDS)])
+        self._roads = _strips(lanes[lanes["kind"].isin((*CARRIAGEWAY_KINDS, "crossing"))])  # lanes and crossings
         self._sidewalks = _strips(lanes[lanes["kind"] == "sidewalk"])
-        self._crossings = _strips(lanes[lanes["kind"] == "crossing"])
         starts, ends, owner = [], [], []
         areas = lanes[lanes["kind"] == "walkingarea"]
         for k, row in enumerate(areas.itertuples(index=False)):
@@ -115,7 +114,7 @@ class Walkways:
         """(M,) bool for (M, 2) world places: on a carriageway lane or a crossing, and neither on nor within
         ``margin_m`` of a sidewalk or a walking area."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
-        road = in_strips(xy, *self._carriageways) | in_strips(xy, *self._crossings)
+        road = in_strips(xy, *self._roads)
         if road.any():
             near, (starts, ends, owner) = xy[road], self._ring_edges
             side_start, side_end, side_half = self._sidewalks
