@@ -43,7 +43,7 @@ from pipeline.stages.render_frames import (
 )
 from pipeline.stages.rig import build_sensors
 from pipeline.world.scene import StaticScene
-from pipeline.world.static import load_static_world
+from pipeline.world.static import load_static_geometry, load_static_world
 
 SENSOR_NAMES = ("camera", "lidar", "radar")
 # Columns of the "radar" observation, one row per detection (radar frame; docs/envs.md).
@@ -106,7 +106,7 @@ class LiveSensors:
         key = (str(roads_dir), seed)
         if key != self._world_key:
             self.world = load_static_world(roads_dir, seed=seed)
-            self.static = StaticScene(self.world.meshes)
+            self.static = StaticScene(self.world.meshes, load_static_geometry(self.world, roads_dir, seed=seed))
             self.signals = SignalState(self.world, self.static, pd.DataFrame(columns=["frame", "tls_id", "state"]))
             self._world_key = key
         self.seed = seed

@@ -301,10 +301,17 @@ class Camera:
             return self.pixel_directions[None]
         rng = np.random.default_rng(self.jitter_seed)
         n = self.width * self.height
+        order_u, order_v = rng.random((n, s)), rng.random((n, s))
+        if not self.has_distortion:  # the loop below in one compiled pass (once per process)
+            jitter = np.empty((2 * s, n))  # du of sample k at row 2k, dv at 2k + 1, drawn in the loop's order
+            for row in jitter:
+                rng.random(out=row)
+            return _pinhole_samples(self.width, self.height, order_u, order_v, jitter, self.fx, self.fy, self.cx,
+                                    self.cy)
         rows, cols = np.divmod(np.arange(n), self.width)
         out = np.empty((s, n, 3), np.float32)
-        perm_u = np.argsort(rng.random((n, s)), axis=1)
-        perm_v = np.argsort(rng.random((n, s)), axis=1)
+        perm_u = np.argsort(order_u, axis=1)
+        perm_v = np.argsort(order_v, axis=1)
         for k in range(s):  # loop over samples only; every pixel is vectorised
             du = (perm_u[:, k] + rng.random(n)) / s
             dv = (perm_v[:, k] + rng.random(n)) / s
@@ -325,4 +332,44 @@ def _pinhole_directions(width, height, fx, fy, cx, cy):
             norm = np.sqrt(x * x + y * y + 1.0)
             i = row * width + col
             out[i, 0], out[i, 1], out[i, 2] = np.float32(x / norm), np.float32(y / norm), np.float32(1.0 / norm)
+    return out
+
+
+@kernel("void(float64[::1], int64[::1])")
+def _ranks(values, order):
+    """``order`` = the positions of ``values`` in ascending order (insertion sort: a pixel's few samples), as
+    ``np.argsort`` gives them for distinct values."""
+    for k in range(values.size):
+        order[k] = k
+    for p in range(1, values.size):
+        item = order[p]
+        q = p - 1
+        while q >= 0 and values[order[q]] > values[item]:
+            order[q + 1] = order[q]
+            q -= 1
+        order[q + 1] = item
+
+
+@kernel("float32[:, :, ::1](int64, int64, float64[:, ::1], float64[:, ::1], float64[:, ::1], float64, float64, "
+        "float64, float64)")
+def _pinhole_samples(width, height, order_u, order_v, jitter, fx, fy, cx, cy):
+    """:attr:`Camera.sample_directions` of a lens without distortion, with its float64 arithmetic in its order:
+    sample k of pixel i at u = col + (argsort(order_u[i])[k] + jitter[2k, i]) / S, v likewise with ``order_v`` and
+    jitter[2k + 1], then :meth:`Camera.unproject`'s (x, y, 1) / sqrt(x^2 + y^2 + 1)."""
+    n, s = order_u.shape
+    out = np.empty((s, n, 3), np.float32)
+    perm_u = np.empty(s, np.int64)
+    perm_v = np.empty(s, np.int64)
+    for i in range(n):
+        row, col = i // width, i % width
+        _ranks(order_u[i], perm_u)
+        _ranks(order_v[i], perm_v)
+        for k in range(s):
+            u = col + (perm_u[k] + jitter[2 * k, i]) / s
+            v = row + (perm_v[k] + jitter[2 * k + 1, i]) / s
+            x = (u - cx) / fx
+            y = (v - cy) / fy
+            norm = np.sqrt(x * x + y * y + 1.0)
+            out[k, i, 0], out[k, i, 1] = np.float32(x / norm), np.float32(y / norm)
+            out[k, i, 2] = np.float32(1.0 / norm)
     return out

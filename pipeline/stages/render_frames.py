@@ -41,8 +41,8 @@ from pipeline.world.materials import material_index
 from pipeline.world.people import person_statures
 from pipeline.world.posed_people import posed_boxes
 from pipeline.world.prams import STROLLER_SIZE_M, stroller_colors, stroller_offset_m
-from pipeline.world.scene import FrameScene, StaticScene
-from pipeline.world.static import StaticWorld
+from pipeline.world.scene import FrameScene, StaticGeometry, StaticScene
+from pipeline.world.static import StaticWorld, load_static_geometry
 
 
 @dataclass(frozen=True)
@@ -252,6 +252,7 @@ class _Shared:
     """The part of a :class:`_WorkerState` that needs no Embree scene (see :func:`prepared_state`)."""
 
     world: StaticWorld
+    geometry: StaticGeometry
     cameras: list
     lidars: list
     condition: object
@@ -289,10 +290,11 @@ def _state(job: ShardJob) -> _WorkerState:
 
 
 def prepared_state(job: ShardJob) -> contextlib.AbstractContextManager[None]:
-    """Within the block, the part of the render's worker state that needs no Embree scene (the static world, the
-    rig's sensors with their rays and anti-aliasing samples, the condition, the body-sized trajectories) is the one
-    built now, in this process, before its pool forks the workers: built once, not once per worker (~1 s of an
-    urban render's each). Forgotten at the end, like :func:`remembered_world`."""
+    """Within the block, the part of the render's worker state that needs no Embree scene (the static world and its
+    merged geometry with the sun maps' triangle index, the rig's sensors with their rays and anti-aliasing samples,
+    the condition, the body-sized trajectories) is the one built now, in this process, before its pool forks the
+    workers: built once, not once per worker (~1 s of an urban render's each). Forgotten at the end, like
+    :func:`remembered_world`."""
     return _SHARED.lent(_state_key(job), _shared(job))
 
 
@@ -303,6 +305,8 @@ def _shared(job: ShardJob) -> _Shared:
     if world is None:
         with job.static_pickle.open("rb") as fh:
             world = pickle.load(fh)
+    if job.threads:  # as render_shard does in each worker; workers forked after this inherit it (~50 ms each)
+        _limit_blas(job.threads)
     cameras, lidars = build_sensors(job.rig)
     for camera in cameras:
         camera.sample_directions  # noqa: B018 -- computed and kept now (a cached property)
@@ -310,13 +314,17 @@ def _shared(job: ShardJob) -> _Shared:
     meshes = rig_actor_meshes(job.rig, condition.umbrellas > 0.0)
     trajectories = Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"), meshes,
                                                         job.seed, condition.umbrellas))
-    return _Shared(world, cameras, lidars, condition, trajectories, meshes)
+    geometry = load_static_geometry(world, job.sim_dir / "roads", seed=job.seed)  # pickled: the same world
+    if condition.shadows and condition.sun_elevation_deg > 0 and any(c.config.quality == "realistic"
+                                                                     for c in cameras):
+        geometry.sun_tiles(condition.sun_disc)  # the realistic cameras' soft shadows test the sun's whole disc
+    return _Shared(world, geometry, cameras, lidars, condition, trajectories, meshes)
 
 
 def _worker_state(job: ShardJob) -> _WorkerState:
     keep_freed_memory(RENDER_THRESHOLDS)
     shared = _SHARED.get(_state_key(job), lambda: _shared(job))
-    static = StaticScene(shared.world.meshes)
+    static = StaticScene(shared.world.meshes, shared.geometry)
     return _WorkerState(shared.world, static, shared.cameras, shared.lidars, shared.condition, shared.trajectories,
                         SignalState(shared.world, static, read_parquet(job.sim_dir / "tls_states.parquet")),
                         shared.meshes)

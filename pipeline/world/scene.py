@@ -294,21 +294,25 @@ SMOOTH_MATERIALS = ("foliage", "foliage_light", "foliage_dark", "bark")
 SMOOTH_CREASE_DEG = 80.0
 
 
-class StaticScene:
-    """The static world (built once per run): all meshes merged into one Embree geometry. Hits on SMOOTH_MATERIALS
-    get interpolated corner normals (as actors' do), the others their triangle's normal.
+class StaticGeometry:
+    """What a :class:`StaticScene` keeps of the static world besides its Embree scene: the meshes merged, with their
+    materials, classes, smooth normals' corner table, chunk boxes, and the sun maps' triangle index per sun disc
+    (:meth:`sun_tiles`). None of it needs Embree, so a render builds it once before its pool forks the workers
+    (:func:`pipeline.stages.render_frames.prepared_state`; ~0.2-0.3 s of each worker's start-up, docs/performance.md),
+    and each worker builds only its Embree scene over it. Read-only once built: a :class:`StaticScene` copies what
+    it changes (its triangles' materials).
 
     Attributes:
-        triangle_material: (T,) int32; triangle_semantic: (T,) uint8; num_triangles: T.
         mesh_offsets: (M + 1,) int64 first merged triangle of each input mesh (input order), then T.
-        chunk_boxes: (lo, hi), each (C, 3) float64 world metres: boxes that contain all the triangles
-            (:func:`chunk_boxes`); a ray that meets none of them cannot hit the static world.
-        floor_z_m: the lowest z of any vertex, metres (inf without triangles).
+        num_triangles: T. vertices: (V, 3) float64 and triangles: (T, 3) int64 of the merged meshes (of the
+            non-empty ones, in order). triangle_material: (T,) int32; triangle_semantic: (T,) uint8.
+        smooth_row: (T,) int64 row of ``corner_normals`` per triangle (-1: shaded flat); corner_normals: (S, 3, 3)
+            float32 (:func:`pipeline.world.smooth_normals.corner_normals` of the SMOOTH_MATERIALS' triangles).
+        chunk_boxes: (lo, hi) (:func:`chunk_boxes`); floor_z_m: the lowest z of any vertex (inf without triangles).
     """
 
     def __init__(self, meshes: list[Mesh]) -> None:
         self.mesh_offsets = np.cumsum([0] + [len(m) for m in meshes]).astype(np.int64)
-        self._sun_maps: dict[tuple[float, ...], SunMap] = {}  # see sun_candidates
         self._sun_tiles: dict[bytes, SunTiles] = {}
         meshes = [m for m in meshes if len(m)]
         self.num_triangles = sum(len(m) for m in meshes)
@@ -316,12 +320,11 @@ class StaticScene:
             merged = Mesh.concatenate(meshes)
             self.triangle_material = merged.material
             self.triangle_semantic = np.concatenate([np.full(len(m), int(m.semantic), np.uint8) for m in meshes])
-            self._scene = _embree(merged.vertices, merged.triangles)
-            self._vertices, self._triangles = merged.vertices, merged.triangles
+            self.vertices, self.triangles = merged.vertices, merged.triangles
             smooth = np.flatnonzero(np.isin(merged.material, [material_index(n) for n in SMOOTH_MATERIALS]))
-            self._smooth_row = np.full(self.num_triangles, -1, np.int64)  # triangle -> row of _corner_normals
-            self._smooth_row[smooth] = np.arange(len(smooth))
-            self._corner_normals = smooth_normals.corner_normals(
+            self.smooth_row = np.full(self.num_triangles, -1, np.int64)  # triangle -> row of corner_normals
+            self.smooth_row[smooth] = np.arange(len(smooth))
+            self.corner_normals = smooth_normals.corner_normals(
                 merged.vertices, merged.triangles[smooth], np.ones(3), SMOOTH_CREASE_DEG) if len(smooth) else \
                 np.zeros((0, 3, 3), np.float32)
             self.chunk_boxes = chunk_boxes(merged.vertices, merged.triangles)
@@ -330,10 +333,49 @@ class StaticScene:
             self.floor_z_m = np.inf
             self.triangle_material = np.zeros(0, np.int32)
             self.triangle_semantic = np.zeros(0, np.uint8)
-            self._scene = None
-            self._vertices, self._triangles = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
-            self._smooth_row, self._corner_normals = np.zeros(0, np.int64), np.zeros((0, 3, 3), np.float32)
+            self.vertices, self.triangles = np.zeros((0, 3)), np.zeros((0, 3), np.int64)
+            self.smooth_row, self.corner_normals = np.zeros(0, np.int64), np.zeros((0, 3, 3), np.float32)
             self.chunk_boxes = (np.zeros((0, 3)), np.zeros((0, 3)))
+
+    def sun_tiles(self, disc: np.ndarray) -> SunTiles:
+        """The :class:`pipeline.world.sunmap.SunTiles` of the triangles over the sun directions ``disc`` ((S, 3):
+        a sun's disc, :func:`pipeline.sensors.shadows.sun_disc`), built on first use and kept."""
+        group = np.asarray(disc, np.float64).reshape(-1, 3)
+        key = group.tobytes()
+        if key not in self._sun_tiles:
+            self._sun_tiles[key] = SunTiles(self.vertices, self.triangles,
+                                            np.array([sun_slope(d) for d in group]).reshape(-1, 2))
+        return self._sun_tiles[key]
+
+
+class StaticScene:
+    """The static world (built once per run): all meshes merged into one Embree geometry. Hits on SMOOTH_MATERIALS
+    get interpolated corner normals (as actors' do), the others their triangle's normal. ``geometry``: the
+    :class:`StaticGeometry` of ``meshes``, when it was built already (else built here).
+
+    Attributes:
+        triangle_material: (T,) int32 (this scene's own copy: :meth:`set_triangle_materials` changes it);
+            triangle_semantic: (T,) uint8; num_triangles: T.
+        mesh_offsets: (M + 1,) int64 first merged triangle of each input mesh (input order), then T.
+        chunk_boxes: (lo, hi), each (C, 3) float64 world metres: boxes that contain all the triangles
+            (:func:`chunk_boxes`); a ray that meets none of them cannot hit the static world.
+        floor_z_m: the lowest z of any vertex, metres (inf without triangles).
+    """
+
+    def __init__(self, meshes: list[Mesh], geometry: StaticGeometry | None = None) -> None:
+        geometry = StaticGeometry(meshes) if geometry is None else geometry
+        if len(geometry.mesh_offsets) != len(meshes) + 1 or geometry.num_triangles != sum(len(m) for m in meshes):
+            raise ValueError(f"the static geometry holds {len(geometry.mesh_offsets) - 1} meshes of "
+                             f"{geometry.num_triangles} triangles, not these {len(meshes)} meshes")
+        self._geometry = geometry
+        self.mesh_offsets, self.num_triangles = geometry.mesh_offsets, geometry.num_triangles
+        self._sun_maps: dict[tuple[float, ...], SunMap] = {}  # see sun_candidates
+        self.triangle_material = geometry.triangle_material.copy()
+        self.triangle_semantic = geometry.triangle_semantic
+        self._vertices, self._triangles = geometry.vertices, geometry.triangles
+        self._smooth_row, self._corner_normals = geometry.smooth_row, geometry.corner_normals
+        self.chunk_boxes, self.floor_z_m = geometry.chunk_boxes, geometry.floor_z_m
+        self._scene = _embree(self._vertices, self._triangles) if self.num_triangles else None
 
     def set_triangle_materials(self, mesh_index: int, triangles: np.ndarray, material: np.ndarray | int) -> None:
         """Change the material of some triangles of input mesh ``mesh_index`` (indices within that mesh), e.g.
@@ -399,14 +441,7 @@ class StaticScene:
         whose maps share one index of the triangles per tile (:class:`pipeline.world.sunmap.SunTiles`)."""
         key = tuple(np.asarray(sun, np.float64).tolist())
         if key not in self._sun_maps:
-            index = None
-            if disc is not None:
-                group = np.asarray(disc, np.float64).reshape(-1, 3)
-                group_key = group.tobytes()
-                if group_key not in self._sun_tiles:
-                    self._sun_tiles[group_key] = SunTiles(self._vertices, self._triangles,
-                                                          np.array([sun_slope(d) for d in group]).reshape(-1, 2))
-                index = self._sun_tiles[group_key]
+            index = None if disc is None else self._geometry.sun_tiles(disc)
             self._sun_maps[key] = SunMap(self._vertices, self._triangles, np.asarray(sun, np.float64), index)
         return self._sun_maps[key].candidates(x, y, z, rows)
 

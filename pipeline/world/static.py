@@ -15,6 +15,7 @@ import hashlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from pipeline.world.primitives import PartBuilder, quads
 from pipeline.world.props import PropPlacer
 from pipeline.world.roadmesh import RoadSurfaces
 from pipeline.world.signals import SignalLamps, build_signals
+
+if TYPE_CHECKING:
+    from pipeline.world.scene import StaticGeometry
 
 log = logging.getLogger(__name__)
 
@@ -127,6 +131,7 @@ def build_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
 # order, builds each world once.
 CACHED_WORLDS = 8
 WORLD_CACHE_NAME = "static-world"
+GEOMETRY_CACHE_NAME = "static-geometry"  # its merged geometry (load_static_geometry)
 
 
 def static_world_key(roads_dir: Path, seed: int) -> str:
@@ -148,3 +153,14 @@ def load_static_world(roads_dir: Path, *, seed: int) -> StaticWorld:
     closed-loop episode on the same network)."""
     return cached(WORLD_CACHE_NAME, lambda: build_static_world(roads_dir, seed=seed),
                   key=static_world_key(roads_dir, seed), keep=CACHED_WORLDS)
+
+
+def load_static_geometry(world: StaticWorld, roads_dir: Path, *, seed: int) -> StaticGeometry:
+    """The :class:`pipeline.world.scene.StaticGeometry` of ``world``, :func:`load_static_world`'s world of
+    ``roads_dir`` and ``seed``: from the build cache (name :data:`GEOMETRY_CACHE_NAME`, under the world's key) when a
+    process built it for the same world, else built (the static world's smooth normals: ~0.25 s of CPU on the
+    highway) and kept there beside the world."""
+    from pipeline.world.scene import StaticGeometry
+
+    return cached(GEOMETRY_CACHE_NAME, lambda: StaticGeometry(world.meshes), key=static_world_key(roads_dir, seed),
+                  keep=CACHED_WORLDS)

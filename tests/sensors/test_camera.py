@@ -100,6 +100,19 @@ def test_samples_are_stratified_inside_their_pixel_and_seeded():
     np.testing.assert_array_equal(s, Camera(cfg).sample_directions)
 
 
+@pytest.mark.parametrize("samples", [2, 4, 5])
+def test_pinhole_samples_equal_the_lens_models_arithmetic(samples):
+    """A lens without distortion takes its anti-aliasing samples from one compiled pass: the same bytes as the
+    general path (the random draws in their order, argsort per pixel, unproject) gives with zero distortion, which
+    its Newton iterations leave unchanged."""
+    cfg = camera_config(width_px=40, height_px=30, samples_per_pixel=samples, name="cam4")
+    compiled = Camera(cfg)
+    general = Camera(cfg)
+    general.has_distortion = True  # zero coefficients: the general path's arithmetic, unchanged by its iterations
+    assert not compiled.has_distortion
+    assert compiled.sample_directions.tobytes() == general.sample_directions.tobytes()
+
+
 def test_distortion_beyond_its_fold_is_refused():
     cam = Camera(camera_config(hfov_deg=100.0, distortion=(-0.28, 0.09, 0.0, 0.0, -0.012)))
     _, invertible = cam.unproject(np.array([[400.0, 300.0], [0.0, 0.0]]))

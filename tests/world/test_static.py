@@ -287,3 +287,47 @@ def test_the_cached_world_is_the_built_one_and_follows_the_tables_and_seed(grid_
     assert len(builds) == 3 and len(list((tmp_path / "cache").glob("static-world-*.pickle"))) == 3
     with pytest.raises(FileNotFoundError, match="no road geometry folder"):
         load_static_world(tmp_path / "nowhere", seed=7)
+
+
+def test_a_scene_over_the_shared_geometry_is_the_scene_of_its_meshes(grid_roads: Path, grid_world, tmp_path,
+                                                                    monkeypatch) -> None:
+    """The static geometry (merged meshes, smooth normals' corners, chunk boxes, the sun maps' index) is built once
+    per world, kept in the build cache, and shared by every StaticScene over it: their casts are those of a scene
+    built from the meshes, and one scene's material changes (signal lamps) reach neither the geometry nor another."""
+    from pipeline.sensors.camera import Camera
+    from pipeline.sensors.shadows import sun_disc
+    from pipeline.world.scene import StaticGeometry, StaticScene, make_rays
+    from pipeline.world.static import load_static_geometry
+    from tests.sensors.conftest import camera_config
+
+    monkeypatch.setenv("ROADSYNTH_CACHE_DIR", str(tmp_path / "cache"))
+    world = load_static_world(grid_roads, seed=7)
+    built = load_static_geometry(world, grid_roads, seed=7)
+    loaded = load_static_geometry(world, grid_roads, seed=7)
+    assert len(list((tmp_path / "cache").glob("static-geometry-*.pickle"))) == 1
+    assert built is not loaded  # the second came from the cache file
+    fresh = StaticGeometry(world.meshes)
+    for name in ("mesh_offsets", "vertices", "triangles", "triangle_material", "triangle_semantic", "smooth_row",
+                 "corner_normals"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(fresh, name))
+    assert len(fresh.corner_normals) > 0  # the grid world's trees are smooth
+    own, shared, other = StaticScene(world.meshes), StaticScene(world.meshes, loaded), StaticScene(world.meshes, loaded)
+    cam = Camera(camera_config(width_px=200, height_px=150))
+    cam_to_world = cam.camera_to_world(Transform.from_xyz_rpy((50.0, 1.6, 1.4), (0.0, 0.0, 0.3)))
+    rays = make_rays(cam_to_world.translation, cam.pixel_directions, cam_to_world.rotation)
+    for a, b in zip(own.cast(rays), shared.cast(rays), strict=True):
+        assert a.tobytes() == b.tobytes()
+    disc = sun_disc(np.array([0.3, 0.2, 0.9]) / np.linalg.norm([0.3, 0.2, 0.9]), 0.01)
+    hit = np.flatnonzero(np.isfinite(own.cast(rays)[0]))
+    points = [(rays[hit, k] + rays[hit, 3 + k] * own.cast(rays)[0][hit]).astype(np.float32) for k in range(3)]
+    assert loaded.sun_tiles(disc) is loaded.sun_tiles(disc.copy())  # one index per disc
+    np.testing.assert_array_equal(own.sun_candidates(*points, disc[0], disc=disc),
+                                  shared.sun_candidates(*points, disc[0], disc=disc))
+    before = loaded.triangle_material.copy()
+    changed = (before[:3] + 1) % len(MATERIAL_NAMES)  # mesh 0's first triangles, each to another material
+    shared.set_triangle_materials(0, np.arange(3), changed)
+    np.testing.assert_array_equal(shared.triangle_material[:3], changed)
+    np.testing.assert_array_equal(loaded.triangle_material, before)
+    np.testing.assert_array_equal(other.triangle_material, before)
+    with pytest.raises(ValueError, match="not these 2 meshes"):
+        StaticScene(world.meshes[:2], loaded)
