@@ -27,11 +27,12 @@ def _images(rng: np.random.Generator) -> list[np.ndarray]:
     ]
 
 
+@pytest.mark.parametrize("strategy", ["default", "huffman"])
 @pytest.mark.parametrize("row_filter", ["none", "sub", "up"])
-def test_opencv_and_pillow_read_back_the_samples(tmp_path, row_filter):
+def test_opencv_and_pillow_read_back_the_samples(tmp_path, row_filter, strategy):
     for k, image in enumerate(_images(np.random.default_rng(3))):
         path = tmp_path / f"{k}.png"
-        write_png(path, image, row_filter)
+        write_png(path, image, row_filter, strategy)
         back = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if image.ndim == 3:  # OpenCV returns BGR(A)
             back = back[..., [2, 1, 0, 3][:image.shape[2]]]
@@ -75,6 +76,27 @@ def test_file_structure():
 def test_same_image_same_bytes():
     image = np.random.default_rng(5).integers(0, 256, (60, 80, 3), dtype=np.uint8)
     assert encode_png(image, "up") == encode_png(image.copy(), "up")
+    assert encode_png(image, "up", strategy="huffman") == encode_png(image.copy(), "up", strategy="huffman")
+
+
+def test_strategies_are_zlibs():
+    """The default strategy is zlib's level-1 deflate of the filtered rows; "huffman" codes the same rows without
+    looking for repeats: on a noisy image (a camera's) a smaller stream, on one of long runs (a label image) larger."""
+    rng = np.random.default_rng(6)
+    noisy = np.clip(rng.normal(128, 12, (60, 80, 3)), 0, 255).astype(np.uint8)
+    runs = np.repeat(rng.integers(0, 5, (60, 8), dtype=np.uint8), 10, axis=1)
+
+    def idat(data: bytes) -> bytes:
+        (length,) = struct.unpack(">I", data[33:37])  # the chunk after the signature (8) and IHDR (25)
+        assert data[37:41] == b"IDAT"
+        return data[41:41 + length]
+
+    for image in (noisy, runs):
+        rows = filter_rows(image, "up").tobytes()
+        assert idat(encode_png(image, "up")) == zlib.compress(rows, 1)
+        assert zlib.decompress(idat(encode_png(image, "up", strategy="huffman"))) == rows
+    assert len(encode_png(noisy, "up", strategy="huffman")) < len(encode_png(noisy, "up"))
+    assert len(encode_png(runs, "none", strategy="huffman")) > len(encode_png(runs, "none"))
 
 
 @pytest.mark.parametrize("image, row_filter, message", [
@@ -90,3 +112,6 @@ def test_bad_input_is_named(tmp_path, image, row_filter, message):
         write_png(path, image, row_filter)
     assert str(path) in str(err.value)
     assert not path.exists()
+    with pytest.raises(ValueError, match="zlib strategy must be one of") as err:
+        write_png(path, np.zeros((4, 4), np.uint8), "none", "rle")
+    assert str(path) in str(err.value) and not path.exists()

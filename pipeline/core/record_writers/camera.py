@@ -21,6 +21,8 @@ from pipeline.core.record_writers.rows import BOX_KEYS, as_riders, identity_colu
 # One fixed PNG row filter per image kind (libpng's adaptive choice per row costs more than it saves): Up for the
 # noisy RGB image, Sub for depth (smooth along rows), none for the label images (runs of one value).
 PNG_FILTER = {"rgb": "up", "instance": "none", "semantic": "none", "depth": "sub"}
+# zlib's strategy per image (pipeline.core.png.STRATEGIES): the camera's noisy image coded by byte frequencies alone.
+PNG_STRATEGY = {"rgb": "huffman", "instance": "default", "semantic": "default", "depth": "default"}
 
 
 def camera_info(camera) -> CameraInfo:
@@ -69,7 +71,7 @@ def write_camera_frame(root: Path, name: str, frame: int, cam) -> None:
     for kind, image in images.items():
         path = camera_path(root, name, kind, frame)
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_png(path, image, PNG_FILTER[kind])
+        write_png(path, image, PNG_FILTER[kind], PNG_STRATEGY[kind])
 
 
 @kernel("uint16[:, ::1](float32[:, ::1], bool_[:, ::1], float32)")
