@@ -13,9 +13,13 @@ street, strongly at grazing angles. Both are ray traced here in the same scene a
   :meth:`FrameScene.near_actors` (a conservative grid test).
   The directions are a fixed spiral set rotated about the normal by an angle hashed from the ray's index, so a frame
   is the same on every run and the pattern shows as fine noise, not bands. On a camera's pixel-centre rays that
-  noise is then filtered away (:func:`smooth_visibility`): each traced pixel takes the mean occlusion of the traced
-  pixels within AO_FILTER_RADIUS_PX that lie on the same surface (same instance, normals within about 18 degrees,
-  depth within 3 %), 8 rays each, so paint shows its sky occlusion as a smooth shade rather than grain.
+  noise is then filtered away (:func:`smooth_visibility`): each pixel takes the mean occlusion of the traced pixels
+  within AO_FILTER_RADIUS_PX that lie on its surface (same instance, normals within about 18 degrees, depth within
+  3 %), 8 rays each, so paint shows its sky occlusion as a smooth shade rather than grain. Since that mean holds a
+  dozen or more pixels wherever a surface is wider than a pixel or two, only every other pixel traces (a
+  checkerboard), and a pixel with no traced one on its surface within the window traces its own: half the rays
+  (urban frames: ~1.9M -> ~0.95M), the same estimate of each surface's occlusion with a little more of its grain
+  (docs/performance.md: 0.2 of an 8-bit level per channel on urban frames).
 - **Reflections.** Materials with a Fresnel ``F0`` (:class:`pipeline.world.materials.Material.fresnel_f0`: clear-coat
   paint, glass, lamps, rims, glazed façades) reflect one bounce: the mirror ray is cast into the scene and what it
   meets is lit by the sky and the sun without shadows (or is the sky, also beyond MIRROR_RANGE_M: a documented
@@ -24,6 +28,8 @@ street, strongly at grazing angles. Both are ray traced here in the same scene a
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -106,17 +112,18 @@ def same_surface(i, j, instance, normal, t_m, normal_cos, depth):
     return normal[i, 0] * normal[j, 0] + normal[i, 1] * normal[j, 1] + normal[i, 2] * normal[j, 2] >= normal_cos
 
 
-@kernel("float32[::1](float32[::1], boolean[::1], int32[::1], float32[:, ::1], float32[::1], int64, int64, int64, "
-        "float32, float32)")
-def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, radius, normal_cos, depth):
-    """(H * W,) float32: for each ``traced`` pixel of a row-major H x W grid, the mean of ``blocked`` over the traced
+@kernel("float32[::1](float32[::1], boolean[::1], boolean[::1], int32[::1], float32[:, ::1], float32[::1], int64, "
+        "int64, int64, float32, float32)")
+def smooth_visibility(blocked, traced, wanted, instance, normal, t_m, height, width, radius, normal_cos, depth):
+    """(H * W,) float32: for each ``wanted`` pixel of a row-major H x W grid, the mean of ``blocked`` over the traced
     pixels within ``radius`` (a square window) of the same ``instance`` whose normal's cosine with its own exceeds
-    ``normal_cos`` and whose depth ``t_m`` is within ``depth`` of its own, relatively (itself included); 0 elsewhere."""
+    ``normal_cos`` and whose depth ``t_m`` is within ``depth`` of its own, relatively (itself included where traced);
+    NaN where no such pixel is traced; 0 where not wanted."""
     out = np.zeros(height * width, np.float32)
     for y in range(height):
         for x in range(width):
             i = y * width + x
-            if not traced[i]:
+            if not wanted[i]:
                 continue
             total = np.float32(0)
             count = 0
@@ -132,7 +139,7 @@ def smooth_visibility(blocked, traced, instance, normal, t_m, height, width, rad
                         continue
                     total += blocked[j]
                     count += 1
-            out[i] = total / np.float32(count)
+            out[i] = total / np.float32(count) if count else np.float32(np.nan)
     return out
 
 
@@ -165,23 +172,40 @@ def sky_visibility(scene: FrameScene, rays: np.ndarray, hits: Hits,
     rows = np.flatnonzero((on_actor | near) if given is None else (on_actor | near) & ~known)
     if not len(rows):
         return visibility
-    ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), rows, _PATTERN,
-                             n if period is None else int(period))
-    # From the world, only actors occlude (their contact shadow): the world's own occlusion is traced nowhere, so
-    # tracing it near actors only would draw the edges of that region.
-    static_rays = np.repeat(on_actor[rows], AO_SAMPLES)
-    blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M, static_rays=static_rays).reshape(len(rows), AO_SAMPLES)
-    share = blocked.mean(axis=1, dtype=np.float32)
-    if image_shape is not None:
-        h, w = image_shape
-        if h * w != n:
-            raise ValueError(f"image_shape {image_shape} does not hold the {n} rays")
-        per_pixel, traced = np.zeros(n, np.float32), np.zeros(n, bool)
-        per_pixel[rows], traced[rows] = share, True
-        share = smooth_visibility(per_pixel, traced, as_input(hits.instance_id, np.int32),
-                                  as_input(hits.normal, np.float32), t, h, w, AO_FILTER_RADIUS_PX,
-                                  np.float32(AO_FILTER_NORMAL_COS), np.float32(AO_FILTER_DEPTH))[rows]
-    visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * share
+    period = n if period is None else int(period)
+
+    def traced_share(which: np.ndarray) -> np.ndarray:
+        """The share of the AO_SAMPLES rays from each hit ``which`` that something blocks within AO_RADIUS_M."""
+        ao_rays = occlusion_rays(as_input(rays, np.float32), t, as_input(hits.normal, np.float32), which, _PATTERN,
+                                 period)
+        # From the world, only actors occlude (their contact shadow): the world's own occlusion is traced nowhere, so
+        # tracing it near actors only would draw the edges of that region.
+        static_rays = np.repeat(on_actor[which], AO_SAMPLES)
+        blocked = scene.occluded_rays(ao_rays, AO_RADIUS_M, static_rays=static_rays).reshape(len(which), AO_SAMPLES)
+        return blocked.mean(axis=1, dtype=np.float32)
+
+    if image_shape is None:
+        visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * traced_share(rows)
+        return visibility
+    h, w = image_shape
+    if h * w != n:
+        raise ValueError(f"image_shape {image_shape} does not hold the {n} rays")
+    # Pixel centres: every other pixel traces (a checkerboard), and each takes the mean over the traced pixels of its
+    # surface within AO_FILTER_RADIUS_PX; a skipped pixel with none (a surface a pixel wide) traces its own.
+    smooth = functools.partial(smooth_visibility, instance=as_input(hits.instance_id, np.int32),
+                               normal=as_input(hits.normal, np.float32), t_m=t, height=h, width=w,
+                               radius=AO_FILTER_RADIUS_PX, normal_cos=np.float32(AO_FILTER_NORMAL_COS),
+                               depth=np.float32(AO_FILTER_DEPTH))
+    per_pixel, traced, wanted = np.zeros(n, np.float32), np.zeros(n, bool), np.zeros(n, bool)
+    first = rows[(rows // w + rows % w) % 2 == 0]
+    per_pixel[first], traced[first] = traced_share(first), True
+    skipped = rows[~traced[rows]]
+    wanted[skipped] = True
+    alone = skipped[np.isnan(smooth(per_pixel, traced, wanted)[skipped])]
+    if len(alone):
+        per_pixel[alone], traced[alone] = traced_share(alone), True
+    wanted[rows] = True
+    visibility[rows] = 1.0 - np.float32(AO_STRENGTH) * smooth(per_pixel, traced, wanted)[rows]
     return visibility
 
 

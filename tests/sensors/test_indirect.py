@@ -109,10 +109,13 @@ def test_smooth_visibility_averages_over_one_surface_only():
     traced[5 * w + 0] = False  # (5, 0) untraced
     normal[0] = (1.0, 0.0, 0.0)  # (0, 0) faces another way
     t_m[1] = 11.0  # (0, 1) lies 10 % farther
-    out = smooth_visibility(blocked, traced, instance, normal, t_m, h, w, 2, np.float32(0.95), np.float32(0.03))
+    wanted = traced.copy()
+    wanted[4 * w + 0] = False  # (4, 0) traced, but its value not asked for
+    out = smooth_visibility(blocked, traced, wanted, instance, normal, t_m, h, w, 2, np.float32(0.95),
+                            np.float32(0.03))
 
     def expected(y, x):
-        if not traced[y * w + x]:
+        if not wanted[y * w + x]:
             return 0.0
         own = y * w + x
         same = [j for j in range(h * w)
@@ -122,8 +125,18 @@ def test_smooth_visibility_averages_over_one_surface_only():
 
     np.testing.assert_allclose(out, [expected(y, x) for y in range(h) for x in range(w)], rtol=1e-6)
     assert out[0] == blocked[0] and out[1] == blocked[1]  # alone on their surfaces
-    assert out[5 * w] == 0.0
+    assert out[5 * w] == 0.0 and out[4 * w] == 0.0
     assert 0.3 < out[3 * w + 1] < 0.7  # inside the checkerboard: near the mean, not 0 or 1
+    # A wanted pixel takes its traced neighbours' mean though untraced itself; NaN where none is on its surface.
+    asked = np.zeros(h * w, bool)
+    asked[5 * w] = asked[0] = True
+    alone = traced.copy()
+    alone[0] = False
+    probe = smooth_visibility(blocked, alone, asked, instance, normal, t_m, h, w, 2, np.float32(0.95),
+                              np.float32(0.03))
+    neighbours = [y * w + x for y in (3, 4, 5) for x in (0, 1, 2) if (y, x) != (5, 0)]  # all on its surface
+    assert probe[5 * w] == pytest.approx(np.mean(blocked[neighbours]))
+    assert np.isnan(probe[0])  # (0, 0) faces another way than all its neighbours
 
 
 def test_camera_grid_smoothing_keeps_a_uniform_surface_uniform(box_meshes, actors_factory):
@@ -141,6 +154,36 @@ def test_camera_grid_smoothing_keeps_a_uniform_surface_uniform(box_meshes, actor
     assert smoothed.std() <= plain.std()
     with pytest.raises(ValueError, match="does not hold"):
         sky_visibility(scene, rays, hits, (4, 4))
+
+
+def test_camera_grid_traces_every_other_pixel_and_each_surface_alone(box_meshes, actors_factory, monkeypatch):
+    """Of a camera grid's pixels, every other one traces (a checkerboard: (row + column) even) and the others take
+    their surface's smoothed mean; a skipped pixel with no traced pixel of its surface nearby traces its own and
+    keeps it (its value the unsmoothed one)."""
+    import dataclasses
+
+    actors = actors_factory([[0.0, 0.0, 1.5]], [[4.0, 2.0, 3.0]])
+    scene = FrameScene(StaticScene([plane()]), actors, box_meshes)
+    gx, gy = np.meshgrid(np.linspace(2.1, 2.6, 4), np.linspace(-0.6, 0.6, 5))
+    rays = down_rays(np.column_stack([gx.ravel(), gy.ravel()]))
+    hits = scene.cast_rays(rays)
+    traced = []
+    occluded_rays = FrameScene.occluded_rays
+    monkeypatch.setattr(FrameScene, "occluded_rays",
+                        lambda self, r, *a, **k: traced.append(r[::AO_SAMPLES, :3].copy()) or occluded_rays(self, r, *a,
+                                                                                                              **k))
+    smoothed = sky_visibility(scene, rays, hits, (5, 4))
+    assert sum(len(t) for t in traced) == 10  # the 10 of 20 pixels with (row + column) even
+    lone = 1 * 4 + 2  # (1, 2), skipped; tilt its normal away from its neighbours': alone on its surface
+    normal = hits.normal.copy()
+    normal[lone] = (0.6, 0.0, 0.8)
+    tilted = dataclasses.replace(hits, normal=normal)
+    traced.clear()
+    with_lone = sky_visibility(scene, rays, tilted, (5, 4))
+    assert sum(len(t) for t in traced) == 11  # the checkerboard, then the lone pixel
+    assert with_lone[lone] == sky_visibility(scene, rays, tilted)[lone]  # its own 8 rays, unsmoothed
+    others = np.arange(20) != lone
+    np.testing.assert_array_equal(with_lone[others], smoothed[others])  # none of theirs: another surface
 
 
 def test_sky_visibility_stops_beyond_its_range(box_meshes, actors_factory):
