@@ -21,8 +21,9 @@ Also prints the default rig's labelled frames per CPU-second (all the stage's pr
 that rate as a share of the bare casts' (issue 41: >= 0.3), the peak resident memory of each render worker, the
 frames/s beside MetaDrive's (METADRIVE_FPS, 800x600, measured on the development machine), and what a
 100,000-frame dataset costs in CPU-hours at this rate. The stage loads the run's static world from the build cache
-when an earlier render of the same simulation built it (pipeline.world.static.load_static_world), as every render of
-a simulation but its first does; --cold-world removes it first, to measure a first render. The breakdown is in CPU
+when an earlier render of the same simulation built it (pipeline.world.static.load_static_world, with its merged
+geometry: load_static_geometry), as every render of a simulation but its first does; --cold-world removes both first,
+to measure a first render. The breakdown is in CPU
 time (cProfile timing with ``time.process_time``: other work on shared cores does not inflate it).
 
     python bench/bench_render.py [--frames 100] [--sim DIR] [--scenario highway] [--condition noon] [--workers 2]
@@ -49,7 +50,7 @@ from pipeline.stages.render import check_sim, render
 from pipeline.stages.rig import build_sensors
 from pipeline.stages.simulate import resolve_scenario, simulate
 from pipeline.world.scene import FrameScene, StaticScene, make_rays
-from pipeline.world.static import WORLD_CACHE_NAME, build_static_world, static_world_key
+from pipeline.world.static import GEOMETRY_CACHE_NAME, WORLD_CACHE_NAME, build_static_world, static_world_key
 
 
 def cpu_seconds() -> float:
@@ -260,9 +261,11 @@ def main() -> None:
             config, _ = resolve_scenario(args.scenario, duration_s=args.frames / 10.0, warmup_s=90.0)
             sim = tmp / "sim"
             simulate(config, 1, sim, progress=False)
-        cached_world = cache_path(WORLD_CACHE_NAME, static_world_key(sim / "roads", int(check_sim(sim)["seed"])))
-        if args.cold_world:
+        world_key = static_world_key(sim / "roads", int(check_sim(sim)["seed"]))
+        cached_world = cache_path(WORLD_CACHE_NAME, world_key)
+        if args.cold_world:  # the world and its merged geometry, as a simulation's first render finds them: absent
             cached_world.unlink(missing_ok=True)
+            cache_path(GEOMETRY_CACHE_NAME, world_key).unlink(missing_ok=True)
         world_was_cached = cached_world.is_file()
         start, cpu = time.perf_counter(), cpu_seconds()
         with PeakWorkerMemory() as memory:
