@@ -71,6 +71,9 @@ RETRO_REFERENCE_RAD = np.radians(1.05)  # observation angle of the 30 m geometry
 RETRO_MIN_RAD = np.radians(0.5)  # closer to the light's direction R is taken as at this angle
 RETRO_WIDTH_RAD = np.radians(6.0)  # beyond a few degrees from the light's direction nothing returns
 RETRO_PEAK = float(RETRO_REFERENCE_RAD / RETRO_MIN_RAD)  # the largest value of the angular factor
+# How far a shadow segment may stray from the line from its lamp through its start: it leaves 2 mm off its
+# surface and stops 5 cm short of the lamp (_lit_pairs), and float32 rounds a point by ~2 mm within 20 km.
+SEGMENT_STRAY_M = 0.1
 
 
 def _retro_per_material() -> np.ndarray:
@@ -394,8 +397,11 @@ def light_radiance(
             continue
         src = src_all[kept]
         if lights.shadows[k]:
-            # Directions span the segment to the light, so tfar = 1 covers exactly the part that can shadow.
-            lit = ~scene.occluded_rays(np.concatenate([start, seg], axis=1), 1.0)
+            # Directions span the segment to the light, so tfar = 1 covers exactly the part that can shadow. Each
+            # segment leaves 2 mm off its surface and stops 5 cm short of the lamp (_lit_pairs): it stays within
+            # SEGMENT_STRAY_M of the line from the lamp through its start, so its actors come from bins about the lamp.
+            lit = ~scene.occluded_rays(np.concatenate([start, seg], axis=1), 1.0,
+                                       toward=(lights.position_m[k], SEGMENT_STRAY_M))
             src, w, s = src[lit], w[lit], s[lit]
         for c in range(3):  # ``src`` is unique within one light, so fancy-index accumulation is exact
             diffuse[c][src] += w * np.float32(lights.rgb[k, c])

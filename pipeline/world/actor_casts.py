@@ -488,9 +488,9 @@ def origin_bins(step: float = ORIGIN_BIN_RAD) -> tuple[int, int]:
 
 @kernel("Tuple((int64[::1], int64[::1], float32[:, ::1]))(float32[:, ::1], int64[::1], int64[::1], "
         "float64[:, :, ::1], float64[:, ::1], float64[::1], float64[::1], float64, int64, int64, int64[::1], "
-        "int64[::1])")
+        "int64[::1], float64[::1])")
 def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, step, n_el, n_az, cell_start,
-                       cell_item):
+                       cell_item, toward):
     """:func:`grid_actor_pairs` (without ``near_m``) of rays ``rows`` that all leave one origin, each ray tested
     against the actors :func:`origin_lists` (``cell_start``, ``cell_item``, built for that origin) lists for its
     direction's bin instead of those of the grid cells it crosses: the same tests in the same arithmetic, the
@@ -498,7 +498,13 @@ def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, 
     hold every actor whose sphere the ray meets (tested against grid_actor_pairs). A camera's or a LiDAR's ray
     crosses a cell of the grid every 2 m of its way; it has one bin. A bin lists the actors behind the ray's limit
     too (where the walk stops at it): those whose sphere begins beyond the grown limit are dropped first, by one
-    comparison (the box test would drop them: the box lies in the sphere)."""
+    comparison (the box test would drop them: the box lies in the sphere).
+
+    ``toward`` (3,) float64, finite: the rays are instead segments that end near one point q (shadow rays towards a
+    lamp) and the lists were built at q: each ray takes the bin of the direction from q to its origin. A segment that
+    stays within s of the line from q through its origin meets an actor's sphere only if that line meets the sphere
+    grown by s, so lists built with the radii grown by s hold every actor it can meet (:meth:`FrameScene._pairs`).
+    NaN: the rays' own directions, as above."""
     local = np.empty(6, np.float32)
     count = 0
     pair_row = np.empty(rows.size, np.int64)
@@ -512,7 +518,10 @@ def origin_actor_pairs(rays, rows, actors, inv_linear, centre, radius, t_limit, 
         dd = d0 * d0 + d1 * d1 + d2 * d2
         limit = np.float64(t_limit[j]) * 1.001 + 0.01
         reach = limit * np.sqrt(dd)  # the farthest a pair's box may begin (inf without a limit)
-        c = _direction_bin(d0, d1, d2, step, n_el, n_az)
+        if np.isnan(toward[0]):
+            c = _direction_bin(d0, d1, d2, step, n_el, n_az)
+        else:
+            c = _direction_bin(o0 - toward[0], o1 - toward[1], o2 - toward[2], step, n_el, n_az)
         for m in range(cell_start[c], cell_start[c + 1]):
             a = actors[cell_item[m]]
             v0, v1, v2 = centre[a, 0] - o0, centre[a, 1] - o1, centre[a, 2] - o2

@@ -494,7 +494,7 @@ class FrameScene:
         self._top_z = float(self.hull_vertices[:, 2].max()) if len(self.hull_vertices) else -np.inf
         self._footprints: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}  # see _sun_footprints
         self._grid: tuple | None = None  # see _pairs
-        self._origin_lists: dict[tuple[float, float, float], tuple[np.ndarray, np.ndarray]] = {}  # see _pairs
+        self._origin_lists: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # see _pairs
 
     @property
     def model_codes(self) -> np.ndarray:
@@ -579,11 +579,14 @@ class FrameScene:
         return self.occluded_rays(_rays(origins, directions), t_max_m)
 
     def occluded_rays(self, rays: np.ndarray, t_max_m: float = np.inf, actor_rays: np.ndarray | None = None,
-                      static_rays: np.ndarray | None = None) -> np.ndarray:
+                      static_rays: np.ndarray | None = None, toward: tuple[np.ndarray, float] | None = None
+                      ) -> np.ndarray:
         """:meth:`occluded` for prebuilt (N, 6) float32 rays [origin | unit direction]. ``actor_rays`` (N,) bool,
         optional: a conservative mask of the rays that may meet an actor (e.g. :meth:`sun_actor_candidates`); the
         others are tested against the static world only. ``static_rays`` likewise for the static world (e.g.
-        :meth:`StaticScene.sun_candidates`)."""
+        :meth:`StaticScene.sun_candidates`). ``toward`` (q (3,), s metres), optional: every ray up to ``t_max_m``
+        stays within s of the line from the point q through its origin (segments towards one lamp): their actors are
+        found from lists of direction bins about q (:meth:`_pairs`)."""
         blocked = self.static.occluded(rays, t_max_m, self.threads, static_rays)
         if not len(self._placed):
             return blocked
@@ -591,7 +594,8 @@ class FrameScene:
         rays = as_input(rays, np.float32)
         # Segments (sky occlusion, shadows towards a lamp) test only the actors of the grid cells they cross.
         # Short ones (a pixel's sky-occlusion rays share an origin) take the actors within their reach of it, once.
-        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)), near=True)
+        pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)), near=True,
+                                                  toward=toward)
         hit_pair = np.zeros(len(pair_row), bool)
         for model, sel in self._pairs_by_model(pair_actor):
             # t along the unit-frame ray is in world metres, so t_max_m applies as it is.
@@ -603,8 +607,8 @@ class FrameScene:
         """(model, the positions (int64) of that model's entries) for each model among the actors ``pair_actor``."""
         return code_groups(self._model[pair_actor])
 
-    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray, near: bool = False
-               ) -> tuple[np.ndarray, ...]:
+    def _pairs(self, rays: np.ndarray, sub: np.ndarray, t_limit: np.ndarray, near: bool = False,
+               toward: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, ...]:
         """:func:`pipeline.world.actor_casts.actor_pairs` of the rays ``sub`` of the (N, 6) float32 ``rays`` and
         the placed actors, less the pairs that cannot be hit at t <= ``t_limit`` ((K,) float64, inf: no limit), each
         ray tested only against the actors of the grid cells it crosses (:func:`grid_actor_pairs`; the grid is
@@ -612,18 +616,31 @@ class FrameScene:
         limit), a ray that reaches no farther than a cell takes the actors within its reach of its origin. Many
         rays from one origin (a camera's, a LiDAR's) take instead the actors listed for their direction's bin
         (:func:`origin_actor_pairs`; the lists built once per frame and origin): the same pairs, without walking
-        the grid."""
+        the grid. Many segments that end near one point (``toward``: the point q and how far, s, each may stray from
+        the line from q through its origin; with ``near`` only) take the actors listed for the bin of their origin's
+        direction from q, in lists built at q with every sphere grown by s: the walk's pairs, and possibly some
+        entered between the limit and its margin, as ``near`` keeps them."""
         if not len(self._placed) or not len(sub):
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 6), np.float32)
         sub = as_input(sub, np.int64)
-        if not near and len(sub) >= ORIGIN_MIN_RAYS and shared_origin(rays, sub):
+        bins = None
+        if near and toward is not None and len(sub) >= ORIGIN_MIN_RAYS:
+            point, stray = np.asarray(toward[0], np.float64).reshape(3), float(toward[1])
+            key = ("toward", *point.tolist(), stray)
+            if key not in self._origin_lists:
+                self._origin_lists[key] = origin_lists(*point.tolist(), self._placed, self._center,
+                                                       self._radius + stray, ORIGIN_BIN_RAD, *origin_bins())
+            bins = self._origin_lists[key], point
+        elif not near and len(sub) >= ORIGIN_MIN_RAYS and shared_origin(rays, sub):
             origin = tuple(float(v) for v in rays[sub[0], :3])
-            lists = self._origin_lists.get(origin)
-            if lists is None:
-                lists = self._origin_lists[origin] = origin_lists(*origin, self._placed, self._center, self._radius,
-                                                                   ORIGIN_BIN_RAD, *origin_bins())
+            if origin not in self._origin_lists:
+                self._origin_lists[origin] = origin_lists(*origin, self._placed, self._center, self._radius,
+                                                          ORIGIN_BIN_RAD, *origin_bins())
+            bins = self._origin_lists[origin], np.full(3, np.nan)
+        if bins is not None:
             return origin_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center, self._radius,
-                                      as_input(t_limit, np.float64), ORIGIN_BIN_RAD, *origin_bins(), *lists)
+                                      as_input(t_limit, np.float64), ORIGIN_BIN_RAD, *origin_bins(), *bins[0],
+                                      bins[1])
         if self._grid is None:
             self._grid = actor_grid(self._center, self._radius, self._placed)
         return grid_actor_pairs(rays, sub, self._placed, self._inv_linear, self._center,

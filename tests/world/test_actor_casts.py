@@ -10,6 +10,7 @@ from pipeline.core.classes import ObjectClass
 from pipeline.core.geometry import Boxes3D
 from pipeline.world.actor_casts import (
     BOX_MARGIN,
+    _unit_box_entry,
     actor_grid,
     actor_pairs,
     cell_lists,
@@ -179,7 +180,8 @@ def test_rays_from_one_origin_take_the_pairs_of_the_grid_from_their_direction_bi
     lists = origin_lists(0.2, -0.1, 1.3, actors, c, radius, step, *origin_bins(step))
     for limit in (np.full(len(rows), np.inf), rng.uniform(0.0, 60.0, len(rows))):
         walked = grid_actor_pairs(rays, rows, actors, inv, c, radius, limit, *grid, 0.0)
-        binned = origin_actor_pairs(rays, rows, actors, inv, c, radius, limit, step, *origin_bins(step), *lists)
+        binned = origin_actor_pairs(rays, rows, actors, inv, c, radius, limit, step, *origin_bins(step), *lists,
+                                    np.full(3, np.nan))
         assert len(walked[0]) > 2000 and {0, 1, 2, 3} <= set(walked[1].tolist())
         for a, b in zip(walked, binned, strict=True):
             np.testing.assert_array_equal(a, b)
@@ -213,6 +215,41 @@ def test_a_frame_scene_gives_rays_from_one_origin_the_grid_pairs():
     assert len(expected[0]) > 200
     for a, b in zip(expected, got, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("lamp", [(3.0, 1.0, 6.5), (0.0, 0.0, 1.0)])  # a street lamp; a headlamp among the cars
+def test_segments_towards_a_lamp_take_the_pairs_of_bins_about_it(lamp):
+    """Shadow segments towards one lamp (from points on and about cars, 2 mm off the surface, stopping 5 cm short of
+    the lamp) find their actors in the direction bins about the lamp (``toward``): every pair the grid's walk finds,
+    none it could not (each entered by the limit and its margin), and the same occlusion by real Embree tests."""
+    rng = np.random.default_rng(11)
+    n = 60
+    boxes = Boxes3D(np.column_stack([rng.uniform(-30, 30, n), rng.uniform(-10, 10, n), np.full(n, 0.75)]),
+                    np.tile([[4.5, 1.8, 1.5]], (n, 1)), rng.uniform(-np.pi, np.pi, n))
+    scene = FrameScene(StaticScene([]), Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, boxes,
+                                                np.full((n, 3), 0.5)), threads=1)
+    points = np.concatenate([boxes.center[rng.integers(0, n, 3000)] + rng.normal(0, [2.0, 1.0, 0.8], (3000, 3)),
+                             rng.uniform([-35, -12, 0], [35, 12, 2], (3000, 3))])
+    normal = rng.normal(size=points.shape)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    lamp = np.array(lamp)
+    v = lamp - points
+    start = points + normal * 2e-3
+    seg = v * (1.0 - 0.05 / np.linalg.norm(v, axis=1))[:, None]
+    rays = np.concatenate([start, seg], axis=1).astype(np.float32)
+    sub, limit = np.arange(len(rays)), np.ones(len(rays))
+    walked = scene._pairs(rays, sub, limit, near=True)
+    binned = scene._pairs(rays, sub, limit, near=True, toward=(lamp, 0.1))
+    assert any(key[0] == "toward" for key in scene._origin_lists)
+    walked_set = set(zip(walked[0].tolist(), walked[1].tolist(), strict=True))
+    binned_set = set(zip(binned[0].tolist(), binned[1].tolist(), strict=True))
+    assert len(walked_set) > 500 and walked_set <= binned_set
+    local = {(r, a): i for i, (r, a) in enumerate(zip(binned[0].tolist(), binned[1].tolist(), strict=True))}
+    entry = np.array([_unit_box_entry(binned[2][local[p]], 0.5 + BOX_MARGIN) for p in binned_set - walked_set])
+    assert np.all(entry <= 1.001 + 0.01)  # extra pairs only between the limit and its margin
+    blocked = scene.occluded_rays(rays, 1.0)
+    assert 300 < blocked.sum() < len(rays) - 300
+    np.testing.assert_array_equal(scene.occluded_rays(rays, 1.0, toward=(lamp, 0.1)), blocked)
 
 
 def test_cell_lists_clip_spans_and_keep_items_ascending():
