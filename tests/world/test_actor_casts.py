@@ -196,14 +196,20 @@ def test_rays_from_one_origin_take_the_pairs_of_the_grid_from_their_direction_bi
     assert not shared_origin(moved, rows)
 
 
+def _cars_scene(rng: np.random.Generator, n: int, half_x_m: float, half_y_m: float) -> tuple[Boxes3D, FrameScene]:
+    """``n`` cars at random places within +-half_x_m, +-half_y_m and headings on the ground, and a frame scene of them
+    alone (one thread)."""
+    centre = np.column_stack([rng.uniform(-half_x_m, half_x_m, n), rng.uniform(-half_y_m, half_y_m, n),
+                              np.full(n, 0.75)])
+    boxes = Boxes3D(centre, np.tile([[4.5, 1.8, 1.5]], (n, 1)), rng.uniform(-np.pi, np.pi, n))
+    cars = Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, boxes, np.full((n, 3), 0.5))
+    return boxes, FrameScene(StaticScene([]), cars, threads=1)
+
+
 def test_a_frame_scene_gives_rays_from_one_origin_the_grid_pairs():
     """FrameScene._pairs takes the direction bins for many rays from one origin (a camera's): the same pairs."""
     rng = np.random.default_rng(5)
-    n = 40
-    boxes = Boxes3D(np.column_stack([rng.uniform(-60, 60, n), rng.uniform(-8, 8, n), np.full(n, 0.75)]),
-                    np.tile([[4.5, 1.8, 1.5]], (n, 1)), rng.uniform(-np.pi, np.pi, n))
-    scene = FrameScene(StaticScene([]), Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, boxes,
-                                                np.full((n, 3), 0.5)), threads=1)
+    _, scene = _cars_scene(rng, 40, 60.0, 8.0)
     d = rng.normal(size=(5000, 3)) * [1.0, 1.0, 0.1]
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     rays = np.column_stack([np.tile([0.0, 0.0, 1.2], (len(d), 1)), d]).astype(np.float32)
@@ -224,10 +230,7 @@ def test_segments_towards_a_lamp_take_the_pairs_of_bins_about_it(lamp):
     none it could not (each entered by the limit and its margin), and the same occlusion by real Embree tests."""
     rng = np.random.default_rng(11)
     n = 60
-    boxes = Boxes3D(np.column_stack([rng.uniform(-30, 30, n), rng.uniform(-10, 10, n), np.full(n, 0.75)]),
-                    np.tile([[4.5, 1.8, 1.5]], (n, 1)), rng.uniform(-np.pi, np.pi, n))
-    scene = FrameScene(StaticScene([]), Actors(np.arange(1, n + 1), [ObjectClass.CAR] * n, boxes,
-                                                np.full((n, 3), 0.5)), threads=1)
+    boxes, scene = _cars_scene(rng, n, 30.0, 10.0)
     points = np.concatenate([boxes.center[rng.integers(0, n, 3000)] + rng.normal(0, [2.0, 1.0, 0.8], (3000, 3)),
                              rng.uniform([-35, -12, 0], [35, 12, 2], (3000, 3))])
     normal = rng.normal(size=points.shape)
