@@ -593,7 +593,8 @@ class FrameScene:
         sub = np.flatnonzero(~blocked if actor_rays is None else actor_rays & ~blocked)
         rays = as_input(rays, np.float32)
         # Segments (sky occlusion, shadows towards a lamp) test only the actors of the grid cells they cross.
-        # Short ones (a pixel's sky-occlusion rays share an origin) take the actors within their reach of it, once.
+        # Short ones (a pixel's sky-occlusion rays share an origin) take the actors within their reach of it, once;
+        # those towards one point (``toward``), the actors of their direction's bin about it.
         pair_row, pair_actor, local = self._pairs(rays, sub, np.full(len(sub), float(t_max_m)), near=True,
                                                   toward=toward)
         hit_pair = np.zeros(len(pair_row), bool)
