@@ -104,6 +104,11 @@ class Condition:
         return self.config.sun.shadows
 
     @property
+    def sun_shadows(self) -> bool:
+        """The sun casts shadows: shadow rays are on and the sun is above the horizon."""
+        return self.shadows and self.sun_elevation_deg > 0
+
+    @property
     def sun_angular_radius_rad(self) -> float:
         """The sun disc's angular radius, radians (0: a point)."""
         return float(np.radians(self.config.sun.angular_radius_deg))

@@ -64,7 +64,7 @@ def actors_in_reach(
         origin = lidar.lidar_to_world(ego_pose).translation
         range_m = condition.lidar(lidar).range_m
         reach |= np.linalg.norm(centre - origin, axis=1) - radius <= range_m
-    sun_shadows = condition.shadows and condition.sun_elevation_deg > 0
+    sun_shadows = condition.sun_shadows
     if sun_shadows:
         sun = condition.sun_direction.astype(np.float64)
         floor = min(floor_z_m, float(np.min(centre[:, 2] - 0.5 * actors.boxes.size[:, 2])))

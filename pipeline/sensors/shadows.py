@@ -221,7 +221,7 @@ def sun_shares(scene: FrameScene, rays: np.ndarray, hits: Hits, condition: Condi
     n_dot_l, lit, shadow, which = sun_rays(as_input(rays, np.float32), normal, t_m, condition.sun_direction, disc,
                                            width, len(rays) if period is None else int(period))
     sunlit = np.ones(len(lit), np.float32)
-    if not (condition.shadows and condition.sun_elevation_deg > 0 and len(lit)):
+    if not (condition.sun_shadows and len(lit)):
         return n_dot_l, lit, sunlit
     if given is None:
         sunlit = sun_visibility(scene, rays, hits, lit, shadow, which, disc, condition.sun_angular_radius_rad,

@@ -315,8 +315,7 @@ def _shared(job: ShardJob) -> _Shared:
     trajectories = Trajectories(body_sized_trajectories(read_parquet(job.sim_dir / "trajectories.parquet"), meshes,
                                                         job.seed, condition.umbrellas))
     geometry = load_static_geometry(world, job.sim_dir / "roads", seed=job.seed)  # pickled: the same world
-    if condition.shadows and condition.sun_elevation_deg > 0 and any(c.config.quality == "realistic"
-                                                                     for c in cameras):
+    if condition.sun_shadows and any(c.config.quality == "realistic" for c in cameras):
         geometry.sun_tiles(condition.sun_disc)  # the realistic cameras' soft shadows test the sun's whole disc
     return _Shared(world, geometry, cameras, lidars, condition, trajectories, meshes)
 
