@@ -73,7 +73,7 @@ PERSON_HITS = 2  # frames on end that confirm a person's track
 # The people's tracker: a person walks at a steady pace (white-noise acceleration of 0.1 m^2/s^3 against a vehicle's
 # 4) and is born standing, up to ~2 m/s either way (a brisk walk 1.5-2 m/s); associated by position alone (tracker.py).
 PERSON_TRACKER = TrackerParams(accel_psd=0.1, birth_speed_std_mps=2.0, confirm_hits=PERSON_HITS, max_misses=3,
-                               birth_with_ego=False, iou_gate=None)
+                               birth_with_ego=False, iou_gate=None, merge_overlap=None)
 # A person's track walks (its velocity counts) at this speed or more and this many standard deviations of it.
 # Simulated at 10 m (0.5 m of ranging noise, the tracker's model there; 20 seeds each): a walk at 1.4 m/s towards the
 # path from 4 m beside it counts after a median 1.2 s (at most 1.6 s; it enters after 2.0 s), and a person standing
@@ -95,6 +95,10 @@ WALK_MOVED_SHARE = 0.5
 RANGE_GATE = (0.4, 2.5)  # the LiDAR points that range a box lie at this share of the depth its height implies
 # LiDAR returns lower than this above the road are the road's (ground removal): they range no box.
 GROUND_CLEARANCE_M = 0.3
+# A confirmed vehicle track the detector missed for up to this many frames on end is still reported while its
+# predicted centre lies in the camera's image (PerceivedFeatures.coast_in_view); out of view it is not (tracker.py).
+COAST_IN_VIEW = 2
+CAR_MIDDLE_M = 0.75  # the height above the road at which a coasting track's centre is projected into the image
 
 
 @dataclass(frozen=True)
@@ -231,7 +235,7 @@ class PerceivedFeatures(gym.Wrapper):
     def __init__(self, env: gym.Env, detector, *, tracker: TrackerParams | None = None,
                  max_detections: int = 32, range_gate: tuple[float, float] | None = RANGE_GATE,
                  ground_clearance_m: float | None = GROUND_CLEARANCE_M, person_score: float = PERSON_SCORE,
-                 person_hits: int = PERSON_HITS) -> None:
+                 person_hits: int = PERSON_HITS, coast_in_view: int = COAST_IN_VIEW) -> None:
         super().__init__(env)
         inner = env.unwrapped
         live = getattr(inner, "sensors", None)
@@ -243,6 +247,9 @@ class PerceivedFeatures(gym.Wrapper):
             raise ValueError(f"person_score: expected a score in [0, 1], got {person_score!r}")
         if isinstance(person_hits, bool) or not isinstance(person_hits, int) or person_hits < 1:
             raise ValueError(f"person_hits: expected an integer >= 1, got {person_hits!r}")
+        if isinstance(coast_in_view, bool) or not isinstance(coast_in_view, int) or coast_in_view < 0:
+            raise ValueError(f"coast_in_view: expected an integer >= 0, got {coast_in_view!r}")
+        self.coast_in_view = coast_in_view
         self.perception = Perception(detector, live.cameras[0], live.lidars[0].mount,
                                      categories=(PERSON_CATEGORY, *ROAD_USER_CATEGORIES), range_gate=range_gate,
                                      ground_clearance_m=ground_clearance_m or 0.0)
@@ -292,6 +299,7 @@ class PerceivedFeatures(gym.Wrapper):
         tracks = self.tracker.update(Detections(centres[vehicles], frame.boxes_px[vehicles],
                                                 frame.category_ids[vehicles], sizes[vehicles],
                                                 frame.scores[vehicles]), pose)
+        tracks = sorted([*tracks, *self._coasting_in_view(pose)], key=lambda t: t.track_id)
         space = inner.observation_space["neighbours"]
         rows = track_neighbour_rows(lane_frame_tracks(tracks, pose, heading, speed), float(obs["ego"][3]),
                                     inner.lane_width_m(), float(space.high[0, 1]))
@@ -322,6 +330,26 @@ class PerceivedFeatures(gym.Wrapper):
         bearing[:n] = np.where(ranged[:n], frame.bearing_rad[:n], 0.0)
         out["detection_range_m"], out["detection_bearing_rad"], out["detection_ranged"] = rng, bearing, ranged_k
         return out, info
+
+
+    def _coasting_in_view(self, pose: EgoPose) -> list[Track]:
+        """The confirmed vehicle tracks the tracker does not report that missed at most ``coast_in_view`` frames on
+        end and whose predicted centre, at the height of a car's middle, lies in the camera's image."""
+        reported = self.tracker.params.report_misses
+        coasting = [t for t in self.tracker.tracks if t.confirmed and reported < t.misses <= self.coast_in_view]
+        if not coasting:
+            return []
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        dx = np.array([t.x[0] - pose.x_m for t in coasting])
+        dy = np.array([t.x[1] - pose.y_m for t in coasting])
+        middle = CAR_MIDDLE_M - 0.5 * self.env.unwrapped.ego_height_m()  # the road lies half the ego's height below
+        ego = np.column_stack([c * dx + s * dy, -s * dx + c * dy, np.full(len(coasting), middle)])
+        uv, in_front = self.perception.camera.project(self.perception.ego_to_camera.apply(ego))
+        camera = self.perception.camera
+        with np.errstate(invalid="ignore"):
+            inside = (in_front & (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0)
+                      & (uv[:, 1] < camera.height))
+        return [t for t, keep in zip(coasting, inside, strict=True) if keep]
 
 
 class RecentPlaces:

@@ -22,11 +22,24 @@ agent reads (:func:`track_neighbour_rows`, the six slots of :mod:`pipeline.envs.
   freedom, ``gate_probability``); a pair inside neither gate cannot be matched. ``iou_gate`` None: positions only
   (people: a person's box cut to a sliver by an occluder keeps most of its IoU with the last one while the LiDAR
   ranges it on the background 20 m behind, and a match by the box would move the track there).
+- **Validation gate**: a detection matched by its box alone, its position outside the position gate, is the same
+  object ranged on something else (the LiDAR median of a small box on a far car's lamps, or of a box holding two
+  cars); it corrects nothing. A confirmed track takes its box and coasts (a miss: after ``max_misses`` of them the
+  next such detection ends it and starts a track where the LiDAR now puts it); a tentative track is dropped and the
+  detection starts a track of its own, so that a track confirms on ``confirm_hits`` consistent positions. Corrected
+  by such a range instead, a track on a car 38 m ahead on the highway at night moved 9 m in 0.1 s and reported the
+  car closing at 100 m/s, and the reference driver braked hard for it (highway seed 1).
 - **Confident and weak detections** (``birth_score``, 0 by default: every detection is confident), as ByteTrack
   does (Zhang et al., "ByteTrack: Multi-Object Tracking by Associating Every Detection Box", ECCV 2022): the tracks
   are first associated with the detections scoring at least ``birth_score``, then the tracks left over with the
   weaker ones; only a confident detection left over starts a track. A weak detection can keep a track alive (a car
   that fades into the dark or the fog) but never start one (glare, a far lamp, a shadow).
+- **Duplicates** (``merge_overlap``): a detector may box one car twice (the whole car and a part of it, scoring
+  too differently for its non-maximum suppression), and both boxes are ranged on the same car. Of two confirmed
+  tracks at one place (each inside the other's position gate) whose image boxes overlap by at least
+  ``merge_overlap`` of the smaller one, the one with fewer hits is dropped (None: never; people standing in a group
+  are at one place and in each other's boxes). Two tracks on one leader took its slot in turns on the highway by
+  morning, one of them closing at 6 m/s where the car was drawing away (highway seed 1).
 - **Births and deaths**: an unmatched confident detection starts a tentative track (moving as the ego does, or at
   rest with ``birth_with_ego`` False, as for people; with the uncertainty of ``birth_speed_std_mps``); it is
   confirmed after ``confirm_hits`` consecutive hits and dropped at its first miss before that; a confirmed track
@@ -71,6 +84,7 @@ class TrackerParams:
     report_misses: int = 0
     birth_score: float = 0.0
     birth_with_ego: bool = True
+    merge_overlap: float | None = 0.7
 
     def __post_init__(self) -> None:
         for name in ("dt_s", "accel_psd", "sigma_m", "birth_speed_std_mps"):
@@ -79,6 +93,8 @@ class TrackerParams:
         check_number("TrackerParams", "gate_probability", self.gate_probability, high=1.0, allow_high=False)
         if self.iou_gate is not None:
             check_number("TrackerParams", "iou_gate", self.iou_gate, high=1.0)
+        if self.merge_overlap is not None:
+            check_number("TrackerParams", "merge_overlap", self.merge_overlap, high=1.0)
         check_number("TrackerParams", "birth_score", self.birth_score, high=1.0, allow_low=True)
         if not isinstance(self.birth_with_ego, bool):
             raise ValueError(f"TrackerParams.birth_with_ego: expected True or False, got {self.birth_with_ego!r}")
@@ -167,17 +183,21 @@ class Track:
     confirmed: bool = False
 
 
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(A, B) IoU of (A, 4) and (B, 4) x1, y1, x2, y2 boxes; NaN boxes give 0."""
+def box_iou(a: np.ndarray, b: np.ndarray, over: str = "union") -> np.ndarray:
+    """(A, B) IoU of (A, 4) and (B, 4) x1, y1, x2, y2 boxes; NaN boxes give 0. ``over`` "smaller": the intersection
+    over the smaller box's area instead (1 for a box inside another)."""
     a = np.asarray(a, np.float64)[:, None, :]
     b = np.asarray(b, np.float64)[None, :, :]
     w = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
     h = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
     inter = w * h
-    union = ((a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1]) + (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
-             - inter)
+    area_a = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1])
+    area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+    if over not in ("union", "smaller"):
+        raise ValueError(f"box_iou: over: expected 'union' or 'smaller', got {over!r}")
+    denominator = area_a + area_b - inter if over == "union" else np.minimum(area_a, area_b)
     with np.errstate(invalid="ignore", divide="ignore"):
-        iou = np.where(union > 0, inter / union, 0.0)
+        iou = np.where(denominator > 0, inter / denominator, 0.0)
     return np.nan_to_num(iou, nan=0.0)
 
 
@@ -213,10 +233,12 @@ class Tracker:
             t.x = f @ t.x
             t.p = f @ t.p @ f.T + q
 
-    def _costs(self, det: Detections, fixed: np.ndarray, ranges: np.ndarray) -> np.ndarray:
+    def _costs(self, det: Detections, fixed: np.ndarray, ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T, K) association costs and whether each pair's position lies inside the position gate."""
         costs = np.full((len(self.tracks), len(fixed)), UNMATCHABLE)
+        consistent = np.zeros(costs.shape, bool)
         if not len(self.tracks) or not len(fixed):
-            return costs
+            return costs, consistent
         iou_gate = self.params.iou_gate
         ious = box_iou(np.array([t.box_px for t in self.tracks]), det.box_px) if iou_gate is not None else None
         gate = self.params.gate
@@ -228,11 +250,12 @@ class Tracker:
                 options = []
                 if d2 < gate:
                     options.append(d2 / gate)
+                    consistent[i, j] = True
                 if ious is not None and ious[i, j] >= iou_gate:
                     options.append(1.0 - ious[i, j])
                 if options:
                     costs[i, j] = min(options)
-        return costs
+        return costs, consistent
 
     def update(self, det: Detections, pose: EgoPose | None = None) -> list[Track]:
         """Predict, associate (confident detections first, then the weak ones with the tracks left over), correct,
@@ -243,30 +266,67 @@ class Tracker:
         ranges = np.hypot(det.position_m[:, 0], det.position_m[:, 1])
         fixed = det.position_m if pose is None else pose.to_fixed(det.position_m)
         pose = pose or EgoPose()
-        costs = self._costs(det, fixed, ranges)
+        costs, consistent = self._costs(det, fixed, ranges)
         k = len(det.position_m)
         confident = (np.ones(k, bool) if det.score is None
                      else np.asarray(det.score, np.float64) >= self.params.birth_score)
-        matched_tracks, matched_dets = set(), set()
+        matched_tracks, matched_dets, dropped = set(), set(), set()
         for dets in (np.flatnonzero(confident), np.flatnonzero(~confident)):
             rows = [i for i in range(len(self.tracks)) if i not in matched_tracks]
             for i, j in self._assign(costs, rows, dets):
-                self._correct(self.tracks[i], det, j, fixed[j], ranges[j])
                 matched_tracks.add(i)
-                matched_dets.add(j)
+                if consistent[i, j]:
+                    self._correct(self.tracks[i], det, j, fixed[j], ranges[j])
+                    matched_dets.add(j)
+                elif self.tracks[i].confirmed and self.tracks[i].misses < self.params.max_misses:
+                    # the same object by its box, its range an outlier: the track coasts
+                    self.tracks[i].box_px = det.box_px[j].copy()
+                    self.tracks[i].misses += 1
+                    matched_dets.add(j)
+                else:  # a tentative track confirms on consistent positions only: the detection starts anew
+                    dropped.add(i)
         kept = []
         for i, t in enumerate(self.tracks):
+            if i in dropped:
+                continue
             if i not in matched_tracks:
                 t.misses += 1
-                if not t.confirmed or t.misses > self.params.max_misses:
+                if not t.confirmed:
                     continue
+            if t.misses > self.params.max_misses:
+                continue
             kept.append(t)
         for j in range(k):
             if j not in matched_dets and confident[j]:
                 kept.append(self._birth(det, j, fixed[j], ranges[j], pose))
-        self.tracks = kept
+        self.tracks = self._merged(kept)
         return sorted((t for t in self.tracks if t.confirmed and t.misses <= self.params.report_misses),
                       key=lambda t: t.track_id)
+
+    def _merged(self, tracks: list[Track]) -> list[Track]:
+        """``tracks`` less the confirmed duplicates (``merge_overlap``): of two confirmed tracks at one place (each
+        inside the other's position gate, the two covariances summed) whose image boxes overlap by at least
+        ``merge_overlap`` of the smaller one, the one with fewer hits (the younger on a tie) is dropped."""
+        if self.params.merge_overlap is None:
+            return tracks
+        confirmed = [t for t in tracks if t.confirmed]
+        if len(confirmed) < 2:
+            return tracks
+        overlap = box_iou(np.array([t.box_px for t in confirmed]), np.array([t.box_px for t in confirmed]),
+                          over="smaller")
+        gone: set[int] = set()
+        ranked = sorted(range(len(confirmed)), key=lambda i: (-confirmed[i].hits, confirmed[i].track_id))
+        for a_rank, a in enumerate(ranked):
+            if confirmed[a].track_id in gone:
+                continue
+            for b in ranked[a_rank + 1:]:
+                if confirmed[b].track_id in gone or overlap[a, b] < self.params.merge_overlap:
+                    continue
+                r = confirmed[b].x[:2] - confirmed[a].x[:2]
+                s = confirmed[a].p[:2, :2] + confirmed[b].p[:2, :2]
+                if float(r @ np.linalg.solve(s, r)) < self.params.gate:
+                    gone.add(confirmed[b].track_id)
+        return [t for t in tracks if t.track_id not in gone]
 
     @staticmethod
     def _assign(costs: np.ndarray, rows: list[int], cols: np.ndarray) -> list[tuple[int, int]]:

@@ -227,6 +227,63 @@ def test_a_perceived_episode_repeats_with_its_seed(rig_path):
         assert np.array_equal(a["detections"], b["detections"])
 
 
+class MissingFrames(GroundTruthBoxes):
+    """The labelled vehicles' boxes, except on the frames (by call, reset's first) in ``missed``: none."""
+
+    def __init__(self, env, missed) -> None:
+        super().__init__(env)
+        self.missed, self.calls = set(missed), 0
+
+    def predict(self, rgbs):
+        self.calls += 1
+        if self.calls - 1 in self.missed:
+            return [ImageDetections(np.zeros((0, 4)), np.zeros(0), np.zeros(0, np.int64))]
+        return super().predict(rgbs)
+
+
+@pytest.mark.slow
+def test_a_leader_the_detector_misses_for_a_frame_coasts_in_view_and_not_out_of_it(rig_path):
+    """A confirmed track missed for up to coast_in_view frames stays in its slot, predicted, while its centre lies in
+    the camera's image (the detector missed it); a track predicted beside or behind the ego, or missed longer, is
+    not reported."""
+    from pipeline.envs.features import NEIGHBOUR_SLOTS
+    from pipeline.envs.tracker import EgoPose, Track
+
+    leader = NEIGHBOUR_SLOTS.index("leader")
+    slots = {}
+    for coast in (0, 2):
+        env = gym.make("roadsynth/Highway-v0", vehicles=100, warmup_s=30.0, time_limit_s=3.0,
+                       sensors=["camera", "lidar"], rig=rig_path)
+        wrapped = PerceivedFeatures(env, MissingFrames(env, missed={6}), coast_in_view=coast)
+        try:
+            obs, _ = wrapped.reset(seed=3)  # a leader 56 m ahead
+            seen = [obs["neighbours"][leader].copy()]
+            for _ in range(7):
+                obs, *_ = wrapped.step(np.zeros(2, np.float32))
+                seen.append(obs["neighbours"][leader].copy())
+            slots[coast] = seen
+            if coast:
+                inner = env.unwrapped
+                pose = EgoPose.moving(*inner.ego_pose(), float(obs["ego"][0]))
+                places = [(30.0, 0.0, 1), (30.0, 0.0, 2), (30.0, 0.0, 3), (0.0, 6.0, 1), (-20.0, 0.0, 1),
+                          (30.0, 0.0, 0)]  # ego frame, misses
+                fixed = pose.to_fixed(np.array([p[:2] for p in places]))
+                wrapped.tracker.tracks = [Track(k + 1, np.array([*fixed[k], 0.0, 0.0]), np.eye(4), np.zeros(4), 3,
+                                                np.array([4.5, 1.8]), 5, misses, True)
+                                          for k, (_, _, misses) in enumerate(places)]
+                assert [t.track_id for t in wrapped._coasting_in_view(pose)] == [1, 2]
+        finally:
+            wrapped.close()
+    assert all(slot[0] == 1.0 for slot in slots[2][2:6])  # the leader, confirmed at the third frame
+    assert slots[0][6][0] == 0.0  # missed on frame 6: not reported without coasting
+    assert slots[2][6][0] == 1.0  # coasting in view
+    assert slots[2][6][1] == pytest.approx(slots[2][5][1] + 0.1 * slots[2][5][3], abs=0.05)  # ds moved by dv dt
+    assert slots[0][7][0] == slots[2][7][0] == 1.0  # the track takes its leader back
+    assert np.array_equal(slots[0][:6], slots[2][:6])
+    with pytest.raises(ValueError, match="coast_in_view"):
+        PerceivedFeatures(env, FixedBoxes([], [], []), coast_in_view=-1)
+
+
 def test_an_env_without_camera_and_lidar_is_refused():
     env = gym.make("roadsynth/Highway-v0", vehicles=20, warmup_s=5.0)
     try:

@@ -95,17 +95,69 @@ def test_a_false_detection_never_becomes_a_track():
     assert tracker.tracks == []
 
 
-def test_image_boxes_associate_when_positions_jump():
-    """A range that jumps (the LiDAR median on another surface) still matches through the image box's IoU."""
-    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1))
+def test_image_boxes_associate_when_positions_jump_but_an_outlying_range_corrects_nothing():
+    """A range that jumps (the LiDAR median on another surface) still matches through the image box's IoU, so no
+    second track is born; outside the position gate it is an outlier: the track coasts on its prediction (a miss)
+    and takes its object back at the next consistent range."""
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=1, report_misses=1))
     box = [100.0, 100.0, 160.0, 140.0]
     (first,) = tracker.update(_dets((30.0, 0.0), boxes=[box]))
     (second,) = tracker.update(_dets((45.0, 0.0), boxes=[[102.0, 100.0, 162.0, 140.0]]))
-    assert second.track_id == first.track_id
+    assert (second.track_id, second.misses) == (first.track_id, 1)
+    assert second.x.tolist() == [30.0, 0.0, 0.0, 0.0]  # predicted, not moved towards 45 m
+    assert second.box_px.tolist() == [102.0, 100.0, 162.0, 140.0]  # the box follows the object
+    (third,) = tracker.update(_dets((30.0, 0.0), boxes=[box]))
+    assert (third.track_id, third.misses) == (first.track_id, 0)
     tracker2 = Tracker(TrackerParams(dt_s=DT, confirm_hits=1, report_misses=1))
     tracker2.update(_dets((30.0, 0.0)))
     coasting, new = tracker2.update(_dets((45.0, 0.0)))  # without boxes: a new track beside the coasting one
     assert (coasting.track_id, coasting.misses, new.track_id, new.misses) == (1, 1, 2, 0)
+
+
+def test_a_range_that_stays_moved_ends_the_track_and_starts_one_there():
+    """The box's object ranged at a new place on every frame (the first track was ranged on something else): the
+    old track coasts max_misses frames, then a track starts at the new range; never a track moving at 150 m/s."""
+    params = TrackerParams(dt_s=DT, confirm_hits=1, max_misses=2, report_misses=5)
+    tracker = Tracker(params)
+    box = [100.0, 100.0, 160.0, 140.0]
+    tracker.update(_dets((30.0, 0.0), boxes=[box]))
+    seen = [[(t.track_id, t.misses, t.x[0], t.x[2]) for t in tracker.update(_dets((45.0, 0.0), boxes=[box]))]
+            for _ in range(4)]
+    assert seen == [[(1, 1, 30.0, 0.0)], [(1, 2, 30.0, 0.0)], [(2, 0, 45.0, 0.0)], [(2, 0, 45.0, 0.0)]]
+
+
+def test_a_tentative_track_confirms_on_consistent_positions_only():
+    """A tentative track whose box's next range is an outlier is dropped and the detection starts a track of its
+    own: three hits at consistent places confirm a track, three scattered ones do not."""
+    tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=3))
+    box = [100.0, 100.0, 160.0, 140.0]
+    assert [tracker.update(_dets((x, 0.0), boxes=[box])) for x in (30.0, 45.0, 30.0)] == [[], [], []]
+    assert [t.track_id for t in tracker.tracks] == [3]
+    assert tracker.update(_dets((30.0, 0.0), boxes=[box])) == []
+    (track,) = tracker.update(_dets((30.0, 0.0), boxes=[box]))
+    assert (track.track_id, track.hits) == (3, 3)
+
+
+def test_two_confirmed_tracks_of_one_object_are_merged_into_the_older():
+    """One car boxed twice (the whole car and its right half), both ranged on it: the younger track is dropped. Nested
+    boxes at another range, or boxes apart at the same range, or merge_overlap None, keep both."""
+    whole, part = [100.0, 100.0, 160.0, 140.0], [135.0, 105.0, 158.0, 138.0]
+
+    def run(second_place, second_box, merge_overlap=0.7):
+        tracker = Tracker(TrackerParams(dt_s=DT, confirm_hits=2, merge_overlap=merge_overlap))
+        tracker.update(_dets((30.0, 0.0), boxes=[whole]))
+        tracker.update(_dets((30.0, 0.0), boxes=[whole]))
+        out = []
+        for _ in range(3):
+            out = tracker.update(_dets((30.0, 0.0), second_place, boxes=[whole, second_box]))
+        return [t.track_id for t in out]
+
+    assert run((30.4, 0.3), part) == [1]
+    assert run((45.0, 0.0), part) == [1, 2]  # a car farther away, seen over the first
+    assert run((30.4, 0.3), [300.0, 100.0, 360.0, 140.0]) == [1, 2]
+    assert run((30.4, 0.3), part, merge_overlap=None) == [1, 2]
+    with pytest.raises(ValueError, match="merge_overlap"):
+        TrackerParams(merge_overlap=0.0)
 
 
 def test_the_same_detections_give_the_same_tracks():
@@ -123,6 +175,11 @@ def test_the_same_detections_give_the_same_tracks():
 def test_box_iou_closed_form():
     iou = box_iou(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 15, 10], [20, 20, 30, 30], [np.nan] * 4]))
     assert iou.tolist() == [[pytest.approx(50 / 150), 0.0, 0.0]]
+    smaller = box_iou(np.array([[0, 0, 10, 10]]), np.array([[5, 0, 15, 10], [2, 2, 4, 4], [8, 0, 18, 5]]),
+                      over="smaller")
+    assert smaller.tolist() == [[0.5, 1.0, pytest.approx(10 / 50)]]
+    with pytest.raises(ValueError, match="over"):
+        box_iou(np.zeros((1, 4)), np.zeros((1, 4)), over="area")
 
 
 def test_tracks_fill_the_neighbour_slots_as_the_ground_truth_does():
